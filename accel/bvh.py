@@ -1,0 +1,306 @@
+"""Our hand-written BVH: the seed's mean-centroid split, built and traversed without recursion.
+
+Build: a node covers a contiguous range of the primitive order array. It becomes a leaf when it
+holds at most `max_leaf_size` primitives; otherwise it splits along the longest axis of its
+centroid bounds at the mean centroid. When that leaves one side empty (coincident centroids,
+rounding), or the node is deeper than `MEAN_SPLIT_DEPTH`, it splits by count instead (the lower
+half of the centroids sorted on that axis goes left), which always makes progress and bounds the
+depth: a run of bad mean splits cannot make a giant leaf, an endless loop, or a tree deeper than
+the traversal stack.
+
+Layout (structure of arrays): lower[n], upper[n] boxes; child_or_first[n] is the left child index
+(the right child is the next node) for an interior node, or the first entry in `order` for a leaf;
+count[n] is 0 for an interior node and the number of primitives for a leaf.
+"""
+import time
+
+import numpy as np
+from numba import njit, prange
+
+from .kernels import NO_HIT, better, slab_entry, sphere_hit, triangle_hit
+from .types import Hits
+
+STACK_SIZE = 128
+MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
+SPLITS = ("mean",)
+
+
+@njit(cache=True)
+def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth):
+    n = prim_lower.shape[0]
+    max_nodes = max(2 * n - 1, 1)
+    lower = np.empty((max_nodes, 3))
+    upper = np.empty((max_nodes, 3))
+    child_or_first = np.zeros(max_nodes, dtype=np.int64)
+    count = np.zeros(max_nodes, dtype=np.int64)
+    order = np.arange(n)
+    if n == 0:
+        return lower[:0], upper[:0], child_or_first[:0], count[:0], order, 0
+
+    # explicit stack of (node, start, end, depth)
+    stack_node = np.empty(STACK_SIZE * 2, dtype=np.int64)
+    stack_start = np.empty(STACK_SIZE * 2, dtype=np.int64)
+    stack_end = np.empty(STACK_SIZE * 2, dtype=np.int64)
+    stack_depth = np.empty(STACK_SIZE * 2, dtype=np.int64)
+    top = 0
+    stack_node[0], stack_start[0], stack_end[0], stack_depth[0] = 0, 0, n, 0
+    top = 1
+    used = 1
+    max_depth = 0
+    keys = np.empty(n)
+    while top > 0:
+        top -= 1
+        node = stack_node[top]
+        start = stack_start[top]
+        end = stack_end[top]
+        depth = stack_depth[top]
+        if depth > max_depth:
+            max_depth = depth
+        # bounds of the primitives and of their centroids
+        c_lo = np.full(3, np.inf)
+        c_hi = np.full(3, -np.inf)
+        for a in range(3):
+            lower[node, a] = np.inf
+            upper[node, a] = -np.inf
+        for i in range(start, end):
+            p = order[i]
+            for a in range(3):
+                if prim_lower[p, a] < lower[node, a]:
+                    lower[node, a] = prim_lower[p, a]
+                if prim_upper[p, a] > upper[node, a]:
+                    upper[node, a] = prim_upper[p, a]
+                if centroid[p, a] < c_lo[a]:
+                    c_lo[a] = centroid[p, a]
+                if centroid[p, a] > c_hi[a]:
+                    c_hi[a] = centroid[p, a]
+        size = end - start
+        if size <= max_leaf_size:
+            child_or_first[node] = start
+            count[node] = size
+            continue
+        axis = 0
+        for a in range(1, 3):
+            if c_hi[a] - c_lo[a] >= c_hi[axis] - c_lo[axis]:   # ties go to the later axis
+                axis = a
+        mid = start
+        if depth < mean_split_depth and c_hi[axis] > c_lo[axis]:
+            mean = 0.0
+            for i in range(start, end):
+                mean += centroid[order[i], axis]
+            mean /= size
+            # partition: centroid < mean to the left
+            left = start
+            right = end - 1
+            while left <= right:
+                if centroid[order[left], axis] < mean:
+                    left += 1
+                else:
+                    order[left], order[right] = order[right], order[left]
+                    right -= 1
+            mid = left
+        if mid == start or mid == end:
+            # count split: the lower half along the axis goes left (stable in primitive id)
+            for i in range(start, end):
+                keys[i] = centroid[order[i], axis]
+            perm = np.argsort(keys[start:end], kind="mergesort")
+            segment = order[start:end].copy()
+            for i in range(size):
+                order[start + i] = segment[perm[i]]
+            mid = start + size // 2
+        left_child = used
+        used += 2
+        child_or_first[node] = left_child
+        count[node] = 0
+        # push right then left so the left subtree is built first
+        stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
+            left_child + 1, mid, end, depth + 1
+        top += 1
+        stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
+            left_child, start, mid, depth + 1
+        top += 1
+    return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
+
+
+@njit(cache=True, parallel=True)
+def _intersect(lower, upper, child_or_first, count, order, vertices, faces, centers, radii,
+               origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v, out_visits):
+    n_tri = faces.shape[0]
+    n_nodes = lower.shape[0]
+    for r in prange(origins.shape[0]):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        ix = 1.0 / dx if dx != 0.0 else np.inf
+        iy = 1.0 / dy if dy != 0.0 else np.inf
+        iz = 1.0 / dz if dz != 0.0 else np.inf
+        lo = tmin[r]
+        best_t = tmax[r]
+        best_prim = NO_HIT
+        best_u = 0.0
+        best_v = 0.0
+        visits = 0
+        stack = np.empty(STACK_SIZE, dtype=np.int64)
+        entry = np.empty(STACK_SIZE)
+        top = 0
+        if n_nodes > 0:
+            t_root = slab_entry(lower, upper, 0, ox, oy, oz, ix, iy, iz, lo, best_t)
+            if t_root != np.inf:
+                stack[0] = 0
+                entry[0] = t_root
+                top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if entry[top] > best_t:
+                continue
+            visits += 1
+            k = count[node]
+            if k > 0:
+                first = child_or_first[node]
+                for i in range(first, first + k):
+                    p = order[i]
+                    if p < n_tri:
+                        t, u, v = triangle_hit(vertices, faces, p, ox, oy, oz, dx, dy, dz)
+                        if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
+                            best_t, best_prim, best_u, best_v = t, p, u, v
+                    else:
+                        t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
+                                       lo, best_t)
+                        if t <= best_t and better(t, p, best_t, best_prim):
+                            best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
+                continue
+            left = child_or_first[node]
+            right = left + 1
+            t_left = slab_entry(lower, upper, left, ox, oy, oz, ix, iy, iz, lo, best_t)
+            t_right = slab_entry(lower, upper, right, ox, oy, oz, ix, iy, iz, lo, best_t)
+            # push the farther child first so the nearer one is popped first
+            if t_left <= t_right:
+                if t_right != np.inf:
+                    stack[top] = right
+                    entry[top] = t_right
+                    top += 1
+                if t_left != np.inf:
+                    stack[top] = left
+                    entry[top] = t_left
+                    top += 1
+            else:
+                if t_left != np.inf:
+                    stack[top] = left
+                    entry[top] = t_left
+                    top += 1
+                stack[top] = right
+                entry[top] = t_right
+                top += 1
+        if best_prim == NO_HIT:
+            best_t = np.inf
+        out_t[r] = best_t
+        out_prim[r] = best_prim
+        out_u[r] = best_u
+        out_v[r] = best_v
+        out_visits[r] = visits
+
+
+@njit(cache=True, parallel=True)
+def _occluded(lower, upper, child_or_first, count, order, vertices, faces, centers, radii,
+              origins, directions, tmin, tmax, out):
+    n_tri = faces.shape[0]
+    n_nodes = lower.shape[0]
+    for r in prange(origins.shape[0]):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+        ix = 1.0 / dx if dx != 0.0 else np.inf
+        iy = 1.0 / dy if dy != 0.0 else np.inf
+        iz = 1.0 / dz if dz != 0.0 else np.inf
+        lo = tmin[r]
+        hi = tmax[r]
+        hit = False
+        stack = np.empty(STACK_SIZE, dtype=np.int64)
+        top = 0
+        if n_nodes > 0:
+            stack[0] = 0
+            top = 1
+        while top > 0 and not hit:
+            top -= 1
+            node = stack[top]
+            if slab_entry(lower, upper, node, ox, oy, oz, ix, iy, iz, lo, hi) == np.inf:
+                continue
+            k = count[node]
+            if k > 0:
+                first = child_or_first[node]
+                for i in range(first, first + k):
+                    p = order[i]
+                    if p < n_tri:
+                        t, u, v = triangle_hit(vertices, faces, p, ox, oy, oz, dx, dy, dz)
+                        if t >= lo and t <= hi:
+                            hit = True
+                            break
+                    elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
+                                    lo, hi) <= hi:
+                        hit = True
+                        break
+                continue
+            left = child_or_first[node]
+            stack[top] = left + 1
+            stack[top + 1] = left
+            top += 2
+        out[r] = hit
+
+
+class BVHAccelerator:
+    kind = "bvh"
+
+    def __init__(self, geometry, max_leaf_size=4, split="mean"):
+        if split not in SPLITS:
+            raise ValueError(f"unknown BVH split {split!r}; choose one of {', '.join(SPLITS)}")
+        max_leaf_size = int(max_leaf_size)
+        if max_leaf_size < 1:
+            raise ValueError("max_leaf_size must be at least 1")
+        self.geometry = geometry
+        self.max_leaf_size = max_leaf_size
+        self.split = split
+        start = time.perf_counter()
+        prim_lower, prim_upper = geometry.primitive_bounds()
+        centroid = 0.5 * (prim_lower + prim_upper)
+        # Pad every box by a hair (1e-9 of the scene's largest coordinate) so the slab test's
+        # rounding can never reject a hit that the primitive test accepts.
+        scale = max(np.abs(prim_lower).max(initial=0.0), np.abs(prim_upper).max(initial=0.0))
+        prim_lower = np.ascontiguousarray(prim_lower - 1e-9 * scale)
+        prim_upper = np.ascontiguousarray(prim_upper + 1e-9 * scale)
+        (self.lower, self.upper, self.child_or_first, self.count, self.order,
+         self.max_depth) = _build(prim_lower, prim_upper, centroid, max_leaf_size,
+                                  MEAN_SPLIT_DEPTH)
+        self._build_seconds = time.perf_counter() - start
+        # a traversal stack holds at most depth + 1 entries
+        assert self.max_depth < STACK_SIZE - 1, "BVH deeper than the traversal stack"
+        self.last_mean_visits = None
+
+    def intersect(self, rays):
+        rays.validate()
+        n = len(rays)
+        hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
+        visits = np.empty(n, dtype=np.int64)
+        g = self.geometry
+        _intersect(self.lower, self.upper, self.child_or_first, self.count, self.order,
+                   g.vertices, g.faces, g.centers, g.radii, rays.origins, rays.directions,
+                   rays.tmin, rays.tmax, hits.t, hits.prim, hits.u, hits.v, visits)
+        self.last_mean_visits = float(visits.mean()) if n else 0.0
+        return hits
+
+    def occluded(self, rays):
+        rays.validate()
+        out = np.empty(len(rays), dtype=np.bool_)
+        g = self.geometry
+        _occluded(self.lower, self.upper, self.child_or_first, self.count, self.order,
+                  g.vertices, g.faces, g.centers, g.radii, rays.origins, rays.directions,
+                  rays.tmin, rays.tmax, out)
+        return out
+
+    def stats(self):
+        nodes = int(self.lower.shape[0])
+        arrays = (self.lower, self.upper, self.child_or_first, self.count, self.order)
+        return {"kind": self.kind, "primitives": self.geometry.primitive_count,
+                "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
+                "build_seconds": self._build_seconds, "split": self.split,
+                "nodes": nodes, "leaves": int((self.count > 0).sum()),
+                "max_depth": int(self.max_depth), "max_leaf_size": self.max_leaf_size,
+                "largest_leaf": int(self.count.max(initial=0)),
+                "bytes": int(sum(a.nbytes for a in arrays))}

@@ -1,0 +1,162 @@
+"""Primitive tests shared by every backend: Möller–Trumbore triangles, analytic spheres, slabs.
+
+All three backends call these same functions, so naive and bvh compute bit-identical t values.
+A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course). Between two
+hits at exactly the same t the lower primitive id wins, so the answer does not depend on the
+order primitives are visited in.
+"""
+import numpy as np
+from numba import njit
+
+NO_HIT = -1
+# A primitive test returns NaN for "no hit": every comparison with NaN is false, so a miss can
+# never pass `tmin <= t <= tmax`, even when tmax is infinite.
+MISS = np.nan
+
+
+@njit(cache=True, inline="always")
+def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
+    """Möller–Trumbore: (t, u, v) of the ray against triangle `tri`; t = MISS (NaN) on a miss.
+
+    Edges are inclusive (u, v, 1-u-v in [0, 1]); no determinant epsilon and no back-face
+    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses.
+    """
+    i0 = faces[tri, 0]
+    i1 = faces[tri, 1]
+    i2 = faces[tri, 2]
+    p0x = vertices[i0, 0]
+    p0y = vertices[i0, 1]
+    p0z = vertices[i0, 2]
+    e1x = vertices[i1, 0] - p0x
+    e1y = vertices[i1, 1] - p0y
+    e1z = vertices[i1, 2] - p0z
+    e2x = vertices[i2, 0] - p0x
+    e2y = vertices[i2, 1] - p0y
+    e2z = vertices[i2, 2] - p0z
+    # s1 = d x e2
+    s1x = dy * e2z - dz * e2y
+    s1y = dz * e2x - dx * e2z
+    s1z = dx * e2y - dy * e2x
+    det = s1x * e1x + s1y * e1y + s1z * e1z
+    if det == 0.0:
+        return MISS, 0.0, 0.0
+    inv = 1.0 / det
+    sx = ox - p0x
+    sy = oy - p0y
+    sz = oz - p0z
+    u = (s1x * sx + s1y * sy + s1z * sz) * inv
+    if u < 0.0 or u > 1.0:
+        return MISS, 0.0, 0.0
+    # s2 = s x e1
+    s2x = sy * e1z - sz * e1y
+    s2y = sz * e1x - sx * e1z
+    s2z = sx * e1y - sy * e1x
+    v = (s2x * dx + s2y * dy + s2z * dz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return MISS, 0.0, 0.0
+    t = (s2x * e2x + s2y * e2y + s2z * e2z) * inv
+    return t, u, v
+
+
+@njit(cache=True, inline="always")
+def sphere_hit(centers, radii, sphere, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Nearest root of the ray against `sphere` inside [tmin, tmax]; MISS (NaN) if none.
+
+    Like the course: the nearer root if it is in range, else the farther one (so a ray that
+    starts inside hits the far side). The discriminant is computed from the ray's closest
+    approach to the centre rather than from b^2 - 4ac, which loses every digit when the
+    origin is far away compared with the radius (Ray Tracing Gems, ch. 7).
+    """
+    fx = ox - centers[sphere, 0]
+    fy = oy - centers[sphere, 1]
+    fz = oz - centers[sphere, 2]
+    r = radii[sphere]
+    a = dx * dx + dy * dy + dz * dz
+    if a == 0.0:
+        return MISS
+    b_half = fx * dx + fy * dy + fz * dz
+    # f minus its projection on d: the vector from the centre to the closest approach
+    k = b_half / a
+    lx = fx - k * dx
+    ly = fy - k * dy
+    lz = fz - k * dz
+    disc = a * (r * r - (lx * lx + ly * ly + lz * lz))   # = b_half^2 - a*c
+    if disc < 0.0:
+        return MISS
+    c = fx * fx + fy * fy + fz * fz - r * r
+    root = np.sqrt(disc)
+    q = -(b_half + root) if b_half >= 0.0 else -(b_half - root)
+    if q == 0.0:  # origin on the sphere, tangent direction: a double root at 0
+        t0 = 0.0
+        t1 = 0.0
+    else:
+        t0 = q / a
+        t1 = c / q
+    if t0 > t1:
+        t0, t1 = t1, t0
+    if tmin <= t0 <= tmax:
+        return t0
+    if tmin <= t1 <= tmax:
+        return t1
+    return MISS
+
+
+@njit(cache=True, inline="always")
+def slab_entry(lo, hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax):
+    """Entry t of the ray into box `node` clipped to [tmin, tmax]; inf if it misses.
+
+    ix, iy, iz are 1/direction (inf for a zero component). A zero component is handled
+    explicitly so that 0 * inf never produces NaN: the ray is inside that slab or misses.
+    """
+    t0 = tmin
+    t1 = tmax
+    # x
+    if ix == np.inf or ix == -np.inf:
+        if ox < lo[node, 0] or ox > hi[node, 0]:
+            return np.inf
+    else:
+        a = (lo[node, 0] - ox) * ix
+        b = (hi[node, 0] - ox) * ix
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+    # y
+    if iy == np.inf or iy == -np.inf:
+        if oy < lo[node, 1] or oy > hi[node, 1]:
+            return np.inf
+    else:
+        a = (lo[node, 1] - oy) * iy
+        b = (hi[node, 1] - oy) * iy
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+    # z
+    if iz == np.inf or iz == -np.inf:
+        if oz < lo[node, 2] or oz > hi[node, 2]:
+            return np.inf
+    else:
+        a = (lo[node, 2] - oz) * iz
+        b = (hi[node, 2] - oz) * iz
+        if a > b:
+            a, b = b, a
+        if a > t0:
+            t0 = a
+        if b < t1:
+            t1 = b
+    # The slab t values carry rounding error; widen the far end so a box never rejects a hit
+    # the primitive test would accept (boxes are also padded at build time).
+    if t0 > t1 + abs(t1) * 4e-16:
+        return np.inf
+    return t0
+
+
+@njit(cache=True, inline="always")
+def better(t, prim, best_t, best_prim):
+    """True if a hit (t, prim) beats the current best: nearer, or as near with a lower id."""
+    return t < best_t or (t == best_t and (best_prim == NO_HIT or prim < best_prim))

@@ -1,0 +1,140 @@
+"""The data that crosses the accel interface: geometry, a batch of rays, a batch of hits.
+
+Everything is a flat, C-contiguous numpy array (structure of arrays), so numba kernels and
+Embree can take them as they are.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def _float_array(name, value, shape_tail):
+    array = np.ascontiguousarray(value, dtype=np.float64)
+    if array.size == 0:
+        array = array.reshape((0,) + shape_tail)
+    if array.shape[1:] != shape_tail or array.ndim != 1 + len(shape_tail):
+        raise ValueError(f"{name} must have shape (N, {', '.join(map(str, shape_tail))})"
+                         f" but has shape {array.shape}")
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Geometry:
+    """Triangles (vertices, faces) and analytic spheres (centers, radii).
+
+    Primitive ids: triangles 0..F-1, then spheres F..F+S-1.
+    """
+    vertices: np.ndarray
+    faces: np.ndarray
+    centers: np.ndarray = None
+    radii: np.ndarray = None
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        vertices = _float_array("vertices", self.vertices, (3,))
+        faces = np.ascontiguousarray(self.faces, dtype=np.int64)
+        if faces.size == 0:
+            faces = faces.reshape(0, 3)
+        if faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"faces must have shape (F, 3) but has shape {faces.shape}")
+        centers = _float_array("centers", np.empty((0, 3)) if self.centers is None else self.centers, (3,))
+        radii = np.ascontiguousarray(np.empty(0) if self.radii is None else self.radii,
+                                     dtype=np.float64).reshape(-1)
+        if radii.shape[0] != centers.shape[0]:
+            raise ValueError(f"{centers.shape[0]} sphere centers but {radii.shape[0]} radii")
+        if not np.isfinite(vertices).all():
+            raise ValueError("vertices contain NaN or infinite coordinates")
+        if not (np.isfinite(centers).all() and np.isfinite(radii).all()):
+            raise ValueError("spheres contain NaN or infinite values")
+        if (radii < 0).any():
+            raise ValueError("sphere radii must not be negative")
+        if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+            raise ValueError(f"faces index vertices outside 0..{len(vertices) - 1}")
+        set_(self, "vertices", vertices)
+        set_(self, "faces", faces)
+        set_(self, "centers", centers)
+        set_(self, "radii", radii)
+
+    @property
+    def triangle_count(self):
+        return self.faces.shape[0]
+
+    @property
+    def sphere_count(self):
+        return self.centers.shape[0]
+
+    @property
+    def primitive_count(self):
+        return self.triangle_count + self.sphere_count
+
+    def primitive_bounds(self):
+        """(lower, upper) corners of each primitive's box, shape (P, 3) each."""
+        corners = self.vertices[self.faces]  # (F, 3, 3)
+        lower = np.concatenate([corners.min(axis=1), self.centers - self.radii[:, None]])
+        upper = np.concatenate([corners.max(axis=1), self.centers + self.radii[:, None]])
+        return lower.reshape(-1, 3), upper.reshape(-1, 3)
+
+    def bounds(self):
+        """(lower, upper) of the whole geometry, or None when it is empty."""
+        if self.primitive_count == 0:
+            return None
+        lower, upper = self.primitive_bounds()
+        return lower.min(axis=0), upper.max(axis=0)
+
+
+@dataclass(frozen=True, eq=False)
+class Rays:
+    """A batch of N rays: points origin + t * direction with tmin <= t <= tmax.
+
+    Directions need not be unit length; t is measured in units of the direction.
+    """
+    origins: np.ndarray
+    directions: np.ndarray
+    tmin: np.ndarray = None
+    tmax: np.ndarray = None
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        origins = _float_array("origins", self.origins, (3,))
+        directions = _float_array("directions", self.directions, (3,))
+        n = origins.shape[0]
+        if directions.shape[0] != n:
+            raise ValueError(f"{n} origins but {directions.shape[0]} directions")
+        tmin = np.zeros(n) if self.tmin is None else np.broadcast_to(
+            np.asarray(self.tmin, dtype=np.float64), (n,))
+        tmax = np.full(n, np.inf) if self.tmax is None else np.broadcast_to(
+            np.asarray(self.tmax, dtype=np.float64), (n,))
+        set_(self, "origins", origins)
+        set_(self, "directions", directions)
+        set_(self, "tmin", np.ascontiguousarray(tmin))
+        set_(self, "tmax", np.ascontiguousarray(tmax))
+
+    def __len__(self):
+        return self.origins.shape[0]
+
+    def validate(self):
+        """Raise ValueError for rays no backend can answer (NaN or infinite parts)."""
+        if not (np.isfinite(self.origins).all() and np.isfinite(self.directions).all()):
+            raise ValueError("rays contain NaN or infinite origins or directions")
+        if np.isnan(self.tmin).any() or np.isnan(self.tmax).any() or np.isinf(self.tmin).any():
+            raise ValueError("rays contain NaN t bounds or an infinite tmin")
+
+
+@dataclass(frozen=True, eq=False)
+class Hits:
+    """Closest hits of a batch of rays.
+
+    t is inf and prim is -1 on a miss; (u, v) are barycentrics with
+    hit = (1-u-v)*p0 + u*p1 + v*p2 for triangles and 0 for spheres.
+    """
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+
+    @classmethod
+    def empty(cls, n):
+        return cls(np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.zeros(n), np.zeros(n))
+
+    def __len__(self):
+        return self.t.shape[0]

@@ -1,0 +1,1 @@
+"""Benchmark scripts. Each writes a Markdown report (and charts) into benchmarks/results/."""

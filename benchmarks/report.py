@@ -1,0 +1,48 @@
+"""The header every benchmark report starts with: machine, date, versions, exact command."""
+import datetime
+import os
+import platform
+import shlex
+import sys
+from importlib import metadata
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+PACKAGES = ("numpy", "numba", "llvmlite", "embreex", "trimesh", "ptrace")
+
+
+def cpu_model():
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def header(title):
+    versions = []
+    for name in PACKAGES:
+        try:
+            versions.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            pass
+    command = "python -m " + " ".join(
+        [__import__("__main__").__spec__.name if getattr(__import__("__main__"), "__spec__", None)
+         else sys.argv[0]] + [shlex.quote(a) for a in sys.argv[1:]])
+    return "\n".join([
+        f"# {title}", "",
+        f"- machine: {os.cpu_count()} cores, {cpu_model()}, {platform.system()} {platform.machine()}",
+        f"- date: {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}",
+        f"- python {platform.python_version()}; " + ", ".join(versions),
+        f"- command: `{command}`", "", ""])
+
+
+def write(name, text):
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    path = RESULTS / name
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+    return path

@@ -1,0 +1,202 @@
+"""COLLADA materials, lights and cameras in the course dialect (CS184.md 1.5-1.7)."""
+import math
+
+import numpy as np
+
+from ..scene import (AMBIENT, AREA, DIFFUSE, DIRECTIONAL, EMISSION, GLASS, LIGHT_NAMES,
+                     MICROFACET, MIRROR, POINT, REFRACTION, SPOT, CameraSpec)
+from .collada_geometry import cgl_techniques
+
+DEFAULT_ALBEDO = (0.5, 0.5, 0.5)
+COMMON_SHADERS = ("phong", "lambert", "blinn")
+
+
+def apply(matrix, point):
+    """xyz of matrix @ (x, y, z, 1), no division by w (like the course)."""
+    return matrix[:3, :3] @ np.asarray(point, dtype=np.float64) + matrix[:3, 3]
+
+
+# --- materials (1.5) ------------------------------------------------------------------------
+
+def _rgb(document, parent, tag):
+    return tuple(document.vector(document.require_child(parent, tag), 3, tag))
+
+
+def _number(document, parent, tag):
+    return document.scalar(document.require_child(parent, tag), tag)
+
+
+def _emission(document, element):
+    return {"kind": EMISSION, "emission": _rgb(document, element, "radiance")}
+
+
+def _mirror(document, element):
+    return {"kind": MIRROR, "albedo": _rgb(document, element, "reflectance")}
+
+
+def _glass(document, element):
+    return {"kind": GLASS, "transmittance": _rgb(document, element, "transmittance"),
+            "albedo": _rgb(document, element, "reflectance"),
+            "roughness": _number(document, element, "roughness"),
+            "ior": _number(document, element, "ior")}
+
+
+def _refraction(document, element):
+    return {"kind": REFRACTION, "transmittance": _rgb(document, element, "transmittance"),
+            "roughness": _number(document, element, "roughness"),
+            "ior": _number(document, element, "ior")}
+
+
+def _microfacet(document, element):
+    return {"kind": MICROFACET, "alpha": _number(document, element, "alpha"),
+            "eta": _rgb(document, element, "eta"), "k": _rgb(document, element, "k")}
+
+
+CGL_BSDF_READERS = {"emission": _emission, "mirror": _mirror, "glass": _glass,
+                    "refraction": _refraction, "microfacet": _microfacet}
+
+
+def read_effect(document, effect):
+    """A material record for an <effect>: CGL extra (last recognised child wins), else the
+    profile_COMMON diffuse colour, else 0.5 grey."""
+    record = None
+    for technique in cgl_techniques(document, effect):
+        for child in technique:
+            reader = CGL_BSDF_READERS.get(child.tag)
+            if reader is not None:
+                record = reader(document, child)
+            else:
+                document.notes.append(f"{document.describe(child)}: unknown CGL BSDF "
+                                      f"<{child.tag}> ignored")
+    if record is not None:
+        return record
+    profile_common = document.child(effect, "profile_COMMON")
+    techniques = [] if profile_common is None else document.children(profile_common, "technique")
+    for technique in techniques:
+        for shader in COMMON_SHADERS:
+            color = document.find_path(technique, shader, "diffuse", "color")
+            if color is not None:
+                return {"kind": DIFFUSE, "albedo": tuple(document.vector(color, 3, "colour"))}
+    document.notes.append(f"{document.describe(effect)}: no diffuse colour; albedo 0.5")
+    return {"kind": DIFFUSE, "albedo": DEFAULT_ALBEDO}
+
+
+class MaterialTable:
+    """Material records, one per distinct <effect> plus the default grey when it is used."""
+
+    def __init__(self, document):
+        self.document = document
+        self.records = []
+        self._index_of_effect = {}
+        self._default_index = None
+
+    def index_for(self, instance_geometry):
+        """Material index for an <instance_geometry>: its first bound instance_material."""
+        document = self.document
+        instance_material = document.find_path(instance_geometry, "bind_material",
+                                               "technique_common", "instance_material")
+        if instance_material is None:
+            return self.default_index()
+        material = document.resolve(instance_material, "target", ("material",))
+        instance_effect = document.require_child(material, "instance_effect")
+        effect = document.resolve(instance_effect, "url", ("effect",))
+        if effect not in self._index_of_effect:
+            record = read_effect(document, effect)
+            record["name"] = material.get("id") or effect.get("id") or ""
+            self._index_of_effect[effect] = len(self.records)
+            self.records.append(record)
+        return self._index_of_effect[effect]
+
+    def default_index(self):
+        if self._default_index is None:
+            self._default_index = len(self.records)
+            self.records.append({"kind": DIFFUSE, "albedo": DEFAULT_ALBEDO,
+                                 "name": "default (no material bound)"})
+        return self._default_index
+
+
+# --- lights (1.6) ---------------------------------------------------------------------------
+
+def _unit(document, node, vector, what):
+    length = float(np.linalg.norm(vector))
+    if not (length > 0 and math.isfinite(length)):
+        document.fail(f"{document.describe(node)}: the {what} has zero length")
+    return vector / length
+
+
+def read_light(document, light, node, world):
+    """A light record for a <light> placed by its node's world matrix."""
+    techniques = cgl_techniques(document, light)
+    technique = techniques[0] if techniques else document.child(light, "technique_common")
+    if technique is None:
+        document.fail(f"{document.describe(light)} has neither a CGL technique nor "
+                      f"<technique_common>")
+    kind_element = next(iter(technique), None)
+    if kind_element is None:
+        document.fail(f"{document.describe(technique)} is empty")
+    if kind_element.tag not in LIGHT_NAMES:
+        document.fail(f"{document.describe(light)}: unknown light type <{kind_element.tag}> "
+                      f"(known: {', '.join(LIGHT_NAMES)})")
+    radiance = document.vector(document.require_child(kind_element, "color"), 3, "colour")
+    record = {"kind": LIGHT_NAMES.index(kind_element.tag), "radiance": tuple(radiance)}
+    if record["kind"] == AMBIENT:
+        return record
+    centre = apply(world, (0, 0, 0))
+    front = apply(world, (0, 0, -1))
+    if record["kind"] == DIRECTIONAL:
+        # w = 1: the node's translation leaks into the direction, as in the course.
+        record["direction"] = _unit(document, node, front, "directional light direction")
+    elif record["kind"] == POINT:
+        record["position"] = centre
+    elif record["kind"] == AREA:
+        edge_x = apply(world, (-1, 0, 0)) - centre
+        edge_y = apply(world, (0, 1, 0)) - centre
+        record.update(position=centre, edge_x=edge_x, edge_y=edge_y,
+                      direction=_unit(document, node, front - centre, "area light normal"),
+                      area=float(np.linalg.norm(edge_x) * np.linalg.norm(edge_y)))
+    elif record["kind"] == SPOT:
+        record.update(position=centre,
+                      direction=_unit(document, node, front - centre, "spot light direction"))
+    values = np.concatenate([np.ravel(value) for key, value in record.items() if key != "kind"])
+    if not np.isfinite(values).all():
+        document.fail(f"{document.describe(node)}: light placement overflows to infinity")
+    return record
+
+
+# --- cameras (1.7) --------------------------------------------------------------------------
+
+def read_camera(document, camera, world):
+    """CameraSpec for a <camera> placed by its node's world matrix."""
+    hfov, vfov, znear, zfar = 50.0, 35.0, 0.001, 1000.0
+    perspective = document.find_path(camera, "optics", "technique_common", "perspective")
+    if perspective is None:
+        document.notes.append(f"{document.describe(camera)} has no <perspective>; using "
+                              f"hfov 50, vfov 35")
+    else:
+        value = lambda tag, default: default if document.child(perspective, tag) is None \
+            else document.scalar(document.child(perspective, tag), tag)
+        hfov = value("xfov", hfov)
+        znear = value("znear", znear)
+        zfar = value("zfar", zfar)
+        if document.child(perspective, "yfov") is not None:
+            vfov = value("yfov", vfov)
+        else:
+            aspect_element = document.child(perspective, "aspect_ratio")
+            if aspect_element is None:
+                document.fail(f"{document.describe(perspective)} has neither <yfov> nor "
+                              f"<aspect_ratio>")
+            aspect = document.scalar(aspect_element, "aspect_ratio")
+            if not aspect > 0:
+                document.fail(f"{document.describe(aspect_element)}: aspect ratio {aspect} "
+                              f"is not positive")
+            vfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov) / 2) / aspect))
+    for name, degrees in (("xfov", hfov), ("yfov", vfov)):
+        if not 0 < degrees < 180:
+            document.fail(f"{document.describe(camera)}: {name} {degrees} is not between "
+                          f"0 and 180 degrees")
+    view_point = apply(world, (0, 0, -1))
+    position = apply(world, (0, 0, 0))
+    if not (np.isfinite(view_point).all() and np.isfinite(position).all()):
+        document.fail(f"{document.describe(camera)}: camera placement overflows to infinity")
+    return CameraSpec(view_point=view_point, position=position, hfov=hfov, vfov=vfov,
+                      znear=znear, zfar=zfar)

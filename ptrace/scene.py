@@ -1,0 +1,163 @@
+"""The loaded scene: flat numpy arrays only. No scene graph survives loading."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import accel
+
+# BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
+DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET = range(6)
+BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet")
+
+# Light kinds (Lights.kind). The codes index LIGHT_NAMES.
+AMBIENT, DIRECTIONAL, POINT, AREA, SPOT = range(5)
+LIGHT_NAMES = ("ambient", "directional", "point", "area", "spot")
+
+
+@dataclass(eq=False)
+class Materials:
+    """M materials as parallel arrays. Which fields matter depends on kind:
+
+    diffuse: albedo; emission: emission; mirror: albedo (reflectance);
+    glass: albedo (reflectance), transmittance, ior; refraction: transmittance, ior;
+    microfacet: alpha, eta, k.
+    """
+    kind: np.ndarray            # (M,) int32
+    albedo: np.ndarray          # (M, 3)
+    transmittance: np.ndarray   # (M, 3)
+    emission: np.ndarray        # (M, 3)
+    ior: np.ndarray             # (M,)
+    roughness: np.ndarray       # (M,) parsed, unused like the course
+    alpha: np.ndarray           # (M,)
+    eta: np.ndarray             # (M, 3)
+    k: np.ndarray               # (M, 3)
+    names: tuple = ()
+
+    def __len__(self):
+        return self.kind.shape[0]
+
+    @classmethod
+    def from_records(cls, records):
+        """Build from a list of dicts with a 'kind' and any of the fields above."""
+        m = len(records)
+        rgb = lambda key, default: np.array(
+            [r.get(key, default) for r in records], dtype=np.float64).reshape(m, 3)
+        one = lambda key, default: np.array(
+            [r.get(key, default) for r in records], dtype=np.float64).reshape(m)
+        return cls(
+            kind=np.array([r["kind"] for r in records], dtype=np.int32).reshape(m),
+            albedo=rgb("albedo", (0.5, 0.5, 0.5)),
+            transmittance=rgb("transmittance", (0.0, 0.0, 0.0)),
+            emission=rgb("emission", (0.0, 0.0, 0.0)),
+            ior=one("ior", 1.0),
+            roughness=one("roughness", 0.0),
+            alpha=one("alpha", 0.0),
+            eta=rgb("eta", (0.0, 0.0, 0.0)),
+            k=rgb("k", (0.0, 0.0, 0.0)),
+            names=tuple(r.get("name", "") for r in records),
+        )
+
+
+@dataclass(eq=False)
+class Lights:
+    """L lights as parallel arrays (see CS184.md section 1.6 for the placement rules).
+
+    point/spot: position; directional: direction (unit, toward the light);
+    area: position (centre), direction (unit facing normal), edge_x, edge_y (unnormalised), area;
+    ambient: radiance only (the upper hemisphere about world +Y).
+    """
+    kind: np.ndarray        # (L,) int32
+    radiance: np.ndarray    # (L, 3)
+    position: np.ndarray    # (L, 3)
+    direction: np.ndarray   # (L, 3)
+    edge_x: np.ndarray      # (L, 3)
+    edge_y: np.ndarray      # (L, 3)
+    area: np.ndarray        # (L,)
+
+    def __len__(self):
+        return self.kind.shape[0]
+
+    @classmethod
+    def from_records(cls, records):
+        n = len(records)
+        vec = lambda key: np.array([r.get(key, (0.0, 0.0, 0.0)) for r in records],
+                                   dtype=np.float64).reshape(n, 3)
+        return cls(
+            kind=np.array([r["kind"] for r in records], dtype=np.int32).reshape(n),
+            radiance=vec("radiance"), position=vec("position"), direction=vec("direction"),
+            edge_x=vec("edge_x"), edge_y=vec("edge_y"),
+            area=np.array([r.get("area", 0.0) for r in records], dtype=np.float64).reshape(n),
+        )
+
+    def counts(self):
+        """{"area": 1, ...}: how many lights of each kind."""
+        out = {}
+        for code in self.kind:
+            name = LIGHT_NAMES[code]
+            out[name] = out.get(name, 0) + 1
+        return out
+
+
+@dataclass(eq=False)
+class CameraSpec:
+    """What the scene file says about its camera (the course's orbit rule uses view_point only).
+
+    view_point: the camera node's world matrix applied to (0, 0, -1, 1), one unit in front of the
+    camera; position: the node's world position (kept for reference, the course ignores it);
+    hfov, vfov: degrees as the file gives them (vfov derived from the aspect ratio if absent);
+    znear, zfar: the camera rays' t interval.
+    """
+    view_point: np.ndarray
+    position: np.ndarray
+    hfov: float = 50.0
+    vfov: float = 35.0
+    znear: float = 0.001
+    zfar: float = 1000.0
+
+
+@dataclass(eq=False)
+class Scene:
+    path: str
+    geometry: accel.Geometry
+    vertex_normals: np.ndarray      # (V, 3) unit, area-weighted (CS184.md 1.3); 0 where undefined
+    material_index: np.ndarray      # (F + S,) int32 into materials
+    materials: Materials
+    lights: Lights
+    camera: CameraSpec = None
+    notes: list = field(default_factory=list)   # what the loader decided (e.g. defaults given)
+
+    @property
+    def triangle_count(self):
+        return self.geometry.triangle_count
+
+    @property
+    def sphere_count(self):
+        return self.geometry.sphere_count
+
+    def bsdf_kinds(self):
+        """Sorted names of the BSDF kinds used by at least one primitive."""
+        used = np.unique(self.materials.kind[np.unique(self.material_index)]) \
+            if len(self.material_index) else []
+        return sorted(BSDF_NAMES[k] for k in used)
+
+    def bounds(self):
+        """(lower, upper) over meshes and spheres (lights excluded), or None if empty."""
+        return self.geometry.bounds()
+
+
+def area_weighted_normals(vertices, faces):
+    """Per-vertex sum of cross(p_j - p_i, p_k - p_i) over incident faces, normalised.
+
+    CS184.md 1.3: file normals are ignored and these are recomputed. A vertex whose sum is zero
+    (unused, or only in zero-area faces) gets a zero normal.
+    """
+    normals = np.zeros_like(vertices)
+    if len(faces):
+        p0, p1, p2 = (vertices[faces[:, i]] for i in range(3))
+        face_normals = np.cross(p1 - p0, p2 - p0)   # twice the area, same for every corner
+        for corner in range(3):
+            np.add.at(normals, faces[:, corner], face_normals)
+    length = np.linalg.norm(normals, axis=1)
+    nonzero = length > 0
+    normals[nonzero] /= length[nonzero, None]
+    return normals

@@ -1,0 +1,84 @@
+"""Structural invariants of the BVH, on course meshes and on inputs that defeat the mean split."""
+import numpy as np
+import pytest
+
+import accel
+from accel import raygen
+from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE
+
+import ptrace
+
+
+def check_invariants(bvh):
+    geometry = bvh.geometry
+    n = geometry.primitive_count
+    nodes = bvh.lower.shape[0]
+    assert nodes <= max(2 * n - 1, 0)
+    prim_lower, prim_upper = geometry.primitive_bounds()
+    seen = np.zeros(n, dtype=int)
+    depth = np.zeros(nodes, dtype=int)
+    for node in range(nodes):   # children always come after their parent
+        assert (bvh.lower[node] <= bvh.upper[node]).all()
+        if bvh.count[node] > 0:
+            first, count = bvh.child_or_first[node], bvh.count[node]
+            assert count <= bvh.max_leaf_size
+            prims = bvh.order[first:first + count]
+            seen[prims] += 1
+            assert (bvh.lower[node] <= prim_lower[prims]).all()
+            assert (prim_upper[prims] <= bvh.upper[node]).all()
+        else:
+            left = bvh.child_or_first[node]
+            assert node < left and left + 1 < nodes
+            for child in (left, left + 1):
+                assert (bvh.lower[node] <= bvh.lower[child]).all()
+                assert (bvh.upper[child] <= bvh.upper[node]).all()
+                depth[child] = depth[node] + 1
+    np.testing.assert_array_equal(seen, 1)   # every primitive in exactly one leaf
+    assert depth.max(initial=0) == bvh.max_depth
+    assert bvh.max_depth < STACK_SIZE - 1
+    stats = bvh.stats()
+    assert stats["nodes"] == nodes and stats["leaves"] == int((bvh.count > 0).sum())
+    assert stats["bytes"] > 0 or n == 0
+
+
+@pytest.mark.parametrize("relpath", ["meshedit/cow.dae", "sky/CBspheres.dae",
+                                     "meshedit/maxplanck.dae"])
+def test_invariants_on_course_meshes(scenes_dir, relpath):
+    geometry = ptrace.load(scenes_dir / relpath).geometry
+    for leaf_size in (1, 4, 8):
+        check_invariants(accel.build("bvh", geometry, max_leaf_size=leaf_size))
+
+
+def geometric_series_geometry(count=1000):
+    """Triangles in the planes x = 2^-k: each mean split peels only a few off the top."""
+    x = 2.0 ** -np.arange(count)
+    base = np.array([[0, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    points = base[None, :, :] + np.stack([x, np.zeros(count), np.zeros(count)], 1)[:, None, :]
+    return accel.Geometry(points.reshape(-1, 3), np.arange(3 * count).reshape(count, 3))
+
+
+def test_depth_stays_bounded_when_mean_splits_peel_a_few_at_a_time():
+    geometry = geometric_series_geometry()
+    bvh = accel.build("bvh", geometry)
+    check_invariants(bvh)
+    assert bvh.max_depth >= MEAN_SPLIT_DEPTH   # the mean split really did go deep here...
+    assert bvh.max_depth <= MEAN_SPLIT_DEPTH + 10   # ...and the count split then bounded it
+    rays = raygen.sphere_rays(geometry, 2000)
+    reference = accel.build("naive", geometry).intersect(rays)
+    np.testing.assert_array_equal(bvh.intersect(rays).prim, reference.prim)
+
+
+def test_invariants_with_coincident_centroids():
+    one = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    geometry = accel.Geometry(np.tile(one, (1000, 1)), np.arange(3000).reshape(1000, 3))
+    bvh = accel.build("bvh", geometry)
+    check_invariants(bvh)
+    assert bvh.stats()["largest_leaf"] <= 4
+    assert bvh.max_depth <= 10   # count splits halve: ceil(log2(1000 / 4)) + 1
+
+
+def test_bad_options_are_refused():
+    with pytest.raises(ValueError):
+        accel.build("bvh", geometric_series_geometry(4), max_leaf_size=0)
+    with pytest.raises(ValueError):
+        accel.build("bvh", geometric_series_geometry(4), split="median-of-nothing")
