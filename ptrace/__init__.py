@@ -1,5 +1,7 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
 from .errors import PtraceError, SceneError
 from .io import load
+from .render import render
 from .scene import Scene
-__all__ = ["PtraceError", "SceneError", "Scene", "load"]
+
+__all__ = ["PtraceError", "SceneError", "Scene", "load", "render"]

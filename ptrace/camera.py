@@ -1,0 +1,125 @@
+"""The course's camera (CS184.md 1.7), its settings file (3.3), and camera rays (4.1).
+
+The course ignores where the camera node is. It takes d, the direction from the world origin to
+one unit in front of the camera, and places an orbit camera at the centre of the scene's bounding
+box plus 1.5 times the box diagonal along d, looking at that centre with +Y up. The focal length in
+pixels is fixed from the file's field of view at 800x600; another resolution keeps it, so a
+W x H render is the central W x H window of the 800 x 600 view.
+"""
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .errors import PtraceError, SceneError
+
+BASE_WIDTH, BASE_HEIGHT = 800, 600
+
+
+@dataclass(frozen=True)
+class Camera:
+    position: np.ndarray        # (3,)
+    target: np.ndarray          # (3,)
+    camera_to_world: np.ndarray  # (3, 3): columns are the camera's x, y and z (backward) axes
+    screen_dist: float          # focal length in pixels
+    width: int
+    height: int
+    znear: float
+    zfar: float
+
+    @property
+    def hfov(self):
+        return float(np.degrees(2 * np.arctan(self.width / (2 * self.screen_dist))))
+
+    @property
+    def vfov(self):
+        return float(np.degrees(2 * np.arctan(self.height / (2 * self.screen_dist))))
+
+    def resized(self, width, height):
+        """Same focal length in pixels, another window (CS184.md 1.7 step 5)."""
+        return replace(self, width=int(width), height=int(height))
+
+    def directions(self, px, py):
+        """World directions (unit) through image points (px, py); y counted from the bottom."""
+        # (2u - 1) tan(hfov / 2) with u = px / W is (px - W/2) / screen_dist; written this way a
+        # pixel of a W x H window gets bit-identical rays to the same pixel of the 800 x 600 view
+        sx = (px - 0.5 * self.width) / self.screen_dist
+        sy = (py - 0.5 * self.height) / self.screen_dist
+        local = np.stack([sx, sy, -np.ones_like(sx)], axis=-1)
+        world = local @ self.camera_to_world.T
+        return world / np.linalg.norm(world, axis=-1, keepdims=True)
+
+
+def look_at(position, target):
+    """Camera-to-world axes looking from position at target with +Y up (the course's rule)."""
+    backward = position - target
+    backward = backward / np.linalg.norm(backward)
+    up = np.array([0.0, 1.0, 0.0])
+    right = np.cross(up, backward)
+    if np.linalg.norm(right) < 1e-12:   # looking straight up or down: any right will do
+        right = np.array([1.0, 0.0, 0.0])
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(backward, right), backward], axis=1)
+
+
+def widen_to_base_aspect(hfov_degrees, vfov_degrees):
+    """Widen (hfov, vfov) to 4:3 along whichever axis is too narrow; return both in degrees."""
+    tan_h = np.tan(np.radians(hfov_degrees) / 2)
+    tan_v = np.tan(np.radians(vfov_degrees) / 2)
+    aspect = BASE_WIDTH / BASE_HEIGHT
+    if tan_h / tan_v > aspect:
+        tan_v = tan_h / aspect
+    else:
+        tan_h = tan_v * aspect
+    return np.degrees(2 * np.arctan(tan_h)), np.degrees(2 * np.arctan(tan_v))
+
+
+def course_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT):
+    """The camera the course builds for this scene (CS184.md 1.7)."""
+    spec = scene.camera
+    bounds = scene.bounds()
+    if spec is None:
+        raise SceneError(scene.path, "the scene has no camera")
+    if bounds is None:
+        raise SceneError(scene.path, "the scene has no geometry to point the camera at")
+    lower, upper = bounds
+    target = 0.5 * (lower + upper)
+    radius = 1.5 * float(np.linalg.norm(upper - lower))
+    view = np.asarray(spec.view_point, dtype=np.float64)
+    if not np.linalg.norm(view) > 0:
+        raise SceneError(scene.path, "the camera looks from the world origin at itself "
+                                     "(its view point is the origin), so it has no direction")
+    d = view / np.linalg.norm(view)
+    phi = np.arccos(np.clip(d[1], -1.0, 1.0))
+    theta = np.arctan2(d[0], d[2])
+    position = target + radius * np.array([np.sin(phi) * np.sin(theta), np.cos(phi),
+                                           np.sin(phi) * np.cos(theta)])
+    _, vfov = widen_to_base_aspect(spec.hfov, spec.vfov)
+    screen_dist = BASE_HEIGHT / (2 * np.tan(np.radians(vfov) / 2))
+    camera = Camera(position, target, look_at(position, target), float(screen_dist),
+                    BASE_WIDTH, BASE_HEIGHT, float(spec.znear), float(spec.zfar))
+    return camera.resized(width, height)
+
+
+def load_camera_settings(path, width, height):
+    """Read the course's camera settings file (the `D` key's dump, CS184.md 3.3)."""
+    try:
+        with open(path) as handle:
+            numbers = np.array(handle.read().split(), dtype=np.float64)
+    except OSError as error:
+        raise PtraceError(f"{path}: cannot read camera settings ({error.strerror})") from None
+    except ValueError:
+        raise PtraceError(f"{path}: camera settings must be whitespace-separated numbers") from None
+    if numbers.size < 28:
+        raise PtraceError(f"{path}: camera settings need at least 28 numbers "
+                          f"(hFov vFov aspect near far / pos target / phi theta r minR maxR / "
+                          f"3x3 rotation / screenW screenH screenDist), found {numbers.size}")
+    if not np.isfinite(numbers[:28]).all():
+        raise PtraceError(f"{path}: camera settings contain NaN or infinite numbers")
+    near, far = numbers[3], numbers[4]
+    position, target = numbers[5:8], numbers[8:11]
+    rotation = numbers[16:25].reshape(3, 3)
+    screen_dist = numbers[27]
+    if not screen_dist > 0:
+        raise PtraceError(f"{path}: screenDist must be positive, found {screen_dist}")
+    return Camera(position, target, rotation, float(screen_dist), int(width), int(height),
+                  float(near), float(far))

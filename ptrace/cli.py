@@ -1,0 +1,182 @@
+"""`ptrace [options] SCENE`: the course's command line over ptrace.load and ptrace.render.
+
+Anything a user can cause ends in one line on stderr and exit code 2, never a traceback.
+"""
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+
+EXIT_USAGE = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):   # one line, not argparse's usage block
+        raise _UsageError(message)
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _positive_int(name):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if value < 1:
+            raise argparse.ArgumentTypeError(f"{name} must be at least 1, got {value}")
+        return value
+    return parse
+
+
+def _nonnegative_int(name):
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"{name} must not be negative, got {value}")
+        return value
+    return parse
+
+
+def _positive_float(name):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not value > 0 or not np.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{name} must be a positive number, got {text}")
+        return value
+    return parse
+
+
+def build_parser():
+    import accel
+    from .render import INTEGRATORS
+    parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
+                     "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
+    add = parser.add_argument
+    add("scene", help="scene file: .dae (CS184 COLLADA) or .obj .ply .stl .glb .gltf")
+    add("-t", "--threads", type=_positive_int("threads"), default=None,
+        help="render threads (default: all cores)")
+    add("-s", "--spp", type=_positive_int("samples per pixel"), default=1,
+        help="camera rays per pixel (default 1)")
+    add("-l", "--light-samples", type=_positive_int("light samples"), default=1,
+        help="samples per area light per shading point (default 1)")
+    add("-m", "--max-depth", type=_nonnegative_int("max depth"), default=1,
+        help="maximum ray depth (default 1)")
+    add("-a", "--adaptive", nargs=2, metavar=("BATCH", "TOL"), default=None,
+        help="adaptive sampling: samples per batch and tolerance")
+    add("-H", "--hemisphere", action="store_true",
+        help="direct light by uniform hemisphere sampling instead of light sampling")
+    add("-r", "--resolution", nargs=2, type=_positive_int("resolution"), metavar=("W", "H"),
+        default=(800, 600), help="image size; keeps the focal length, so it crops (default 800 600)")
+    add("-f", "--output", default=None, metavar="FILE",
+        help="output image, .png (the course's 8-bit curve) or .exr (linear float); "
+             "default SCENE_NAME.png in the current directory")
+    add("-p", "--crop", nargs=4, type=_nonnegative_int("crop"), metavar=("X", "Y", "DX", "DY"),
+        default=None, help="render only this cell (y counted from the bottom) and save just it")
+    add("-c", "--camera", default=None, metavar="FILE", help="the course's camera settings file")
+    add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
+    add("--seed", type=_nonnegative_int("seed"), default=0, help="random seed (default 0)")
+    add("--integrator", choices=INTEGRATORS, default="path",
+        help="path (light transport) or normals (the course's normal shading)")
+    add("--info", action="store_true", help="print a JSON summary of the scene and exit")
+    add("-q", "--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def scene_info(scene):
+    from .camera import course_camera
+    from .scene import BSDF_NAMES, LIGHT_NAMES
+    lights = scene.lights
+    entries = []
+    for i in range(len(lights)):
+        kind = LIGHT_NAMES[lights.kind[i]]
+        entry = {"type": kind, "radiance": lights.radiance[i].tolist()}
+        if kind in ("point", "spot", "area"):
+            entry["position"] = lights.position[i].tolist()
+        if kind in ("directional", "spot", "area"):
+            entry["direction"] = lights.direction[i].tolist()
+        if kind == "area":
+            entry.update(edge_x=lights.edge_x[i].tolist(), edge_y=lights.edge_y[i].tolist(),
+                         area=float(lights.area[i]))
+        entries.append(entry)
+    camera = course_camera(scene)
+    bounds = scene.bounds()
+    return {
+        "file": os.path.abspath(scene.path),
+        "triangles": int(scene.triangle_count),
+        "spheres": int(scene.sphere_count),
+        "lights": entries,
+        "bsdfs": scene.bsdf_kinds(),
+        "camera": {"position": camera.position.tolist(), "target": camera.target.tolist(),
+                   "hfov": camera.hfov, "vfov": camera.vfov, "screen_dist": camera.screen_dist,
+                   "znear": camera.znear, "zfar": camera.zfar},
+        "bounds": None if bounds is None else [bounds[0].tolist(), bounds[1].tolist()],
+    }
+
+
+def run(argv):
+    from . import load, render
+    from .camera import load_camera_settings
+    from .errors import PtraceError
+    from .image import FORMATS, write_image
+    args = build_parser().parse_args(argv)
+    if args.adaptive is not None:
+        batch = _positive_int("adaptive batch")(args.adaptive[0])
+        tolerance = _positive_float("adaptive tolerance")(args.adaptive[1])
+        args.adaptive = (batch, tolerance)
+    output = args.output
+    if output is None:
+        output = os.path.splitext(os.path.basename(args.scene))[0] + ".png"
+    if os.path.splitext(output)[1].lower() not in FORMATS:
+        raise PtraceError(f"{output}: output must end in {' or '.join(FORMATS)}")
+    out_dir = os.path.dirname(os.path.abspath(output))
+    if not args.info and not (os.path.isdir(out_dir) and os.access(out_dir, os.W_OK)):
+        raise PtraceError(f"{output}: cannot write to directory {out_dir}")
+    scene = load(args.scene)
+    if args.info:
+        print(json.dumps(scene_info(scene), indent=2))
+        return 0
+    width, height = args.resolution
+    camera = load_camera_settings(args.camera, width, height) if args.camera else None
+    stats = {}
+    image = render(scene, spp=args.spp, accel=args.accel, integrator=args.integrator,
+                   resolution=(width, height), seed=args.seed, threads=args.threads,
+                   crop=args.crop, camera=camera,
+                   progress=not args.quiet and sys.stderr.isatty(), stats=stats,
+                   light_samples=args.light_samples, max_depth=args.max_depth,
+                   adaptive=args.adaptive, hemisphere=args.hemisphere)
+    write_image(output, image)
+    seconds = stats["render_seconds"]
+    print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} accel {args.accel} "
+          f"build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
+          f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
+          f"-> {os.path.abspath(output)}")
+    return 0
+
+
+def main(argv=None):
+    from .errors import PtraceError
+    try:
+        return run(sys.argv[1:] if argv is None else argv)
+    except (_UsageError, argparse.ArgumentTypeError) as error:
+        print(f"ptrace: error: {error}", file=sys.stderr)
+    except PtraceError as error:
+        print(f"ptrace: error: {error}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("ptrace: interrupted", file=sys.stderr)
+        return 130
+    return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

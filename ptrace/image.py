@@ -1,0 +1,68 @@
+"""Image output through OpenImageIO: the course's 8-bit PNG curve, or linear float EXR.
+
+Files are written whole or not at all: into a temporary file beside the target, then renamed.
+"""
+import os
+import tempfile
+
+import numpy as np
+
+from .errors import PtraceError
+
+FORMATS = (".png", ".exr")
+
+
+def course_8bit(radiance):
+    """floor(255 * min(1, (sqrt(2) * L) ** (1/2.2))) per channel (CS184.md 3.2); NaN -> 255."""
+    radiance = np.asarray(radiance, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        curve = np.power(np.sqrt(2.0) * np.maximum(radiance, 0.0), 1 / 2.2)
+    curve = np.where(np.isnan(radiance), 1.0, np.minimum(curve, 1.0))
+    return np.floor(255 * curve).astype(np.uint8)
+
+
+def write_image(path, radiance):
+    """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float)."""
+    import OpenImageIO as oiio
+    path = os.fspath(path)
+    extension = os.path.splitext(path)[1].lower()
+    if extension not in FORMATS:
+        raise PtraceError(f"{path}: output must end in {' or '.join(FORMATS)}")
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise PtraceError(f"{path}: output directory {directory} does not exist")
+    if extension == ".png":
+        pixels, pixel_type = course_8bit(radiance), oiio.UINT8
+    else:
+        pixels, pixel_type = np.ascontiguousarray(radiance, dtype=np.float32), oiio.FLOAT
+    height, width, channels = pixels.shape
+    try:
+        handle, temporary = tempfile.mkstemp(prefix=".ptrace-", suffix=extension, dir=directory)
+        os.close(handle)
+    except OSError as error:
+        raise PtraceError(f"{path}: cannot write to {directory} ({error.strerror})") from None
+    try:
+        output = oiio.ImageOutput.create(temporary)
+        spec = oiio.ImageSpec(width, height, channels, pixel_type)
+        if output is None or not output.open(temporary, spec):
+            message = oiio.geterror() if output is None else output.geterror()
+            raise PtraceError(f"{path}: cannot write image ({message})")
+        ok = output.write_image(pixels)
+        output.close()
+        if not ok:
+            raise PtraceError(f"{path}: cannot write image ({output.geterror()})")
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, path)
+    finally:
+        if os.path.exists(temporary):
+            os.remove(temporary)
+    return path
+
+
+def read_image(path):
+    """(H, W, C) float32 pixels of an image file (PNG values scaled to [0, 1])."""
+    import OpenImageIO as oiio
+    buffer = oiio.ImageBuf(os.fspath(path))
+    if buffer.has_error:
+        raise PtraceError(f"{path}: cannot read image ({buffer.geterror()})")
+    return buffer.get_pixels(oiio.FLOAT)

@@ -1,0 +1,123 @@
+"""The real console script, run in a subprocess: help, --info, renders, and every error case."""
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ptrace.image import course_8bit, read_image
+
+SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
+
+
+def ptrace_command():
+    script = shutil.which("ptrace", path=os.path.dirname(sys.executable))
+    return [script] if script else [sys.executable, "-m", "ptrace"]
+
+
+def run(*args, cwd=None):
+    return subprocess.run(ptrace_command() + [str(a) for a in args], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+def test_help():
+    result = run("--help")
+    assert result.returncode == 0
+    for flag in ("--spp", "--light-samples", "--max-depth", "--adaptive", "--hemisphere",
+                 "--resolution", "--output", "--crop", "--camera", "--accel", "--seed",
+                 "--integrator", "--info", "--threads"):
+        assert flag in result.stdout
+
+
+def test_info_on_every_course_scene(scenes_dir):
+    files = sorted(scenes_dir.rglob("*.dae"))
+    assert len(files) == 25
+    for path in files:
+        result = run("--info", path)
+        assert result.returncode == 0, result.stderr
+        info = json.loads(result.stdout)
+        assert set(info) >= {"file", "triangles", "spheres", "lights", "bsdfs", "camera", "bounds"}
+        assert set(info["camera"]) >= {"position", "target", "hfov", "vfov", "screen_dist"}
+        assert info["triangles"] > 0 and all("type" in light for light in info["lights"])
+
+
+def test_info_on_the_shipped_scene():
+    info = json.loads(run("--info", SHIPPED).stdout)
+    assert (info["triangles"], info["spheres"]) == (24, 1)
+    assert info["lights"][0]["type"] == "area" and info["lights"][0]["area"] == pytest.approx(0.48)
+    assert info["bsdfs"] == ["diffuse", "emission"]
+    assert info["camera"]["screen_dist"] == pytest.approx(875.0, abs=0.1)
+
+
+@pytest.mark.parametrize("extension", ["png", "exr"])
+def test_normals_render_written_and_read_back(tmp_path, scenes_dir, extension):
+    output = tmp_path / f"cow.{extension}"
+    result = run("--integrator", "normals", "-r", 120, 90, "-f", output, "--accel", "embree",
+                 scenes_dir / "meshedit/cow.dae")
+    assert result.returncode == 0, result.stderr
+    assert "120x90" in result.stdout and "rays/s" in result.stdout and "embree" in result.stdout
+    pixels = read_image(output)
+    assert pixels.shape == (90, 120, 3)
+    import ptrace
+    expected = ptrace.render(ptrace.load(scenes_dir / "meshedit/cow.dae"), integrator="normals",
+                             resolution=(120, 90), accel="embree")
+    if extension == "png":
+        np.testing.assert_array_equal(np.round(pixels * 255).astype(np.uint8), course_8bit(expected))
+    else:
+        np.testing.assert_array_equal(pixels, expected)
+    assert [p.name for p in tmp_path.iterdir()] == [output.name]   # no temporary left behind
+
+
+def test_default_output_is_scene_name_in_current_directory(tmp_path):
+    result = run("--integrator", "normals", "-r", 16, 12, "-q", SHIPPED, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "cornell.png").exists()
+    assert str(tmp_path / "cornell.png") in result.stdout
+
+
+def test_8bit_curve_matches_the_course():
+    values = np.array([0.0, 0.1, 0.5, 1 / np.sqrt(2), 10.0, np.nan])
+    expected = [0, int(np.floor(255 * (np.sqrt(2) * 0.1) ** (1 / 2.2))),
+                int(np.floor(255 * (np.sqrt(2) * 0.5) ** (1 / 2.2))), 255, 255, 255]
+    np.testing.assert_array_equal(course_8bit(values), expected)
+
+
+BAD_CALLS = {
+    "zero spp": (["-s", "0"], "at least 1"),
+    "zero width": (["-r", "0", "10"], "at least 1"),
+    "unknown accel": (["--accel", "foo"], "invalid choice"),
+    "crop outside": (["-p", "700", "500", "200", "200", "--integrator", "normals"], "not inside"),
+    "bad adaptive": (["-a", "32", "-1"], "positive"),
+    "bad output extension": (["-f", "out.jpg"], "must end in"),
+    "missing output dir": (["-f", "/nonexistent-dir/x.png"], "cannot write"),
+    "missing camera file": (["-c", "/nonexistent-cam.txt", "--integrator", "normals"], "camera"),
+    "path not yet": (["-r", "8", "6"], "not there yet"),
+}
+
+
+@pytest.mark.parametrize("name", list(BAD_CALLS))
+def test_errors_are_one_line_and_exit_2(tmp_path, name):
+    args, fragment = BAD_CALLS[name]
+    result = run(*args, SHIPPED, cwd=tmp_path)
+    assert result.returncode == 2, (result.stdout, result.stderr)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and fragment in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+    assert list(tmp_path.iterdir()) == []   # nothing written
+
+
+def test_scene_errors_are_one_line_and_exit_2(tmp_path):
+    for content, fragment in [(None, "bad.dae"), ("<COLLADA><asset/>", "bad.dae"),
+                              ("<notcollada/>", "COLLADA")]:
+        path = tmp_path / "bad.dae"
+        if content is not None:
+            path.write_text(content)
+        result = run("--info", path)
+        assert result.returncode == 2
+        lines = result.stderr.strip().splitlines()
+        assert len(lines) == 1 and fragment in lines[0] and "Traceback" not in result.stderr
+        path.unlink(missing_ok=True)
