@@ -1,0 +1,79 @@
+"""Normal-shading render time per backend (the course's part 2 comparison) and CLI start-up.
+
+    python -m benchmarks.first_images [--threads 2] [--repeats 3]
+
+For cow and maxplanck: `ptrace.render(scene, integrator="normals", resolution=(480, 360))` with
+naive, bvh and embree (BVH/Embree build time reported apart; bvh and embree the median of
+--repeats runs, naive one run). Start-up: wall time of `ptrace --info cow.dae` in a fresh process,
+cold (an empty bytecode cache for every module, PYTHONPYCACHEPREFIX) and warm (median of 5).
+Writes benchmarks/results/first_images.md.
+"""
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numba
+
+from . import report
+from .accel_rays import scenes_dir
+
+MESHES = ["meshedit/cow.dae", "meshedit/maxplanck.dae"]
+
+
+def info_seconds(scene, env):
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "ptrace", "--info", scene], env=env, check=True,
+                   capture_output=True)
+    return time.perf_counter() - start
+
+
+def main(argv=None):
+    import ptrace
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--output", default="first_images.md")
+    args = parser.parse_args(argv)
+    numba.set_num_threads(args.threads)
+    lines = [report.header("First images: normal shading per backend, and start-up"),
+             f"480x360, 1 spp, {args.threads} threads; bvh and embree: median of {args.repeats} "
+             "runs after one warm-up render; naive: one run. Render seconds exclude the "
+             "acceleration build, which is listed apart.", "",
+             "| scene | backend | build s | render s | rays/s | speedup over naive |",
+             "|---|---|---:|---:|---:|---:|"]
+    for relpath in MESHES:
+        scene = ptrace.load(os.path.join(scenes_dir(), relpath))
+        ptrace.render(scene, integrator="normals", resolution=(16, 12))   # compile / load cache
+        results = {}
+        for kind, repeats in (("bvh", args.repeats), ("embree", args.repeats), ("naive", 1)):
+            runs = []
+            for _ in range(repeats):
+                stats = {}
+                ptrace.render(scene, integrator="normals", resolution=(480, 360), accel=kind,
+                              stats=stats)
+                runs.append(stats)
+            seconds = statistics.median(r["render_seconds"] for r in runs)
+            build = statistics.median(r["build_seconds"] for r in runs)
+            results[kind] = (build, seconds, runs[0]["rays"] / seconds)
+            print(relpath, kind, f"{seconds:.3f} s", flush=True)
+        for kind in ("naive", "bvh", "embree"):
+            build, seconds, rate = results[kind]
+            lines.append(f"| {relpath} | {kind} | {build:.3f} | {seconds:.3f} | {rate:,.0f} | "
+                         f"{results['naive'][1] / seconds:.0f}x |")
+    cow = os.path.join(scenes_dir(), MESHES[0])
+    with tempfile.TemporaryDirectory() as prefix:
+        cold = info_seconds(cow, dict(os.environ, PYTHONPYCACHEPREFIX=prefix))
+    warm = statistics.median(info_seconds(cow, dict(os.environ)) for _ in range(5))
+    lines += ["", f"`ptrace --info meshedit/cow.dae` start-up: cold {cold:.2f} s (every module's "
+              f"bytecode recompiled), warm {warm:.2f} s (median of 5). `--info` compiles no "
+              "numba kernel."]
+    path = report.write(args.output, "\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
