@@ -124,12 +124,25 @@ def scene_info(scene):
     }
 
 
+def _one_line_warnings():
+    import warnings
+    seen = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = str(message)
+        if text not in seen:
+            seen.add(text)
+            print(f"ptrace: warning: {text}", file=sys.stderr)
+    warnings.showwarning = show
+
+
 def run(argv):
     from . import load, render
     from .camera import load_camera_settings
     from .errors import PtraceError
-    from .image import FORMATS, write_image
+    from .image import FORMATS, rate_colours, rate_path, write_image
     args = build_parser().parse_args(argv)
+    _one_line_warnings()
     if args.adaptive is not None:
         batch = _positive_int("adaptive batch")(args.adaptive[0])
         tolerance = _positive_float("adaptive tolerance")(args.adaptive[1])
@@ -156,11 +169,16 @@ def run(argv):
                    light_samples=args.light_samples, max_depth=args.max_depth,
                    adaptive=args.adaptive, hemisphere=args.hemisphere)
     write_image(output, image)
+    write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     seconds = stats["render_seconds"]
-    print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} accel {args.accel} "
-          f"build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
+    mean_spp = stats["samples"].mean()
+    print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} (mean {mean_spp:.1f}) "
+          f"accel {args.accel} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
-          f"-> {os.path.abspath(output)}")
+          f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
+    if stats["interrupted"]:
+        print("ptrace: interrupted: wrote the samples rendered so far", file=sys.stderr)
+        return 130
     return 0
 
 

@@ -21,8 +21,24 @@ def course_8bit(radiance):
     return np.floor(255 * curve).astype(np.uint8)
 
 
-def write_image(path, radiance):
-    """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float)."""
+def rate_colours(rate):
+    """The course's sample-rate ramp (CS184.md 3.2): blue (0) to green (0.5) to red (1), 8-bit."""
+    rate = np.clip(np.asarray(rate, dtype=np.float64), 0.0, 1.0)[..., None]
+    low = np.concatenate([np.zeros_like(rate), 2 * rate, 1 - 2 * rate], axis=-1)
+    high = np.concatenate([2 * rate - 1, 2 - 2 * rate, np.zeros_like(rate)], axis=-1)
+    return np.floor(255 * np.where(rate <= 0.5, low, high)).astype(np.uint8)
+
+
+def rate_path(path):
+    """FILE.png -> FILE_rate.png (the course's name for the rate image)."""
+    root, _ = os.path.splitext(os.fspath(path))
+    return root + "_rate.png"
+
+
+def write_image(path, radiance, eight_bit=None):
+    """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float).
+
+    eight_bit, if given, is written as it is instead (for the rate image)."""
     import OpenImageIO as oiio
     path = os.fspath(path)
     extension = os.path.splitext(path)[1].lower()
@@ -31,7 +47,9 @@ def write_image(path, radiance):
     directory = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(directory):
         raise PtraceError(f"{path}: output directory {directory} does not exist")
-    if extension == ".png":
+    if eight_bit is not None:
+        pixels, pixel_type = np.ascontiguousarray(eight_bit, dtype=np.uint8), oiio.UINT8
+    elif extension == ".png":
         pixels, pixel_type = course_8bit(radiance), oiio.UINT8
     else:
         pixels, pixel_type = np.ascontiguousarray(radiance, dtype=np.float32), oiio.FLOAT

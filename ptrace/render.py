@@ -1,6 +1,14 @@
-"""The render loop: camera rays in chunks of pixels, one batched intersect per chunk, shading
-kernels on the hits, per-pixel means. Python runs once per chunk; numba kernels once per ray."""
+"""The render loop: passes of samples over the active pixels, each pass in chunks of pixels.
+
+Python runs once per wave (a chunk's camera rays, then each bounce); numba kernels run once per
+ray. Per pixel the loop keeps the sum of radiance, the sum and sum of squares of illuminance and
+the sample count; adaptive sampling (-a) retires converged pixels after each pass. Random
+numbers are keyed by (seed, pixel, sample, dimension), and pass sizes depend only on -s and -a,
+so an image does not depend on threads, chunk size or backend.
+"""
+import sys
 import time
+import warnings
 
 import numba
 import numpy as np
@@ -10,30 +18,32 @@ import accel
 
 from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
 from .errors import PtraceError
+from .paths import PathTracer
 from .sampling import uniform
-from .shading import normal_colours, shading_normals
 
 INTEGRATORS = ("path", "normals")
-CHUNK_RAYS = 1 << 16   # rays per batch: bounds memory at about 200 bytes x 65536 per array set
+CHUNK_RAYS = 1 << 16     # rays per batch handed to the accelerator (bounds peak memory)
+PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 @njit(cache=True, parallel=True)
-def camera_samples(seed, pixel_x, pixel_y, width, spp, out_x, out_y):
-    """Image-plane points for spp samples of each pixel (y from the bottom): the pixel centre
-    when spp is 1, else uniform jitter from the counter-based hash (CS184.md 4.1)."""
+def camera_samples(seed, pixel_x, pixel_y, width, first_sample, count, spp, out_x, out_y):
+    """Image-plane points of samples first_sample .. first_sample+count-1 of each pixel (y from
+    the bottom): the pixel centre when spp is 1, else uniform jitter (CS184.md 4.1)."""
     for k in prange(pixel_x.shape[0]):
         pixel = pixel_y[k] * width + pixel_x[k]
-        for s in range(spp):
-            i = k * spp + s
+        for j in range(count):
+            i = k * count + j
             if spp == 1:
                 out_x[i] = pixel_x[k] + 0.5
                 out_y[i] = pixel_y[k] + 0.5
             else:
-                out_x[i] = pixel_x[k] + uniform(seed, pixel, s, 0)
-                out_y[i] = pixel_y[k] + uniform(seed, pixel, s, 1)
+                out_x[i] = pixel_x[k] + uniform(seed, pixel, first_sample + j, 0)
+                out_y[i] = pixel_y[k] + uniform(seed, pixel, first_sample + j, 1)
 
 
-def _check_options(spp, accel_kind, integrator, width, height, crop):
+def _check_options(spp, accel_kind, integrator, width, height, crop, options):
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise PtraceError(f"samples per pixel must be a positive integer, got {spp!r}")
     if accel_kind not in accel.KINDS:
@@ -47,6 +57,19 @@ def _check_options(spp, accel_kind, integrator, width, height, crop):
         if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > width or y + dy > height:
             raise PtraceError(f"crop cell x={x} y={y} dx={dx} dy={dy} is not inside the "
                               f"{width}x{height} image")
+    unknown = set(options) - {"light_samples", "max_depth", "adaptive", "hemisphere"}
+    if unknown:
+        raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
+    if options.get("light_samples", 1) < 1:
+        raise PtraceError("light samples must be at least 1")
+    if options.get("max_depth", 1) < 0:
+        raise PtraceError("max depth must not be negative")
+    adaptive = options.get("adaptive")
+    if adaptive is not None:
+        batch, tolerance = adaptive
+        if batch < 1 or not tolerance > 0:
+            raise PtraceError(f"adaptive sampling needs a batch >= 1 and a tolerance > 0, "
+                              f"got {batch} {tolerance}")
 
 
 def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
@@ -55,16 +78,15 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
 
     resolution is (W, H), default the course's 800x600 (a crop of the same focal length, not a
     rescale); crop (x, y, dx, dy) renders only that cell (y counted from the bottom, like the
-    course) and returns it alone; camera overrides the course's camera; stats, if a dict, is
-    filled with build and render seconds and rays traced. options carry the light-transport
-    flags (light_samples, max_depth, adaptive, hemisphere).
+    course) and returns it alone; camera overrides the course's camera; options are the light
+    transport flags: light_samples (-l, default 1), max_depth (-m, default 1), adaptive (-a,
+    (batch, tolerance) or None) and hemisphere (-H). stats, if a dict, receives build and render
+    seconds, rays traced, per-pixel sample counts ("samples", (H, W)), the number of non-finite
+    samples dropped, and whether Ctrl-C interrupted the render.
     """
     accel_kind = accel
     width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
-    _check_options(spp, accel_kind, integrator, width, height, crop)
-    if integrator == "path":
-        raise PtraceError("the path integrator is not there yet (light transport is the next "
-                          "milestone); use --integrator normals")
+    _check_options(spp, accel_kind, integrator, width, height, crop, options)
     previous_threads = numba.get_num_threads()
     if threads is not None:
         if not 1 <= threads <= numba.config.NUMBA_NUM_THREADS:
@@ -72,13 +94,25 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
                               f"got {threads}")
         numba.set_num_threads(threads)
     try:
-        return _render(scene, spp, accel_kind, width, height, int(seed), crop, camera,
-                       progress, stats)
+        return _render(scene, int(spp), accel_kind, integrator, width, height, int(seed), crop,
+                       camera, progress, stats, options)
     finally:
         numba.set_num_threads(previous_threads)
 
 
-def _render(scene, spp, accel_kind, width, height, seed, crop, camera, progress, stats):
+def _converged(sum_l, sum_l2, count, tolerance, batch):
+    """The course's test, 1.96 sigma / sqrt(n) <= tolerance * mu on illuminance, except that a
+    pixel whose samples have all been equal (sigma = 0, typically all black) is not stopped
+    before it has two batches: one batch of zeros in a dim, noisy region says little."""
+    n = count.astype(np.float64)
+    mean = sum_l / n
+    variance = np.maximum(sum_l2 - sum_l * sum_l / n, 0.0) / np.maximum(n - 1, 1)
+    sigma = np.sqrt(variance)
+    return (1.96 * sigma / np.sqrt(n) <= tolerance * mean) & ((sigma > 0) | (n >= 2 * batch))
+
+
+def _render(scene, spp, accel_kind, integrator, width, height, seed, crop, camera, progress,
+            stats, options):
     camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
     start = time.perf_counter()
@@ -86,42 +120,73 @@ def _render(scene, spp, accel_kind, width, height, seed, crop, camera, progress,
     build_seconds = time.perf_counter() - start
 
     start = time.perf_counter()
+    tracer = PathTracer(scene, backend, seed, integrator,
+                        light_samples=int(options.get("light_samples", 1)),
+                        max_depth=int(options.get("max_depth", 1)),
+                        hemisphere=bool(options.get("hemisphere", False)))
+    for message in tracer.warnings:
+        warnings.warn(message, RuntimeWarning, stacklevel=3)
+    adaptive = options.get("adaptive")
+    batch = int(adaptive[0]) if adaptive is not None else min(spp, PASS_SAMPLES)
     ys, xs = np.mgrid[y0:y0 + cell_h, x0:x0 + cell_w]
     pixel_x = xs.reshape(-1).astype(np.int64)
     pixel_y = ys.reshape(-1).astype(np.int64)
     n_pixels = pixel_x.shape[0]
-    image = np.zeros((n_pixels, 3))
-    per_chunk = max(1, CHUNK_RAYS // spp)
-    chunks = range(0, n_pixels, per_chunk)
+    sum_rgb = np.zeros((n_pixels, 3))
+    sum_l = np.zeros(n_pixels)
+    sum_l2 = np.zeros(n_pixels)
+    count = np.zeros(n_pixels, dtype=np.int64)
+    nonfinite = 0
+    active = np.arange(n_pixels)
+    done = 0
     bar = None
     if progress:
         from tqdm import tqdm
-        bar = tqdm(total=n_pixels, unit="px", unit_scale=True, leave=False)
-    rays_traced = 0
-    geometry = scene.geometry
-    for first in chunks:
-        last = min(first + per_chunk, n_pixels)
-        cx, cy = pixel_x[first:last], pixel_y[first:last]
-        n = (last - first) * spp
-        sx, sy = np.empty(n), np.empty(n)
-        camera_samples(seed, cx, cy, width, spp, sx, sy)
-        directions = camera.directions(sx, sy)
-        origins = np.broadcast_to(camera.position, directions.shape)
-        rays = accel.Rays(origins, directions, camera.znear, camera.zfar)
-        hits = backend.intersect(rays)
-        rays_traced += n
-        normals = shading_normals(scene.vertex_normals, geometry.faces, geometry.centers,
-                                  geometry.radii, rays.origins, rays.directions, hits.t,
-                                  hits.prim, hits.u, hits.v, np.empty((n, 3)))
-        colours = normal_colours(normals, hits.prim, np.empty((n, 3)))
-        image[first:last] = colours.reshape(last - first, spp, 3).mean(axis=1)
-        if bar is not None:
-            bar.update(last - first)
+        bar = tqdm(total=n_pixels * spp, unit="spl", unit_scale=True, leave=False,
+                   file=sys.stderr)
+    interrupted = False
+    try:
+        while done < spp and active.size:
+            pass_n = min(batch, spp - done)
+            per_chunk = max(1, (CHUNK_RAYS // tracer.rays_per_path) // pass_n)
+            for first in range(0, active.size, per_chunk):
+                chosen = active[first:first + per_chunk]
+                n = chosen.size * pass_n
+                sx, sy = np.empty(n), np.empty(n)
+                camera_samples(seed, pixel_x[chosen], pixel_y[chosen], width, done, pass_n, spp,
+                               sx, sy)
+                directions = camera.directions(sx, sy)
+                rays = accel.Rays(np.broadcast_to(camera.position, directions.shape), directions,
+                                  camera.znear, camera.zfar)
+                pixel_ids = np.repeat(pixel_y[chosen] * width + pixel_x[chosen], pass_n)
+                sample_ids = np.tile(np.arange(done, done + pass_n), chosen.size)
+                radiance = tracer.trace(pixel_ids, sample_ids, rays)
+                finite = np.isfinite(radiance).all(axis=1)
+                nonfinite += int((~finite).sum())
+                radiance[~finite] = 0.0
+                lum = radiance @ LUMINANCE
+                sum_rgb[chosen] += radiance.reshape(chosen.size, pass_n, 3).sum(axis=1)
+                sum_l[chosen] += lum.reshape(chosen.size, pass_n).sum(axis=1)
+                sum_l2[chosen] += (lum * lum).reshape(chosen.size, pass_n).sum(axis=1)
+                count[chosen] += finite.reshape(chosen.size, pass_n).sum(axis=1)
+                if bar is not None:
+                    bar.update(n)
+            done += pass_n
+            if adaptive is not None and done < spp:
+                stop = _converged(sum_l[active], sum_l2[active], count[active], adaptive[1], batch)
+                if bar is not None:
+                    bar.update(int(stop.sum()) * (spp - done))
+                active = active[~stop]
+    except KeyboardInterrupt:
+        interrupted = True
     if bar is not None:
         bar.close()
     render_seconds = time.perf_counter() - start
+    image = np.where(count[:, None] > 0, sum_rgb / np.maximum(count, 1)[:, None], 0.0)
     if stats is not None:
         stats.update(build_seconds=build_seconds, render_seconds=render_seconds,
-                     rays=rays_traced, accel=backend.stats())
+                     rays=tracer.rays_traced, accel=backend.stats(), nonfinite=nonfinite,
+                     interrupted=interrupted, spp=spp,
+                     samples=count.reshape(cell_h, cell_w)[::-1].copy())
     # rows were generated bottom row first; the returned image has the top row first
     return image.reshape(cell_h, cell_w, 3)[::-1].astype(np.float32)

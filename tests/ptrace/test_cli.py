@@ -69,7 +69,8 @@ def test_normals_render_written_and_read_back(tmp_path, scenes_dir, extension):
         np.testing.assert_array_equal(np.round(pixels * 255).astype(np.uint8), course_8bit(expected))
     else:
         np.testing.assert_array_equal(pixels, expected)
-    assert [p.name for p in tmp_path.iterdir()] == [output.name]   # no temporary left behind
+    # the image and the course's rate image, and no temporary left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([output.name, "cow_rate.png"])
 
 
 def test_default_output_is_scene_name_in_current_directory(tmp_path):
@@ -77,6 +78,25 @@ def test_default_output_is_scene_name_in_current_directory(tmp_path):
     assert result.returncode == 0, result.stderr
     assert (tmp_path / "cornell.png").exists()
     assert str(tmp_path / "cornell.png") in result.stdout
+
+
+def test_path_render_summary_and_rate_image(tmp_path):
+    output = tmp_path / "box.png"
+    result = run("-s", 8, "-l", 2, "-m", 3, "-a", 4, 0.2, "-r", 40, 30, "-f", output, SHIPPED)
+    assert result.returncode == 0, result.stderr
+    assert "non-finite samples dropped 0" in result.stdout and "40x30" in result.stdout
+    rate = read_image(tmp_path / "box_rate.png")
+    assert rate.shape == (30, 40, 3)
+    # adaptive sampling stopped some pixels early (not pure red) and not all (some red)
+    red = (rate[..., 0] > 0.99) & (rate[..., 1] < 0.01)
+    assert 0 < red.sum() < red.size
+
+
+def test_hemisphere_on_a_scene_without_emitters_warns_once(tmp_path, scenes_dir):
+    result = run("-H", "-r", 16, 12, "-f", tmp_path / "cow.png", scenes_dir / "meshedit/cow.dae")
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 1 and "emissive" in warnings[0]
 
 
 def test_8bit_curve_matches_the_course():
@@ -95,7 +115,8 @@ BAD_CALLS = {
     "bad output extension": (["-f", "out.jpg"], "must end in"),
     "missing output dir": (["-f", "/nonexistent-dir/x.png"], "cannot write"),
     "missing camera file": (["-c", "/nonexistent-cam.txt", "--integrator", "normals"], "camera"),
-    "path not yet": (["-r", "8", "6"], "not there yet"),
+    "zero light samples": (["-l", "0"], "at least 1"),
+    "negative depth": (["-m", "-1"], "negative"),
 }
 
 

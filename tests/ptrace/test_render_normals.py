@@ -53,8 +53,3 @@ def test_shipped_scene_renders_normals():
     assert np.isfinite(image).all()
     # left wall faces +x: red channel high; right wall faces -x: red channel low
     assert image[180, 10, 0] > 0.9 and image[180, 470, 0] < 0.1
-
-
-def test_path_integrator_says_it_is_not_there_yet():
-    with pytest.raises(ptrace.PtraceError, match="not there yet"):
-        ptrace.render(ptrace.load(SHIPPED), resolution=(8, 6))

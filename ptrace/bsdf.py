@@ -1,0 +1,196 @@
+"""BSDFs in a local shading frame (normal = +z), as numba functions of one material index.
+
+Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine
+term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction) return from sample()
+the weight f / pdf already folded into f with pdf = 1 and `delta = True`; eval() of a delta BSDF
+is 0. Semantics follow CS184.md 4.8, with the textbook Smith Lambda for Beckmann (sqrt(pi),
+where the course's starter has pi).
+"""
+import math
+
+import numpy as np
+from numba import njit
+
+from .scene import DIFFUSE, EMISSION, GLASS, MICROFACET, MIRROR, REFRACTION
+
+INV_PI = 1.0 / math.pi
+SQRT_PI = math.sqrt(math.pi)
+
+
+@njit(cache=True, inline="always")
+def is_delta(kind):
+    return kind == MIRROR or kind == GLASS or kind == REFRACTION
+
+
+@njit(cache=True, inline="always")
+def cosine_hemisphere(u1, u2):
+    """Cosine-weighted direction about +z (CS184.md 4.8): r = sqrt(u1), z = sqrt(1 - u1)."""
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    return r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u1))
+
+
+@njit(cache=True, inline="always")
+def uniform_hemisphere(u1, u2):
+    """Uniform direction about +z: z = u1, pdf 1 / (2 pi)."""
+    z = u1
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * math.pi * u2
+    return r * math.cos(phi), r * math.sin(phi), z
+
+
+# -- microfacet (Beckmann, Smith G, conductor Fresnel) --------------------------------------------
+
+@njit(cache=True, inline="always")
+def beckmann_d(alpha, cos_h):
+    if cos_h <= 0.0:
+        return 0.0
+    cos2 = cos_h * cos_h
+    tan2 = (1.0 - cos2) / cos2
+    return math.exp(-tan2 / (alpha * alpha)) / (math.pi * alpha * alpha * cos2 * cos2)
+
+
+@njit(cache=True, inline="always")
+def smith_lambda(alpha, cos_w):
+    """Beckmann Lambda, textbook form: (erf(a) - 1)/2 + exp(-a^2) / (2 a sqrt(pi)), a = 1/(alpha tan)."""
+    cos_w = abs(cos_w)
+    if cos_w >= 1.0:
+        return 0.0
+    tan_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w)) / cos_w
+    a = 1.0 / (alpha * tan_w)
+    return 0.5 * (math.erf(a) - 1.0) + math.exp(-a * a) / (2.0 * a * SQRT_PI)
+
+
+@njit(cache=True, inline="always")
+def conductor_fresnel(eta, k, cos_i):
+    """Unpolarised conductor Fresnel for one channel (CS184.md 4.8)."""
+    c2 = cos_i * cos_i
+    ek = eta * eta + k * k
+    rs = (ek - 2.0 * eta * cos_i + c2) / (ek + 2.0 * eta * cos_i + c2)
+    rp = (ek * c2 - 2.0 * eta * cos_i + 1.0) / (ek * c2 + 2.0 * eta * cos_i + 1.0)
+    return 0.5 * (rs + rp)
+
+
+@njit(cache=True, inline="always")
+def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if norm == 0.0:
+        return 0.0, 0.0, 0.0
+    hz /= norm
+    alpha = materials_alpha[m]
+    d = beckmann_d(alpha, hz)
+    g = 1.0 / (1.0 + smith_lambda(alpha, wiz) + smith_lambda(alpha, woz))
+    scale = d * g / (4.0 * woz * wiz)
+    return (conductor_fresnel(eta[m, 0], k[m, 0], wiz) * scale,
+            conductor_fresnel(eta[m, 1], k[m, 1], wiz) * scale,
+            conductor_fresnel(eta[m, 2], k[m, 2], wiz) * scale)
+
+
+@njit(cache=True, inline="always")
+def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if norm == 0.0:
+        return 0.0
+    hx, hy, hz = hx / norm, hy / norm, hz / norm
+    # p(h) = D(h) cos(theta_h): the Beckmann distribution of normals, then the reflection Jacobian
+    p_h = beckmann_d(alpha, hz) * hz
+    return p_h / (4.0 * (wix * hx + wiy * hy + wiz * hz))
+
+
+# -- the interface ---------------------------------------------------------------------------------
+
+@njit(cache=True)
+def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+    """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters."""
+    if kind == DIFFUSE:
+        if woz > 0.0 and wiz > 0.0:
+            return albedo[m, 0] * INV_PI, albedo[m, 1] * INV_PI, albedo[m, 2] * INV_PI
+        return 0.0, 0.0, 0.0
+    if kind == MICROFACET:
+        return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def bsdf_pdf(kind, alpha, m, wox, woy, woz, wix, wiy, wiz):
+    """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise."""
+    if kind == DIFFUSE:
+        return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
+    if kind == MICROFACET:
+        return _microfacet_pdf(alpha[m], wox, woy, woz, wix, wiy, wiz)
+    return 0.0
+
+
+@njit(cache=True)
+def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, woz, u1, u2, u3):
+    """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
+
+    For delta BSDFs f carries the whole weight divided by |cos theta_i| and pdf is the discrete
+    probability of the branch taken (1 for mirror and refraction, R or 1-R for glass), so that
+    f * |cos| / pdf is the path weight in every case.
+    """
+    if kind == DIFFUSE:
+        if woz <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        x, y, z = cosine_hemisphere(u1, u2)
+        if z <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        return x, y, z, albedo[m, 0] * INV_PI, albedo[m, 1] * INV_PI, albedo[m, 2] * INV_PI, \
+            z * INV_PI
+    if kind == MIRROR:
+        if woz == 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        c = abs(woz)
+        return -wox, -woy, woz, albedo[m, 0] / c, albedo[m, 1] / c, albedo[m, 2] / c, 1.0
+    if kind == MICROFACET:
+        if woz <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        a = alpha[m]
+        tan2 = -a * a * math.log(max(1.0 - u1, 1e-300))
+        cos_h = 1.0 / math.sqrt(1.0 + tan2)
+        sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
+        phi = 2.0 * math.pi * u2
+        hx, hy, hz = sin_h * math.cos(phi), sin_h * math.sin(phi), cos_h
+        d = wox * hx + woy * hy + woz * hz
+        wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+        if wiz <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        pdf = _microfacet_pdf(a, wox, woy, woz, wix, wiy, wiz)
+        fr, fg, fb = _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+        return wix, wiy, wiz, fr, fg, fb, pdf
+    if kind == GLASS or kind == REFRACTION:
+        if woz == 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        entering = woz > 0.0
+        eta_ratio = 1.0 / ior[m] if entering else ior[m]    # n_incident / n_transmitted
+        cos_o = abs(woz)
+        sin2_t = eta_ratio * eta_ratio * max(0.0, 1.0 - cos_o * cos_o)
+        if sin2_t >= 1.0:   # total internal reflection
+            if kind == REFRACTION:
+                return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+            return -wox, -woy, woz, albedo[m, 0] / cos_o, albedo[m, 1] / cos_o, \
+                albedo[m, 2] / cos_o, 1.0
+        cos_t = math.sqrt(1.0 - sin2_t)
+        tz = -cos_t if entering else cos_t
+        tx, ty = -eta_ratio * wox, -eta_ratio * woy
+        radiance_scale = eta_ratio * eta_ratio
+        if kind == REFRACTION:
+            s = radiance_scale / cos_t
+            return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+                transmittance[m, 2] * s, 1.0
+        r0 = (1.0 - ior[m]) / (1.0 + ior[m])
+        r0 = r0 * r0
+        reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
+        if u3 < reflect:
+            s = reflect / cos_o
+            return -wox, -woy, woz, albedo[m, 0] * s, albedo[m, 1] * s, albedo[m, 2] * s, reflect
+        s = (1.0 - reflect) * radiance_scale / cos_t
+        return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+            transmittance[m, 2] * s, 1.0 - reflect
+    return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering

@@ -1,0 +1,132 @@
+"""Light transport against analytic answers, its invariances, and the shadow-ray rules."""
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+import ptrace
+from ptrace.camera import Camera
+from ptrace.scene import DIFFUSE
+
+from scenes_by_hand import (ambient_light, directional_light, floor_plane, looking_down,
+                            make_scene, pixel_hits_on_floor, point_light)
+
+SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
+
+
+def furnace(albedo, radiance):
+    """A closed diffuse sphere (radius 1, seen from inside) with a point light at its centre.
+
+    The point light (no falloff, like the course) gives every wall point direct radiance
+    a P / pi; the sphere sees only itself, so each bounce multiplies by a:
+    L = (a P / pi) (1 + a + ... + a^(m-1)) -> a P / (pi (1 - a)).
+    """
+    scene = make_scene(centers=[[0, 0, 0]], radii=[1.0],
+                       materials=[dict(kind=DIFFUSE, albedo=(albedo,) * 3)], material_index=[0],
+                       lights=[point_light((0, 0, 0), radiance)])
+    camera = Camera(np.array([0.0, 0.0, 0.3]), np.zeros(3), np.eye(3), 10.0, 16, 16, 1e-3, 1e3)
+    return scene, camera
+
+
+@pytest.mark.parametrize("depth", [1, 2])
+def test_furnace_is_exact_without_roulette(depth):
+    albedo, power = 0.5, 2.0
+    scene, camera = furnace(albedo, power)
+    image = ptrace.render(scene, camera=camera, resolution=(16, 16), spp=2, max_depth=depth)
+    expected = albedo * power / math.pi * sum(albedo ** k for k in range(depth))
+    np.testing.assert_allclose(image, expected, rtol=1e-5)
+
+
+@pytest.mark.parametrize("accel_kind", ["bvh", "embree"])
+def test_furnace_converges_with_roulette(accel_kind):
+    albedo, power = 0.7, 1.0
+    scene, camera = furnace(albedo, power)
+    stats = {}
+    image = ptrace.render(scene, camera=camera, resolution=(16, 16), spp=64, max_depth=100,
+                          accel=accel_kind, stats=stats)
+    expected = albedo * power / (math.pi * (1 - albedo))
+    mean = image.mean()
+    print(f"furnace: mean {mean:.5f} expected {expected:.5f}, rays {stats['rays']}")
+    assert mean == pytest.approx(expected, rel=0.02)
+    assert stats["nonfinite"] == 0
+
+
+def test_diffuse_plane_under_a_point_light_is_exact():
+    albedo, power, height = 0.6, 3.0, 1.0
+    scene = make_scene(**floor_plane(albedo), lights=[point_light((0, height, 0), power)])
+    camera = looking_down(3.0)
+    image = ptrace.render(scene, camera=camera, resolution=(32, 32), max_depth=1)
+    hit = pixel_hits_on_floor(camera)
+    distance = np.linalg.norm(hit - [0, height, 0], axis=-1)
+    expected = albedo / math.pi * power * height / distance   # cos theta, no 1/r^2 (course)
+    np.testing.assert_allclose(image[..., 0], expected, rtol=1e-5)
+    np.testing.assert_allclose(image[..., 1], image[..., 0])
+
+
+def test_diffuse_plane_under_a_directional_light_is_exact():
+    albedo, power = 0.4, 2.0
+    scene = make_scene(**floor_plane(albedo), lights=[directional_light((1, 2, 0), power)])
+    image = ptrace.render(scene, camera=looking_down(3.0), resolution=(32, 32), max_depth=1)
+    np.testing.assert_allclose(image, albedo / math.pi * power * 2 / math.sqrt(5), rtol=1e-5)
+
+
+def test_diffuse_plane_under_the_ambient_light():
+    albedo, power = 0.5, 1.5
+    scene = make_scene(**floor_plane(albedo), lights=[ambient_light(power)])
+    image = ptrace.render(scene, camera=looking_down(3.0), resolution=(32, 32), spp=16,
+                          light_samples=4, max_depth=1)
+    assert image.mean() == pytest.approx(albedo * power, rel=0.02)   # E = pi L, times a / pi
+
+
+def test_hemisphere_and_light_sampling_agree_where_light_and_quad_coincide():
+    scene = ptrace.load(SHIPPED)
+    kwargs = dict(resolution=(32, 24), spp=64, light_samples=8, max_depth=1)
+    lit = ptrace.render(scene, **kwargs)
+    hemi = ptrace.render(scene, hemisphere=True, **kwargs)
+    print(f"light sampling {lit.mean():.4f}, hemisphere {hemi.mean():.4f}")
+    assert hemi.mean() == pytest.approx(lit.mean(), rel=0.02)
+
+
+def test_the_quad_on_the_area_light_does_not_shadow_it():
+    """The shipped scene's emissive quad lies exactly on the area light: every shadow ray to a
+    light sample reaches the quad's plane at the sample itself, and must stop short of it.
+    With the quad removed the direct light must be the same, sample for sample."""
+    scene = ptrace.load(SHIPPED)
+    quad = np.nonzero(scene.materials.kind[scene.material_index] == 1)[0]   # emission
+    assert quad.size == 2
+    keep = np.setdiff1d(np.arange(scene.triangle_count), quad)
+    without = make_scene(scene.geometry.vertices, scene.geometry.faces[keep],
+                         scene.geometry.centers, scene.geometry.radii, [],
+                         np.concatenate([scene.material_index[keep],
+                                         scene.material_index[scene.triangle_count:]]), [])
+    without.materials, without.lights, without.camera = scene.materials, scene.lights, scene.camera
+    kwargs = dict(resolution=(48, 36), spp=4, light_samples=2, max_depth=1)
+    with_quad = ptrace.render(scene, **kwargs)
+    without_quad = ptrace.render(without, **kwargs)
+    visible_quad = np.all(with_quad > 7.9, axis=2)   # pixels that see the emitter itself
+    np.testing.assert_array_equal(with_quad[~visible_quad], without_quad[~visible_quad])
+
+
+def test_cornell_walls_are_lit(scenes_dir):
+    scene = ptrace.load(scenes_dir / "variants_sp23/sky/CBspheres_lambertian.dae")
+    image = ptrace.render(scene, resolution=(480, 360), spp=4, light_samples=2, max_depth=1)
+    left, right, back = image[150:250, 5:25], image[150:250, 455:475], image[100:200, 200:280]
+    assert left[..., 0].mean() > 2 * left[..., 2].mean() > 0      # red wall, lit
+    assert right[..., 2].mean() > 2 * right[..., 0].mean() > 0    # blue wall, lit
+    assert back.mean() > 0.05
+
+
+def test_same_seed_same_image_whatever_threads_chunks_and_backend(monkeypatch):
+    import importlib
+    render_module = importlib.import_module("ptrace.render")
+    scene = ptrace.load(SHIPPED)
+    kwargs = dict(resolution=(40, 30), spp=4, light_samples=2, max_depth=4, seed=7)
+    reference = ptrace.render(scene, threads=1, **kwargs)
+    assert np.array_equal(ptrace.render(scene, threads=2, **kwargs), reference)
+    assert np.array_equal(ptrace.render(scene, accel="naive", **kwargs), reference)
+    monkeypatch.setattr(render_module, "CHUNK_RAYS", 97)
+    assert np.array_equal(ptrace.render(scene, **kwargs), reference)
+    embree = ptrace.render(scene, accel="embree", **kwargs)
+    assert np.abs(embree - reference).mean() < 0.01 * reference.mean()
+    assert not np.array_equal(ptrace.render(scene, **dict(kwargs, seed=8)), reference)
