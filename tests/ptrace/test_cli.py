@@ -142,3 +142,20 @@ def test_scene_errors_are_one_line_and_exit_2(tmp_path):
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and fragment in lines[0] and "Traceback" not in result.stderr
         path.unlink(missing_ok=True)
+
+
+def test_ctrl_c_writes_what_was_rendered(tmp_path):
+    import signal
+    import time
+    output = tmp_path / "box.png"
+    process = subprocess.Popen(ptrace_command() + ["-s", "100000", "-m", "3", "-r", "32", "24",
+                                                   "-f", str(output), str(SHIPPED)],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(12)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    pixels = read_image(output)
+    assert pixels.shape == (24, 32, 3) and pixels.max() > 0   # a partial render, not black
+    assert (tmp_path / "box_rate.png").exists()

@@ -130,3 +130,14 @@ def test_same_seed_same_image_whatever_threads_chunks_and_backend(monkeypatch):
     embree = ptrace.render(scene, accel="embree", **kwargs)
     assert np.abs(embree - reference).mean() < 0.01 * reference.mean()
     assert not np.array_equal(ptrace.render(scene, **dict(kwargs, seed=8)), reference)
+
+
+def test_non_finite_samples_are_counted_not_written():
+    # an infinitely bright light makes every lit sample infinite (or NaN, inf * 0)
+    scene = make_scene(**floor_plane(0.5), lights=[point_light((0, 1, 0), math.inf)])
+    stats = {}
+    image = ptrace.render(scene, camera=looking_down(3.0), resolution=(8, 8), spp=2,
+                          max_depth=1, stats=stats)
+    assert np.isfinite(image).all()
+    assert stats["nonfinite"] == 8 * 8 * 2
+    assert (stats["samples"] == 0).all()
