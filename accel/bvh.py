@@ -1,5 +1,8 @@
 """Our hand-written BVH: the seed's mean-centroid split, built and traversed without recursion.
 
+`split="sah"` chooses instead, among 16 bins of the centroid bounds on each axis, the plane of
+least surface-area cost (n_left * area_left + n_right * area_right); everything else is shared.
+
 Build: a node covers a contiguous range of the primitive order array. It becomes a leaf when it
 holds at most `max_leaf_size` primitives; otherwise it splits along the longest axis of its
 centroid bounds at the mean centroid. When that leaves one side empty (coincident centroids,
@@ -22,11 +25,84 @@ from .types import Hits
 
 STACK_SIZE = 128
 MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
-SPLITS = ("mean",)
+SPLITS = ("mean", "sah")   # the seed's mean-centroid split; a binned surface-area heuristic
+SAH_BINS = 16
+
+
+@njit(cache=True, inline="always")
+def _half_area(lx, ly, lz, hx, hy, hz):
+    dx, dy, dz = hx - lx, hy - ly, hz - lz
+    return dx * dy + dy * dz + dz * dx
 
 
 @njit(cache=True)
-def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth):
+def _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo, c_hi):
+    """Binned SAH: over SAH_BINS bins of the centroid bounds on each axis, the plane that
+    minimises n_left * area_left + n_right * area_right; partition the range by it and return
+    the first index of the right side (start or end if no plane separates anything)."""
+    best_cost = np.inf
+    best_axis = -1
+    best_bin = -1
+    counts = np.zeros(SAH_BINS, dtype=np.int64)
+    lo = np.empty((SAH_BINS, 3))
+    hi = np.empty((SAH_BINS, 3))
+    right_area = np.empty(SAH_BINS)
+    right_count = np.empty(SAH_BINS, dtype=np.int64)
+    for axis in range(3):
+        extent = c_hi[axis] - c_lo[axis]
+        if not extent > 0.0:
+            continue
+        counts[:] = 0
+        lo[:, :] = np.inf
+        hi[:, :] = -np.inf
+        for i in range(start, end):
+            p = order[i]
+            b = min(SAH_BINS - 1, int(SAH_BINS * (centroid[p, axis] - c_lo[axis]) / extent))
+            counts[b] += 1
+            for a in range(3):
+                lo[b, a] = min(lo[b, a], prim_lower[p, a])
+                hi[b, a] = max(hi[b, a], prim_upper[p, a])
+        # sweep from the right: area and count of bins b..end
+        bx0, by0, bz0, bx1, by1, bz1 = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
+        n = 0
+        for b in range(SAH_BINS - 1, 0, -1):
+            if counts[b] > 0:
+                bx0, by0, bz0 = min(bx0, lo[b, 0]), min(by0, lo[b, 1]), min(bz0, lo[b, 2])
+                bx1, by1, bz1 = max(bx1, hi[b, 0]), max(by1, hi[b, 1]), max(bz1, hi[b, 2])
+            n += counts[b]
+            right_count[b] = n
+            right_area[b] = _half_area(bx0, by0, bz0, bx1, by1, bz1) if n > 0 else 0.0
+        bx0, by0, bz0, bx1, by1, bz1 = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
+        n = 0
+        for b in range(SAH_BINS - 1):   # plane between bin b and b + 1
+            if counts[b] > 0:
+                bx0, by0, bz0 = min(bx0, lo[b, 0]), min(by0, lo[b, 1]), min(bz0, lo[b, 2])
+                bx1, by1, bz1 = max(bx1, hi[b, 0]), max(by1, hi[b, 1]), max(bz1, hi[b, 2])
+            n += counts[b]
+            if n == 0 or right_count[b + 1] == 0:
+                continue
+            cost = n * _half_area(bx0, by0, bz0, bx1, by1, bz1) + \
+                right_count[b + 1] * right_area[b + 1]
+            if cost < best_cost:
+                best_cost, best_axis, best_bin = cost, axis, b
+    if best_axis < 0:
+        return start
+    extent = c_hi[best_axis] - c_lo[best_axis]
+    left = start
+    right = end - 1
+    while left <= right:
+        p = order[left]
+        b = min(SAH_BINS - 1, int(SAH_BINS * (centroid[p, best_axis] - c_lo[best_axis]) / extent))
+        if b <= best_bin:
+            left += 1
+        else:
+            order[left], order[right] = order[right], order[left]
+            right -= 1
+    return left
+
+
+@njit(cache=True)
+def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, use_sah):
     n = prim_lower.shape[0]
     max_nodes = max(2 * n - 1, 1)
     lower = np.empty((max_nodes, 3))
@@ -83,7 +159,9 @@ def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth):
             if c_hi[a] - c_lo[a] >= c_hi[axis] - c_lo[axis]:   # ties go to the later axis
                 axis = a
         mid = start
-        if depth < mean_split_depth and c_hi[axis] > c_lo[axis]:
+        if use_sah and depth < mean_split_depth:
+            mid = _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo, c_hi)
+        elif depth < mean_split_depth and c_hi[axis] > c_lo[axis]:
             mean = 0.0
             for i in range(start, end):
                 mean += centroid[order[i], axis]
@@ -267,7 +345,7 @@ class BVHAccelerator:
         prim_upper = np.ascontiguousarray(prim_upper + 1e-9 * scale)
         (self.lower, self.upper, self.child_or_first, self.count, self.order,
          self.max_depth) = _build(prim_lower, prim_upper, centroid, max_leaf_size,
-                                  MEAN_SPLIT_DEPTH)
+                                  MEAN_SPLIT_DEPTH, split == "sah")
         self._build_seconds = time.perf_counter() - start
         # a traversal stack holds at most depth + 1 entries
         assert self.max_depth < STACK_SIZE - 1, "BVH deeper than the traversal stack"

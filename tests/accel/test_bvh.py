@@ -41,12 +41,23 @@ def check_invariants(bvh):
     assert stats["bytes"] > 0 or n == 0
 
 
+@pytest.mark.parametrize("split", ["mean", "sah"])
 @pytest.mark.parametrize("relpath", ["meshedit/cow.dae", "sky/CBspheres.dae",
                                      "meshedit/maxplanck.dae"])
-def test_invariants_on_course_meshes(scenes_dir, relpath):
+def test_invariants_on_course_meshes(scenes_dir, relpath, split):
     geometry = ptrace.load(scenes_dir / relpath).geometry
     for leaf_size in (1, 4, 8):
-        check_invariants(accel.build("bvh", geometry, max_leaf_size=leaf_size))
+        check_invariants(accel.build("bvh", geometry, max_leaf_size=leaf_size, split=split))
+
+
+@pytest.mark.parametrize("relpath", ["meshedit/cow.dae", "sky/CBspheres.dae", "sky/CBbunny.dae"])
+def test_sah_split_answers_exactly_like_naive(scenes_dir, relpath):
+    geometry = ptrace.load(scenes_dir / relpath).geometry
+    rays = raygen.sphere_rays(geometry, 5000, seed=4)
+    reference = accel.build("naive", geometry).intersect(rays)
+    hits = accel.build("bvh", geometry, split="sah").intersect(rays)
+    np.testing.assert_array_equal(hits.prim, reference.prim)
+    np.testing.assert_array_equal(hits.t, reference.t)
 
 
 def geometric_series_geometry(count=1000):
@@ -59,6 +70,7 @@ def geometric_series_geometry(count=1000):
 
 def test_depth_stays_bounded_when_mean_splits_peel_a_few_at_a_time():
     geometry = geometric_series_geometry()
+    check_invariants(accel.build("bvh", geometry, split="sah"))
     bvh = accel.build("bvh", geometry)
     check_invariants(bvh)
     assert bvh.max_depth >= MEAN_SPLIT_DEPTH   # the mean split really did go deep here...
@@ -68,10 +80,11 @@ def test_depth_stays_bounded_when_mean_splits_peel_a_few_at_a_time():
     np.testing.assert_array_equal(bvh.intersect(rays).prim, reference.prim)
 
 
-def test_invariants_with_coincident_centroids():
+@pytest.mark.parametrize("split", ["mean", "sah"])
+def test_invariants_with_coincident_centroids(split):
     one = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
     geometry = accel.Geometry(np.tile(one, (1000, 1)), np.arange(3000).reshape(1000, 3))
-    bvh = accel.build("bvh", geometry)
+    bvh = accel.build("bvh", geometry, split=split)
     check_invariants(bvh)
     assert bvh.stats()["largest_leaf"] <= 4
     assert bvh.max_depth <= 10   # count splits halve: ceil(log2(1000 / 4)) + 1

@@ -1,0 +1,91 @@
+"""Wall time and rays per second of the seed's command lines, per backend.
+
+    python -m benchmarks.seed_commands [--backends bvh embree naive] [--spp-scale 1] [--only NAME ...]
+
+Each command is the seed's flags run through `ptrace.render` (the CLI's code path) on 2
+threads. --spp-scale divides every -s (a quick look at the same commands); naive, which tests
+every primitive, runs at -s divided by --naive-scale on meshes above 1,000 triangles and its time
+is multiplied back per sample (the table says so). Kernels are compiled before timing.
+Writes benchmarks/results/seed_commands.md.
+"""
+import argparse
+import os
+import time
+
+import numba
+
+from . import report
+from .accel_rays import scenes_dir
+
+# name: (scene, spp, light samples, max depth, resolution, extra options)
+COMMANDS = {
+    "CBspheres_lambertian -s 64 -l 16 -m 6": ("sky/CBspheres_lambertian.dae", 64, 16, 6, (480, 360), {}),
+    "CBbunny -s 64 -l 16 -m 6": ("sky/CBbunny.dae", 64, 16, 6, (480, 360), {}),
+    "cow -s 64 -l 16 -m 6": ("meshedit/cow.dae", 64, 16, 6, (480, 360), {}),
+    "CBbunny -s 16 -l 8 -m 6 -H": ("sky/CBbunny.dae", 16, 8, 6, (480, 360), {"hemisphere": True}),
+    "CBbunny -s 16 -l 8 -m 6": ("sky/CBbunny.dae", 16, 8, 6, (480, 360), {}),
+    "CBbunny -s 64 -l 4 -m 0": ("sky/CBbunny.dae", 64, 4, 0, (480, 360), {}),
+    "CBbunny -s 64 -l 4 -m 1": ("sky/CBbunny.dae", 64, 4, 1, (480, 360), {}),
+    "CBbunny -s 64 -l 4 -m 2": ("sky/CBbunny.dae", 64, 4, 2, (480, 360), {}),
+    "CBbunny -s 64 -l 4 -m 3": ("sky/CBbunny.dae", 64, 4, 3, (480, 360), {}),
+    "CBbunny -s 64 -l 4 -m 100": ("sky/CBbunny.dae", 64, 4, 100, (480, 360), {}),
+    "CBbunny -s 2048 -a 64 0.05 -l 1 -m 5": ("sky/CBbunny.dae", 2048, 1, 5, (480, 360),
+                                             {"adaptive": (64, 0.05)}),
+    "CBspheres -s 64 -l 16 -m 6": ("sky/CBspheres.dae", 64, 16, 6, (480, 360), {}),
+    "CBspheres_microfacet_al_ag -s 64 -l 16 -m 6": ("sky/CBspheres_microfacet_al_ag.dae", 64, 16, 6, (480, 360), {}),
+    "CBbunny_microfacet_cu -s 64 -l 16 -m 6": ("sky/CBbunny_microfacet_cu.dae", 64, 16, 6, (480, 360), {}),
+    "bunny -s 64 -l 16 -m 6": ("sky/bunny.dae", 64, 16, 6, (480, 360), {}),
+}
+
+
+def main(argv=None):
+    import ptrace
+    from ptrace.image import write_image
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--backends", nargs="*", default=["bvh", "embree", "naive"])
+    parser.add_argument("--spp-scale", type=int, default=1)
+    parser.add_argument("--naive-scale", type=int, default=16)
+    parser.add_argument("--only", nargs="*", default=None, help="command names to run")
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--images", default=None, help="directory for the bvh images")
+    parser.add_argument("--output", default="seed_commands.md")
+    args = parser.parse_args(argv)
+    numba.set_num_threads(args.threads)
+    names = args.only or list(COMMANDS)
+    rows = []
+    for name in names:
+        relpath, spp, light_samples, depth, resolution, extra = COMMANDS[name]
+        scene = ptrace.load(os.path.join(scenes_dir(), relpath))
+        ptrace.render(scene, spp=1, light_samples=1, max_depth=2, resolution=(8, 6), **extra)
+        for kind in args.backends:
+            run_spp = max(1, spp // args.spp_scale)
+            scale_note = ""
+            if kind == "naive" and scene.triangle_count > 1000:
+                run_spp = max(1, run_spp // args.naive_scale)
+                scale_note = f" (run at -s {run_spp}, time x {spp // args.spp_scale / run_spp:g})"
+            stats = {}
+            start = time.perf_counter()
+            image = ptrace.render(scene, spp=run_spp, light_samples=light_samples,
+                                  max_depth=depth, resolution=resolution, accel=kind,
+                                  stats=stats, **extra)
+            wall = time.perf_counter() - start
+            factor = (spp // args.spp_scale) / run_spp
+            rays_per_second = stats["rays"] / stats["render_seconds"]
+            rows.append(f"| {name} | {kind} | {run_spp}{scale_note} | {wall * factor:.1f} | "
+                        f"{stats['rays'] * factor:,.0f} | {rays_per_second:,.0f} | "
+                        f"{stats['samples'].mean():.1f} |")
+            print(rows[-1], flush=True)
+            if args.images and kind == "bvh":
+                os.makedirs(args.images, exist_ok=True)
+                write_image(os.path.join(args.images, name.replace(" ", "_") + ".png"), image)
+    lines = [report.header("The seed's command lines: wall time and rays per second per backend"),
+             f"{args.threads} threads; -s divided by {args.spp_scale}. Wall time includes the "
+             "acceleration build and excludes loading and compiling.", "",
+             "| command | backend | -s run | wall s | rays | rays/s | mean samples per pixel |",
+             "|---|---|---:|---:|---:|---:|---:|"] + rows
+    path = report.write(args.output, "\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
