@@ -21,28 +21,26 @@ class _UsageError(Exception):
     pass
 
 
-def _positive_int(name):
+def _int_at_least(name, minimum):
     def parse(text):
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{name} must be at least 1, got {value}")
+        if value < minimum:
+            bound = "at least 1" if minimum == 1 else f"at least {minimum}" if minimum else \
+                "not negative"
+            raise argparse.ArgumentTypeError(f"{name} must be {bound}, got {value}")
         return value
     return parse
+
+
+def _positive_int(name):
+    return _int_at_least(name, 1)
 
 
 def _nonnegative_int(name):
-    def parse(text):
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
-        if value < 0:
-            raise argparse.ArgumentTypeError(f"{name} must not be negative, got {value}")
-        return value
-    return parse
+    return _int_at_least(name, 0)
 
 
 def _positive_float(name):

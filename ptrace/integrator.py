@@ -50,6 +50,16 @@ def frame(nx, ny, nz):
     return ny * yz - nz * yy, nz * yx - nx * yz, nx * yy - ny * yx, yx, yy, yz
 
 
+@njit(cache=True, inline="always")
+def local_frame(normal, directions, i):
+    """The shading frame at path i (x, y axes; z = normal) and wo = -direction in it."""
+    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
+    xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
+    dx, dy, dz = -directions[i, 0], -directions[i, 1], -directions[i, 2]
+    return (xx, xy, xz, yx, yy, yz, nx, ny, nz, dx * xx + dy * xy + dz * xz,
+            dx * yx + dy * yy + dz * yz, dx * nx + dy * ny + dz * nz)
+
+
 @njit(cache=True, parallel=True)
 def surfaces(vertices, faces, centers, radii, vertex_normals, material_index, kinds, scale,
              origins, directions, t, prim, u, v, point, geo_normal, normal, material, offset):
@@ -143,11 +153,7 @@ def light_samples(seed, vertex, pixel, sample, directions, point, geo_normal, no
         m = material[i]
         usable = alive[i] and m >= 0 and not is_delta(kinds[m]) and kinds[m] != EMISSION
         if usable:
-            nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-            xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-            dx, dy, dz = -directions[i, 0], -directions[i, 1], -directions[i, 2]
-            wox, woy, woz = dx * xx + dy * xy + dz * xz, dx * yx + dy * yy + dz * yz, \
-                dx * nx + dy * ny + dz * nz
+            xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
         j = 0
         for light in range(n_lights):
             count = 1 if light_is_delta(light_kind[light]) else light_samples_per_area
@@ -202,11 +208,7 @@ def hemisphere_samples(seed, vertex, pixel, sample, directions, point, geo_norma
         m = material[i]
         usable = alive[i] and m >= 0 and not is_delta(kinds[m]) and kinds[m] != EMISSION
         if usable:
-            nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-            xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-            dx, dy, dz = -directions[i, 0], -directions[i, 1], -directions[i, 2]
-            wox, woy, woz = dx * xx + dy * xy + dz * xz, dx * yx + dy * yy + dz * yz, \
-                dx * nx + dy * ny + dz * nz
+            xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
         for j in range(samples_per_path):
             r = i * samples_per_path + j
             for k in range(3):
@@ -268,11 +270,7 @@ def bounce(seed, vertex, pixel, sample, directions, point, geo_normal, normal, m
         if not alive[i] or m < 0:
             alive[i] = False
             continue
-        nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-        xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-        dx, dy, dz = -directions[i, 0], -directions[i, 1], -directions[i, 2]
-        wox, woy, woz = dx * xx + dy * xy + dz * xz, dx * yx + dy * yy + dz * yz, \
-            dx * nx + dy * ny + dz * nz
+        xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
         base = vertex * DIMS_PER_VERTEX
         u1 = uniform(seed, pixel[i], sample[i], base + DIM_BSDF)
         u2 = uniform(seed, pixel[i], sample[i], base + DIM_BSDF + 1)
