@@ -18,6 +18,9 @@ UP_AXIS_MATRICES = {
 # Transform elements the course parses into an all-zero matrix (or ignores): the node would be
 # silently mis-placed, so they are refused.
 UNSUPPORTED_TRANSFORMS = ("translate", "rotate", "scale", "lookat", "skew")
+# Course files nest nodes at most 2 deep; a file nesting hundreds deep is refused rather than
+# walked (it is either broken or built to exhaust the reader).
+MAX_NODE_DEPTH = 256
 
 
 def load_collada(path):
@@ -88,17 +91,21 @@ def node_matrix(document, node):
 
 def walk_nodes_post_order(document, visual_scene, up_axis):
     """(node, world matrix) for every <node>, children before their parent, in file order."""
-    stack = [(node, up_axis, False) for node in reversed(document.children(visual_scene, "node"))]
+    stack = [(node, up_axis, False, 1)
+             for node in reversed(document.children(visual_scene, "node"))]
     while stack:
-        node, matrix, expanded = stack.pop()
+        node, matrix, expanded, depth = stack.pop()
         if expanded:
             yield node, matrix
             continue
+        if depth > MAX_NODE_DEPTH:
+            document.fail(f"{document.describe(node)} is nested more than {MAX_NODE_DEPTH} "
+                          f"nodes deep")
         world = matrix @ node_matrix(document, node)
         if not np.isfinite(world).all():
             document.fail(f"{document.describe(node)}: world matrix overflows to infinity")
-        stack.append((node, world, True))
-        stack.extend((child, world, False)
+        stack.append((node, world, True, depth))
+        stack.extend((child, world, False, depth + 1)
                      for child in reversed(document.children(node, "node")))
 
 
