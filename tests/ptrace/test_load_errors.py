@@ -200,13 +200,18 @@ def test_unknown_extension(tmp_path):
 
 
 def test_deeply_nested_nodes(tmp_path):
-    depth = 50_000
-    path = tmp_path / "deep.dae"
-    path.write_text('<COLLADA><asset><up_axis>Y_UP</up_axis></asset>'
-                    '<library_visual_scenes><visual_scene id="s">' + "<node>" * depth
-                    + "</node>" * depth + "</visual_scene></library_visual_scenes></COLLADA>")
-    scene = ptrace.load(path)      # no geometry, but no RecursionError either
-    assert scene.triangle_count == 0
+    from ptrace.io.collada import MAX_NODE_DEPTH
+
+    def nested(depth):
+        path = tmp_path / f"deep{depth}.dae"
+        path.write_text('<COLLADA><asset><up_axis>Y_UP</up_axis></asset>'
+                        '<library_visual_scenes><visual_scene id="s">' + "<node>" * depth
+                        + "</node>" * depth + "</visual_scene></library_visual_scenes></COLLADA>")
+        return path
+    assert ptrace.load(nested(MAX_NODE_DEPTH)).triangle_count == 0   # walked without recursion
+    for depth in (MAX_NODE_DEPTH + 1, 50_000):
+        with pytest.raises(ptrace.SceneError, match="nested more than"):
+            ptrace.load(nested(depth))
 
 
 @pytest.mark.parametrize("relpath", [PLANE, "sky/CBspheres.dae"])
