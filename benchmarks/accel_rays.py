@@ -14,7 +14,6 @@ import statistics
 import time
 
 import numba
-import numpy as np
 
 import accel
 from accel import raygen

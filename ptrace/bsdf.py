@@ -8,10 +8,9 @@ where the course's starter has pi).
 """
 import math
 
-import numpy as np
 from numba import njit
 
-from .scene import DIFFUSE, EMISSION, GLASS, MICROFACET, MIRROR, REFRACTION
+from .scene import DIFFUSE, GLASS, MICROFACET, MIRROR, REFRACTION
 
 INV_PI = 1.0 / math.pi
 SQRT_PI = math.sqrt(math.pi)

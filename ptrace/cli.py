@@ -93,7 +93,7 @@ def build_parser():
 
 def scene_info(scene):
     from .camera import course_camera
-    from .scene import BSDF_NAMES, LIGHT_NAMES
+    from .scene import LIGHT_NAMES
     lights = scene.lights
     entries = []
     for i in range(len(lights)):

@@ -11,7 +11,6 @@ import math
 import numpy as np
 from numba import njit, prange
 
-import accel
 
 from .bsdf import bsdf_eval, bsdf_sample, is_delta, uniform_hemisphere
 from .lights import light_is_delta, sample_light

@@ -1,5 +1,4 @@
 """Geometry at hit points: positions and shading normals, as numba kernels over arrays."""
-import numpy as np
 from numba import njit, prange
 
 
