@@ -39,6 +39,7 @@ class EmbreeAccelerator:
             one = np.zeros((1, 3), dtype=np.float32)
             self._scene.run(one, one + np.float32(1.0), output=1)   # commit the scene now
         self._no_faces = np.zeros((0, 3), dtype=np.int64)
+        self._pool, self._pool_size = None, 0
         self._build_seconds = time.perf_counter() - start
 
     # -- embree part ---------------------------------------------------------------------------
@@ -52,8 +53,12 @@ class EmbreeAccelerator:
         chunks = self._chunks(n)
         if len(chunks) == 1:
             return [function(*chunks[0])]
-        with ThreadPoolExecutor(len(chunks)) as pool:
-            return list(pool.map(lambda c: function(*c), chunks))
+        # one pool per accelerator, not per call: this runs once per wave of rays
+        if self._pool is None or self._pool_size < len(chunks):
+            if self._pool is not None:
+                self._pool.shutdown()
+            self._pool, self._pool_size = ThreadPoolExecutor(len(chunks)), len(chunks)
+        return list(self._pool.map(lambda c: function(*c), chunks))
 
     @staticmethod
     def _embree_rays(rays, a, b):
