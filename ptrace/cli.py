@@ -63,7 +63,8 @@ def build_parser():
     add = parser.add_argument
     add("scene", help="scene file: .dae (CS184 COLLADA) or .obj .ply .stl .glb .gltf")
     add("-t", "--threads", type=_positive_int("threads"), default=None,
-        help="render threads (default: all cores)")
+        help="render threads (default: all cores; with --workers or --scheduler, threads per "
+             "task on each worker, default its share of its machine's cores)")
     add("-s", "--spp", type=_positive_int("samples per pixel"), default=1,
         help="camera rays per pixel (default 1)")
     add("-l", "--light-samples", type=_positive_int("light samples"), default=1,
@@ -88,6 +89,14 @@ def build_parser():
         help="path (light transport) or normals (the course's normal shading)")
     add("--info", action="store_true", help="print a JSON summary of the scene and exit")
     add("-q", "--quiet", action="store_true", help="no progress bar")
+    dist = parser.add_argument_group("distributed rendering (needs: pip install \"ptrace[dist]\")")
+    where = dist.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int("workers"), default=None, metavar="N",
+                       help="render on a local Dask cluster of N worker processes (127.0.0.1)")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="render on an existing Dask cluster, e.g. tcp://host:8786 or tls://")
+    dist.add_argument("--dashboard", action="store_true",
+                      help="with --workers: serve Dask's dashboard on 127.0.0.1:8787")
     return parser
 
 
@@ -159,19 +168,40 @@ def run(argv):
         return 0
     width, height = args.resolution
     camera = load_camera_settings(args.camera, width, height) if args.camera else None
+    if args.dashboard and args.workers is None:
+        raise PtraceError("--dashboard needs --workers (a local cluster)")
     stats = {}
-    image = render(scene, spp=args.spp, accel=args.accel, integrator=args.integrator,
-                   resolution=(width, height), seed=args.seed, threads=args.threads,
-                   crop=args.crop, camera=camera,
-                   progress=not args.quiet and sys.stderr.isatty(), stats=stats,
-                   light_samples=args.light_samples, max_depth=args.max_depth,
-                   adaptive=args.adaptive, hemisphere=args.hemisphere)
+    client = cluster = None
+    try:
+        if args.workers is not None or args.scheduler is not None:
+            from . import distributed
+            if args.workers is not None:
+                client, cluster = distributed.local_client(args.workers, args.dashboard)
+            else:
+                client = distributed.connect(args.scheduler)
+            workers = len(client.scheduler_info()["workers"])
+            dashboard = f", dashboard {client.dashboard_link}" if args.dashboard else ""
+            print(f"ptrace: rendering on {workers} Dask workers at {client.scheduler.address}"
+                  f"{dashboard}", file=sys.stderr, flush=True)
+        image = render(scene, spp=args.spp, accel=args.accel, integrator=args.integrator,
+                       resolution=(width, height), seed=args.seed, threads=args.threads,
+                       crop=args.crop, camera=camera,
+                       progress=not args.quiet and sys.stderr.isatty(), stats=stats,
+                       client=client, light_samples=args.light_samples,
+                       max_depth=args.max_depth, adaptive=args.adaptive,
+                       hemisphere=args.hemisphere)
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
     write_image(output, image)
     write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     seconds = stats["render_seconds"]
     mean_spp = stats["samples"].mean()
+    where = f"workers {stats['workers']} " if "workers" in stats else ""
     print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} (mean {mean_spp:.1f}) "
-          f"accel {args.accel} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
+          f"{where}accel {args.accel} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
     if stats["interrupted"]:

@@ -73,7 +73,8 @@ def _check_options(spp, accel_kind, integrator, width, height, crop, options):
 
 
 def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
-           threads=None, crop=None, camera=None, progress=False, stats=None, **options):
+           threads=None, crop=None, camera=None, progress=False, stats=None, client=None,
+           **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
     resolution is (W, H), default the course's 800x600 (a crop of the same focal length, not a
@@ -88,6 +89,11 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
     _check_options(spp, accel_kind, integrator, width, height, crop, options)
     previous_threads = numba.get_num_threads()
+    worker_threads = None
+    if client is not None:   # threads applies on the workers, not here
+        if threads is not None and threads < 1:
+            raise PtraceError(f"threads must be at least 1, got {threads}")
+        worker_threads, threads = threads, None
     if threads is not None:
         if not 1 <= threads <= numba.config.NUMBA_NUM_THREADS:
             raise PtraceError(f"threads must be between 1 and {numba.config.NUMBA_NUM_THREADS}, "
@@ -95,7 +101,7 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
         numba.set_num_threads(threads)
     try:
         return _render(scene, int(spp), accel_kind, integrator, width, height, int(seed), crop,
-                       camera, progress, stats, options)
+                       camera, progress, stats, options, client, worker_threads)
     finally:
         numba.set_num_threads(previous_threads)
 
@@ -111,19 +117,56 @@ def _converged(sum_l, sum_l2, count, tolerance, batch):
     return (1.96 * sigma / np.sqrt(n) <= tolerance * mean) & ((sigma > 0) | (n >= 2 * batch))
 
 
+def trace_pixels(tracer, camera, seed, width, spp, pixel_x, pixel_y, first_sample, pass_n,
+                 sums, where, on_chunk=None):
+    """Trace samples first_sample .. first_sample+pass_n-1 of the given pixels (y from the
+    bottom) and add, per pixel, the sum over those samples of radiance, of illuminance and of
+    its square, and the count of finite samples into sums = (rgb, l, l2, count) at rows `where`.
+    Work goes to the tracer in chunks of about CHUNK_RAYS rays (bounding memory); a chunk's
+    sums are added as soon as it is done, and on_chunk(samples) is called after each. Returns
+    the number of non-finite samples dropped. In-process renders and distributed tiles both
+    run this, so their per-pixel arithmetic is the same."""
+    sum_rgb, sum_l, sum_l2, count = sums
+    nonfinite = 0
+    per_chunk = max(1, (CHUNK_RAYS // tracer.rays_per_path) // pass_n)
+    for first in range(0, pixel_x.shape[0], per_chunk):
+        px, py = pixel_x[first:first + per_chunk], pixel_y[first:first + per_chunk]
+        rows = where[first:first + per_chunk]
+        n = px.size * pass_n
+        sx, sy = np.empty(n), np.empty(n)
+        camera_samples(seed, px, py, width, first_sample, pass_n, spp, sx, sy)
+        directions = camera.directions(sx, sy)
+        rays = accel.Rays(np.broadcast_to(camera.position, directions.shape), directions,
+                          camera.znear, camera.zfar)
+        pixel_ids = np.repeat(py * width + px, pass_n)
+        sample_ids = np.tile(np.arange(first_sample, first_sample + pass_n), px.size)
+        radiance = tracer.trace(pixel_ids, sample_ids, rays)
+        finite = np.isfinite(radiance).all(axis=1)
+        nonfinite += int((~finite).sum())
+        radiance[~finite] = 0.0
+        lum = radiance @ LUMINANCE
+        sum_rgb[rows] += radiance.reshape(px.size, pass_n, 3).sum(axis=1)
+        sum_l[rows] += lum.reshape(px.size, pass_n).sum(axis=1)
+        sum_l2[rows] += (lum * lum).reshape(px.size, pass_n).sum(axis=1)
+        count[rows] += finite.reshape(px.size, pass_n).sum(axis=1)
+        if on_chunk is not None:
+            on_chunk(n)
+    return nonfinite
+
+
+def make_tracer(scene, backend, seed, integrator, options):
+    return PathTracer(scene, backend, seed, integrator,
+                      light_samples=int(options.get("light_samples", 1)),
+                      max_depth=int(options.get("max_depth", 1)),
+                      hemisphere=bool(options.get("hemisphere", False)))
+
+
 def _render(scene, spp, accel_kind, integrator, width, height, seed, crop, camera, progress,
-            stats, options):
+            stats, options, client, worker_threads):
     camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
-    start = time.perf_counter()
-    backend = accel.build(accel_kind, scene.geometry)
-    build_seconds = time.perf_counter() - start
-
-    start = time.perf_counter()
-    tracer = PathTracer(scene, backend, seed, integrator,
-                        light_samples=int(options.get("light_samples", 1)),
-                        max_depth=int(options.get("max_depth", 1)),
-                        hemisphere=bool(options.get("hemisphere", False)))
+    # the client side needs a tracer only for its warnings and rays per path
+    tracer = make_tracer(scene, None, seed, integrator, options)
     for message in tracer.warnings:
         warnings.warn(message, RuntimeWarning, stacklevel=3)
     adaptive = options.get("adaptive")
@@ -132,61 +175,90 @@ def _render(scene, spp, accel_kind, integrator, width, height, seed, crop, camer
     pixel_x = xs.reshape(-1).astype(np.int64)
     pixel_y = ys.reshape(-1).astype(np.int64)
     n_pixels = pixel_x.shape[0]
-    sum_rgb = np.zeros((n_pixels, 3))
-    sum_l = np.zeros(n_pixels)
-    sum_l2 = np.zeros(n_pixels)
-    count = np.zeros(n_pixels, dtype=np.int64)
-    nonfinite = 0
-    active = np.arange(n_pixels)
-    done = 0
+    sums = (np.zeros((n_pixels, 3)), np.zeros(n_pixels), np.zeros(n_pixels),
+            np.zeros(n_pixels, dtype=np.int64))
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=n_pixels * spp, unit="spl", unit_scale=True, leave=False,
                    file=sys.stderr)
-    interrupted = False
-    try:
-        while done < spp and active.size:
-            pass_n = min(batch, spp - done)
-            per_chunk = max(1, (CHUNK_RAYS // tracer.rays_per_path) // pass_n)
-            for first in range(0, active.size, per_chunk):
-                chosen = active[first:first + per_chunk]
-                n = chosen.size * pass_n
-                sx, sy = np.empty(n), np.empty(n)
-                camera_samples(seed, pixel_x[chosen], pixel_y[chosen], width, done, pass_n, spp,
-                               sx, sy)
-                directions = camera.directions(sx, sy)
-                rays = accel.Rays(np.broadcast_to(camera.position, directions.shape), directions,
-                                  camera.znear, camera.zfar)
-                pixel_ids = np.repeat(pixel_y[chosen] * width + pixel_x[chosen], pass_n)
-                sample_ids = np.tile(np.arange(done, done + pass_n), chosen.size)
-                radiance = tracer.trace(pixel_ids, sample_ids, rays)
-                finite = np.isfinite(radiance).all(axis=1)
-                nonfinite += int((~finite).sum())
-                radiance[~finite] = 0.0
-                lum = radiance @ LUMINANCE
-                sum_rgb[chosen] += radiance.reshape(chosen.size, pass_n, 3).sum(axis=1)
-                sum_l[chosen] += lum.reshape(chosen.size, pass_n).sum(axis=1)
-                sum_l2[chosen] += (lum * lum).reshape(chosen.size, pass_n).sum(axis=1)
-                count[chosen] += finite.reshape(chosen.size, pass_n).sum(axis=1)
-                if bar is not None:
-                    bar.update(n)
-            done += pass_n
-            if adaptive is not None and done < spp:
-                stop = _converged(sum_l[active], sum_l2[active], count[active], adaptive[1], batch)
-                if bar is not None:
-                    bar.update(int(stop.sum()) * (spp - done))
-                active = active[~stop]
-    except KeyboardInterrupt:
-        interrupted = True
+    passes = Passes(spp, batch, None if adaptive is None else adaptive[1], sums, bar)
+    if client is not None:
+        from . import distributed
+        outcome = distributed.render_passes(client, scene, accel_kind, integrator, options,
+                                            seed, width, spp, camera, tracer.rays_per_path,
+                                            pixel_x, pixel_y, passes, worker_threads)
+    else:
+        outcome = _render_in_process(scene, accel_kind, integrator, options, seed, width, spp,
+                                     camera, pixel_x, pixel_y, passes)
     if bar is not None:
         bar.close()
-    render_seconds = time.perf_counter() - start
+    sum_rgb, count = sums[0], sums[3]
     image = np.where(count[:, None] > 0, sum_rgb / np.maximum(count, 1)[:, None], 0.0)
     if stats is not None:
-        stats.update(build_seconds=build_seconds, render_seconds=render_seconds,
-                     rays=tracer.rays_traced, accel=backend.stats(), nonfinite=nonfinite,
-                     interrupted=interrupted, spp=spp,
-                     samples=count.reshape(cell_h, cell_w)[::-1].copy())
+        stats.update(outcome, spp=spp, samples=count.reshape(cell_h, cell_w)[::-1].copy())
     # rows were generated bottom row first; the returned image has the top row first
     return image.reshape(cell_h, cell_w, 3)[::-1].astype(np.float32)
+
+
+class Passes:
+    """The pass schedule, shared by in-process and distributed renders: pass sizes depend only
+    on -s and -a; after each pass, adaptive sampling retires the converged active pixels."""
+
+    def __init__(self, spp, batch, tolerance, sums, bar):
+        self.spp, self.batch, self.tolerance, self.sums, self.bar = spp, batch, tolerance, sums, bar
+        self.active = np.arange(sums[1].shape[0])
+        self.done = 0
+
+    def __iter__(self):
+        """Yield (first_sample, pass_n, active pixel indices) until every pixel is done."""
+        while self.done < self.spp and self.active.size:
+            pass_n = min(self.batch, self.spp - self.done)
+            yield self.done, pass_n, self.active
+            self.done += pass_n
+            if self.tolerance is not None and self.done < self.spp:
+                _, sum_l, sum_l2, count = self.sums
+                a = self.active
+                stop = _converged(sum_l[a], sum_l2[a], count[a], self.tolerance, self.batch)
+                if self.bar is not None:
+                    self.bar.update(int(stop.sum()) * (self.spp - self.done))
+                self.active = a[~stop]
+
+    @property
+    def adaptive(self):
+        return self.tolerance is not None
+
+    def fixed(self):
+        """The whole schedule up front (only without adaptive sampling)."""
+        assert not self.adaptive
+        schedule, done = [], 0
+        while done < self.spp:
+            pass_n = min(self.batch, self.spp - done)
+            schedule.append((done, pass_n))
+            done += pass_n
+        return schedule
+
+    def update(self, samples):
+        if self.bar is not None:
+            self.bar.update(samples)
+
+
+def _render_in_process(scene, accel_kind, integrator, options, seed, width, spp, camera,
+                       pixel_x, pixel_y, passes):
+    start = time.perf_counter()
+    backend = accel.build(accel_kind, scene.geometry)
+    build_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    tracer = make_tracer(scene, backend, seed, integrator, options)
+    nonfinite = 0
+    interrupted = False
+    try:
+        for first_sample, pass_n, active in passes:
+            nonfinite += trace_pixels(tracer, camera, seed, width, spp, pixel_x[active],
+                                      pixel_y[active], first_sample, pass_n, passes.sums, active,
+                                      passes.update)
+    except KeyboardInterrupt:
+        interrupted = True
+    return dict(build_seconds=build_seconds, render_seconds=time.perf_counter() - start,
+                rays=tracer.rays_traced, accel=backend.stats(), nonfinite=nonfinite,
+                interrupted=interrupted)

@@ -1,0 +1,219 @@
+"""Render tiles x passes on a Dask distributed cluster, bit-identical to an in-process render.
+
+Imported only when a render is given a client (or the CLI --workers / --scheduler), so the
+default mode never imports dask. Install the extra with `pip install "ptrace[dist]"`.
+
+The unit of work is one tile (a contiguous run of the image's pixels, bottom row first) for one
+pass; a task returns per-pixel sums of radiance, of illuminance and of its square, and sample
+counts, computed by the same ptrace.render.trace_pixels as in-process. The client adds them into
+the image in a fixed (pass, tile) order, whatever order tasks finish in, and each pixel's
+arithmetic is then the in-process one: previous sum + this pass's sum. Adaptive sampling decides
+convergence after each pass's merge, exactly as in-process (so adaptive passes run one after
+another); without -a, passes are submitted ahead while about 4 tasks per worker are in flight.
+
+The scene is scattered to every worker once; a worker builds its acceleration structure once per
+(scene, accelerator) and keeps the last few (its numba cache stays warm between jobs).
+"""
+import collections
+import logging
+import math
+import os
+import socket
+import threading
+import time
+import uuid
+
+import numba
+import numpy as np
+
+import accel
+
+from .errors import PtraceError
+
+TASK_RAYS = 1 << 19       # rays per task: about 0.1-0.3 s of work at 2-5 M rays/s
+CONNECT_TIMEOUT = 10      # seconds to reach a scheduler before giving up
+INSTALL_HINT = 'distributed rendering needs Dask: pip install "ptrace[dist]"'
+
+_built = collections.OrderedDict()   # (scene key, accel kind) -> (backend, build seconds)
+_tracers = collections.OrderedDict()  # job token -> tracer
+_lock = threading.Lock()             # one tile at a time per worker process: numba runs threads
+_KEEP = 2
+builds = 0                           # acceleration structures built by this process (tests)
+
+
+def _dask():
+    try:
+        import dask.distributed as dd
+    except ImportError:
+        raise PtraceError(INSTALL_HINT) from None
+    return dd
+
+
+def local_client(workers, dashboard=False):
+    """A local cluster of `workers` processes bound to 127.0.0.1 (no dashboard unless asked,
+    and then on loopback too), one task thread each; returns (client, cluster)."""
+    dd = _dask()
+    if dashboard:
+        options = {"dashboard_address": "127.0.0.1:8787"}
+    else:   # the scheduler's HTTP server (health, metrics) still runs: random loopback port
+        options = {"dashboard_address": None,
+                   "scheduler_kwargs": {"dashboard": False, "dashboard_address": "127.0.0.1:0"}}
+    cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                              host="127.0.0.1", silence_logs=logging.ERROR, **options)
+    return dd.Client(cluster), cluster
+
+
+def connect(address, timeout=CONNECT_TIMEOUT):
+    """A client of the scheduler at `address` (tcp:// or tls://); one-line error if it does not
+    answer within `timeout` seconds."""
+    dd = _dask()
+    try:
+        return dd.Client(address, timeout=f"{timeout}s")
+    except (OSError, TimeoutError, ValueError) as error:
+        detail = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise PtraceError(f"cannot reach the Dask scheduler at {address} within {timeout} s "
+                          f"({detail})") from None
+
+
+def default_worker_threads(client):
+    """Numba threads per task: each worker's share of its machine's cores."""
+    info = client.scheduler_info()["workers"]
+    per_host = collections.Counter(w["host"] for w in info.values())
+    if per_host and all(host in ("127.0.0.1", "localhost") for host in per_host):
+        return max(1, (os.cpu_count() or 1) // max(per_host.values()))
+    return None   # remote machines: numba's default, all of the worker's cores
+
+
+def tile_task(scene, job, pass_index, tile_index, first_sample, pass_n, pixel_x, pixel_y):
+    """Run on a worker: sums for one tile of one pass (see the module docstring)."""
+    from .render import make_tracer, trace_pixels
+    global builds
+    try:
+        with _lock:
+            build_seconds = 0.0
+            key = (job["scene_key"], job["accel"])
+            if key not in _built:
+                start = time.perf_counter()
+                _built[key] = accel.build(job["accel"], scene.geometry)
+                build_seconds = time.perf_counter() - start
+                builds += 1
+                while len(_built) > _KEEP:
+                    _built.popitem(last=False)
+            backend = _built[key]
+            tracer = _tracers.get(job["token"])
+            if tracer is None or tracer.backend is not backend:
+                tracer = make_tracer(scene, backend, job["seed"], job["integrator"],
+                                     job["options"])
+                _tracers[job["token"]] = tracer
+                while len(_tracers) > _KEEP:
+                    _tracers.popitem(last=False)
+            threads = job["threads"]
+            if threads is not None:
+                numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+            n = pixel_x.shape[0]
+            sums = (np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64))
+            rays_before = tracer.rays_traced
+            start = time.perf_counter()
+            nonfinite = trace_pixels(tracer, job["camera"], job["seed"], job["width"],
+                                     job["spp"], pixel_x, pixel_y, first_sample, pass_n, sums,
+                                     np.arange(n))
+            seconds = time.perf_counter() - start
+            return sums, nonfinite, tracer.rays_traced - rays_before, build_seconds, seconds
+    except Exception as error:   # name the tile and pass; keep the worker's message
+        raise PtraceError(f"tile {tile_index} (pixels {pixel_y[0]}:{pixel_x[0]} .., {len(pixel_x)} "
+                          f"of them) of pass {pass_index} (samples {first_sample}.."
+                          f"{first_sample + pass_n - 1}) failed on {socket.gethostname()} "
+                          f"pid {os.getpid()}: {type(error).__name__}: {error}") from None
+
+
+def tile_pixels(n_pixels, rays_per_path, pass_n, workers):
+    """Pixels per tile: enough for about TASK_RAYS rays (a task of at least ~100 ms), but no
+    more than gives two tiles per worker, so small images still spread."""
+    size = math.ceil(TASK_RAYS / (rays_per_path * pass_n))
+    size = min(size, math.ceil(n_pixels / (2 * max(1, workers))))
+    return max(1, size)
+
+
+def render_passes(client, scene, accel_kind, integrator, options, seed, width, spp, camera,
+                  rays_per_path, pixel_x, pixel_y, passes, worker_threads=None):
+    dd = _dask()
+    start = time.perf_counter()
+    workers = len(client.scheduler_info()["workers"])
+    if workers == 0:
+        raise PtraceError(f"the Dask cluster at {client.scheduler.address} has no workers")
+    token = uuid.uuid4().hex
+    scene_future = client.scatter(scene, broadcast=True, hash=False)
+    job = dict(token=token, scene_key=scene_future.key, accel=accel_kind, integrator=integrator,
+               options={k: options[k] for k in ("light_samples", "max_depth", "hemisphere")
+                        if k in options},
+               seed=seed, width=width, spp=spp, camera=camera,
+               threads=worker_threads if worker_threads is not None
+               else default_worker_threads(client))
+    [job_future] = client.scatter([job], broadcast=True, hash=False)
+    totals = dict(nonfinite=0, rays=0, build_seconds=0.0, task_seconds=[], tasks=0,
+                  merge_seconds=0.0, scatter_seconds=time.perf_counter() - start)
+    interrupted = False
+    pending = {}   # key -> future not merged yet (dropping a future frees its result)
+
+    def submit(pass_index, first_sample, pass_n, active):
+        """Submit one pass's tiles; return [(rows, key, samples per pixel)] in tile order."""
+        size = tile_pixels(active.size, rays_per_path, pass_n, workers)
+        tiles = []
+        for tile_index, first in enumerate(range(0, active.size, size)):
+            rows = active[first:first + size]
+            key = f"ptrace-tile-{token}-{pass_index}-{tile_index}"
+            pending[key] = client.submit(tile_task, scene_future, job_future, pass_index,
+                                         tile_index, first_sample, pass_n, pixel_x[rows],
+                                         pixel_y[rows], key=key, pure=False)
+            tiles.append((rows, key, pass_n))
+        return tiles
+
+    def merge(tiles):
+        """Add each tile's sums in tile order, as soon as every earlier tile is in, whatever
+        order they finish in."""
+        sum_rgb, sum_l, sum_l2, count = passes.sums
+        finished = set()
+        position = 0
+        for future in dd.as_completed([pending[key] for _, key, _ in tiles]):
+            finished.add(future.key)
+            while position < len(tiles) and tiles[position][1] in finished:
+                rows, key, pass_n = tiles[position]
+                (rgb, lum, lum2, n), nonfinite, rays, build, seconds = pending.pop(key).result()
+                merge_start = time.perf_counter()
+                sum_rgb[rows] += rgb
+                sum_l[rows] += lum
+                sum_l2[rows] += lum2
+                count[rows] += n
+                totals["nonfinite"] += nonfinite
+                totals["rays"] += rays
+                totals["build_seconds"] = max(totals["build_seconds"], build)
+                totals["task_seconds"].append(seconds)
+                totals["tasks"] += 1
+                passes.update(rows.size * pass_n)
+                position += 1
+                totals["merge_seconds"] += time.perf_counter() - merge_start
+
+    try:
+        if passes.adaptive:
+            for pass_index, (first_sample, pass_n, active) in enumerate(passes):
+                merge(submit(pass_index, first_sample, pass_n, active))
+        else:   # keep a window of passes in flight, so workers never wait on a merge
+            schedule = passes.fixed()
+            window = collections.deque()
+            for pass_index in range(len(schedule)):
+                ahead = pass_index + len(window)
+                while ahead < len(schedule) and (not window or len(pending) < 4 * workers + 16):
+                    window.append(submit(ahead, *schedule[ahead], passes.active))
+                    ahead += 1
+                merge(window.popleft())
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if pending:
+            client.cancel(list(pending.values()))
+            pending.clear()
+        client.cancel([scene_future, job_future])
+    task_seconds = sorted(totals.pop("task_seconds"))
+    return dict(totals, render_seconds=time.perf_counter() - start, accel={},
+                interrupted=interrupted, workers=workers, task_seconds_total=sum(task_seconds),
+                median_task_seconds=task_seconds[len(task_seconds) // 2] if task_seconds else 0.0)
