@@ -12,8 +12,9 @@ task. An "empty" job of tiny tiles measures the bare cost of a task.
 The model: a frame of P pixels at S samples, split as ptrace splits it (16-sample passes, tiles
 of about TASK_RAYS rays), on M machines of C cores each running C one-thread workers, takes
     T(M) = start + tasks x (task + overhead) / (M x C) + one task (the tail)
-where `task` is the measured seconds per pixel-sample on one core times the pixels and samples
-of a tile, bounded below by the client's serial merge, tasks x merge. It is checked against the
+where `task` is the seconds per pixel-sample measured inside the tasks of the C-worker local
+cluster (every core busy) times the pixels and samples of a tile, bounded below by the client's
+serial merge, tasks x merge. It is checked against the
 local clusters here (busy cores = min(workers, cores)), then evaluated for an 800x600 frame at
 1024 spp on 2, 8 and 32 machines like this one. Writes benchmarks/results/distributed.md.
 """
@@ -63,7 +64,6 @@ def main(argv=None):
         runs = [timed_render(threads=threads) for _ in range(repeats)]
         in_process[threads] = (statistics.median(r[0] for r in runs), runs[0][1], runs[0][2])
     reference = in_process[cores][1]
-    per_core = in_process[1][0] / (pixels * spp)      # seconds per pixel-sample on one core
     rows = ["| run | workers | wall s | vs in-process | tasks | median task s | overhead per task ms "
             "| merge per task ms | identical |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     rows.append(f"| in-process, {cores} threads | - | {in_process[cores][0]:.2f} | 1.00 | - | - "
@@ -127,6 +127,10 @@ def main(argv=None):
 
     overhead = statistics.median(overheads)
     merge = statistics.median(merges)
+    # the per-tile cost, measured inside the tasks of the one-thread-per-core cluster (every
+    # core busy, as on a worker machine), per pixel-sample
+    busy_stats = measured[cores][1] if cores in measured else measured[2][1]
+    per_core = busy_stats["task_seconds_total"] / (pixels * spp)
     tracer = make_tracer(scene, None, 0, "path", OPTIONS)
 
     def model(width, height, samples, machines, cores_each, start_cost):
@@ -141,8 +145,9 @@ def main(argv=None):
         return start_cost + max(compute, tasks * merge), tasks, task
 
     lines += ["## The model against local clusters", "",
-              f"Measured: {per_core * 1e6:.2f} us per pixel-sample on one core (in-process, 1 "
-              f"thread), overhead {overhead * 1e3:.1f} ms per task, merge {merge * 1e3:.2f} ms "
+              f"Measured: {per_core * 1e6:.2f} us per pixel-sample per core inside the tasks of "
+              f"the {cores}-worker cluster (every core busy; in-process on 1 thread with the "
+              f"other core idle: {in_process[1][0] / (pixels * spp) * 1e6:.2f} us), overhead {overhead * 1e3:.1f} ms per task, merge {merge * 1e3:.2f} ms "
               "per task (medians over the cluster runs above).", "",
               "| workers | busy cores | measured s | model s | model / measured |",
               "|---:|---:|---:|---:|---:|"]
