@@ -193,8 +193,24 @@ def light_samples(seed, vertex, pixel, sample, directions, point, geo_normal, no
                 out_weight[r, 2] = lb * fb * scale
                 ox, oy, oz = spawn(point, geo_normal, offset, i, wx, wy, wz)
                 out_origin[r, 0], out_origin[r, 1], out_origin[r, 2] = ox, oy, oz
-                out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
-                out_tmax[r] = dist * (1.0 - SHADOW_SHORTEN) if dist != math.inf else math.inf
+                if dist == math.inf:   # directional light
+                    out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
+                    out_tmax[r] = math.inf
+                else:
+                    # aim from the spawned origin at the light's point and stop just short of
+                    # it: measured from the shading point instead, the spawn offset could carry
+                    # the ray's end past the light onto an emitter lying on it
+                    dx = point[i, 0] + dist * wx - ox
+                    dy = point[i, 1] + dist * wy - oy
+                    dz = point[i, 2] + dist * wz - oz
+                    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    if length > 0.0:
+                        out_direction[r, 0] = dx / length
+                        out_direction[r, 1] = dy / length
+                        out_direction[r, 2] = dz / length
+                    else:   # the light sits at the origin: nothing can be in between
+                        out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
+                    out_tmax[r] = length * (1.0 - SHADOW_SHORTEN)
 
 
 @njit(cache=True, parallel=True)
