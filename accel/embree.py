@@ -2,7 +2,14 @@
 
 embreex facts this module works around (DESIGN.md):
 - float32 only: geometry and rays are rounded to float32, so hits can differ from ours in the
-  last bits of t, and a ray grazing an edge can go either way.
+  last bits of t, and a ray grazing an edge can go either way. Float32 keeps about 7 digits of
+  a coordinate, so geometry far from the origin loses its shape (the cow moved 1e4 away
+  disagreed with bvh on about a third of the rays). So the triangles are re-centred in float64
+  before rounding, on the per-axis median of the vertices, and each ray origin is moved by
+  the same offset (t is unchanged by a translation). The median, not the bounding box's
+  centre: a few far outliers move the box's centre away from where the triangles are, which
+  made a dense cluster with outliers 1e6 away disagree on a third or more of the rays (see
+  benchmarks/stability.py, which measures all of this).
 - no tnear: tmin is emulated by starting the ray at origin + tmin * direction and adding tmin
   back to the hit distance.
 - an array passed as `dists` may be overwritten, so it is always a fresh array.
@@ -31,10 +38,12 @@ class EmbreeAccelerator:
         self.geometry = geometry
         start = time.perf_counter()
         self._scene = None
+        self._centre = np.zeros(3)
         if geometry.triangle_count:
+            self._centre = np.median(geometry.vertices, axis=0)
             self._scene = rtcore_scene.EmbreeScene(robust=True)
             mesh_construction.TriangleMesh(
-                self._scene, geometry.vertices.astype(np.float32),
+                self._scene, (geometry.vertices - self._centre).astype(np.float32),
                 geometry.faces.astype(np.int32))
             one = np.zeros((1, 3), dtype=np.float32)
             self._scene.run(one, one + np.float32(1.0), output=1)   # commit the scene now
@@ -60,10 +69,11 @@ class EmbreeAccelerator:
             self._pool, self._pool_size = ThreadPoolExecutor(len(chunks)), len(chunks)
         return list(self._pool.map(lambda c: function(*c), chunks))
 
-    @staticmethod
-    def _embree_rays(rays, a, b):
+    def _embree_rays(self, rays, a, b):
         tmin = rays.tmin[a:b]
-        origins = (rays.origins[a:b] + tmin[:, None] * rays.directions[a:b]).astype(np.float32)
+        # in the re-centred frame of the triangles handed to Embree (see the module docstring)
+        origins = ((rays.origins[a:b] - self._centre)
+                   + tmin[:, None] * rays.directions[a:b]).astype(np.float32)
         directions = rays.directions[a:b].astype(np.float32)
         dists = (rays.tmax[a:b] - tmin).astype(np.float32)   # a fresh array each call
         return origins, directions, dists
