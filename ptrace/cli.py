@@ -190,13 +190,11 @@ def run(argv):
                        client=client, light_samples=args.light_samples,
                        max_depth=args.max_depth, adaptive=args.adaptive,
                        hemisphere=args.hemisphere)
+        write_image(output, image)
+        write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     finally:
         if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
-    write_image(output, image)
-    write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
+            distributed.shutdown(client, cluster)
     seconds = stats["render_seconds"]
     mean_spp = stats["samples"].mean()
     where = f"workers {stats['workers']} " if "workers" in stats else ""

@@ -22,6 +22,7 @@ import socket
 import threading
 import time
 import uuid
+import warnings
 
 import numba
 import numpy as np
@@ -61,6 +62,20 @@ def local_client(workers, dashboard=False):
     cluster = dd.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                               host="127.0.0.1", silence_logs=logging.ERROR, **options)
     return dd.Client(cluster), cluster
+
+
+def shutdown(client, cluster=None):
+    """Close the client and a local cluster; a slow or failed close (a loaded machine, workers
+    still finishing cancelled tasks) is a one-line warning, never an error after a render."""
+    for part in (client, cluster):
+        if part is None:
+            continue
+        try:
+            part.close(timeout=30)
+        except Exception as error:   # noqa: BLE001 - whatever dask raises while closing
+            name = "client" if part is client else "cluster"
+            warnings.warn(f"the Dask {name} did not close cleanly: {type(error).__name__} "
+                          f"{error}".strip(), RuntimeWarning, stacklevel=2)
 
 
 def connect(address, timeout=CONNECT_TIMEOUT):
