@@ -201,7 +201,8 @@ def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, us
 
 @njit(cache=True, parallel=True)
 def _intersect(lower, upper, child_or_first, count, order, vertices, faces, centers, radii,
-               origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v, out_visits):
+               origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v, out_visits,
+               out_tests):
     n_tri = faces.shape[0]
     n_nodes = lower.shape[0]
     for r in prange(origins.shape[0]):
@@ -216,6 +217,7 @@ def _intersect(lower, upper, child_or_first, count, order, vertices, faces, cent
         best_u = 0.0
         best_v = 0.0
         visits = 0
+        tests = 0
         stack = np.empty(STACK_SIZE, dtype=np.int64)
         entry = np.empty(STACK_SIZE)
         top = 0
@@ -237,6 +239,7 @@ def _intersect(lower, upper, child_or_first, count, order, vertices, faces, cent
                 for i in range(first, first + k):
                     p = order[i]
                     if p < n_tri:
+                        tests += 1
                         t, u, v = triangle_hit(vertices, faces, p, ox, oy, oz, dx, dy, dz)
                         if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
                             best_t, best_prim, best_u, best_v = t, p, u, v
@@ -275,6 +278,7 @@ def _intersect(lower, upper, child_or_first, count, order, vertices, faces, cent
         out_u[r] = best_u
         out_v[r] = best_v
         out_visits[r] = visits
+        out_tests[r] = tests
 
 
 @njit(cache=True, parallel=True)
@@ -349,18 +353,21 @@ class BVHAccelerator:
         self._build_seconds = time.perf_counter() - start
         # a traversal stack holds at most depth + 1 entries
         assert self.max_depth < STACK_SIZE - 1, "BVH deeper than the traversal stack"
-        self.last_mean_visits = None
+        self.last_mean_visits = None          # nodes visited per ray in the last intersect()
+        self.last_mean_triangle_tests = None  # ray-triangle tests per ray in the last intersect()
 
     def intersect(self, rays):
         rays.validate()
         n = len(rays)
         hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
         visits = np.empty(n, dtype=np.int64)
+        tests = np.empty(n, dtype=np.int64)
         g = self.geometry
         _intersect(self.lower, self.upper, self.child_or_first, self.count, self.order,
                    g.vertices, g.faces, g.centers, g.radii, rays.origins, rays.directions,
-                   rays.tmin, rays.tmax, hits.t, hits.prim, hits.u, hits.v, visits)
+                   rays.tmin, rays.tmax, hits.t, hits.prim, hits.u, hits.v, visits, tests)
         self.last_mean_visits = float(visits.mean()) if n else 0.0
+        self.last_mean_triangle_tests = float(tests.mean()) if n else 0.0
         return hits
 
     def occluded(self, rays):
