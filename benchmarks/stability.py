@@ -558,8 +558,8 @@ def geometry_cracks(args):
         "cube at every (s, |d|)), `::test_embree_never_leaks_on_closed_meshes` (0 leaks in the "
         "whole grid; not re-centred, leaks only where |d|/s >= 1e7 and loses over 90% at 1e9), "
         "`::test_random_rays_do_not_leak` (the control) and "
-        "`::test_moller_trumbore_is_not_watertight` (strict xfail: it turns "
-        "into a failure, asking for this report to change, the day the float64 kernel stops "
+        "`::test_moller_trumbore_is_not_watertight` (asserts that aimed rays still leak: it "
+        "fails, asking for this report to change, the day the float64 kernel stops "
         "leaking)."), ""]
     return "\n".join(lines)
 
