@@ -198,6 +198,18 @@ def allocated_node_bytes(primitives):
     return (2 * primitives - 1) * (6 * 8 + 2 * 8) + 8 * primitives
 
 
+def measured_build(geometry, split):
+    """(bvh, build seconds, tracemalloc's peak bytes of a second, identical build)."""
+    start = time.perf_counter()
+    bvh = accel.build("bvh", geometry, split=split)
+    seconds = time.perf_counter() - start
+    tracemalloc.start()
+    accel.build("bvh", geometry, split=split)
+    python_peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return bvh, seconds, python_peak
+
+
 def measure_distribution(name, n, rays_count, min_seconds=0.2):
     """Every figure of section 1 for one distribution: a dict per method."""
     geometry, rays = study_rays(name, n, rays_count)
@@ -205,13 +217,7 @@ def measure_distribution(name, n, rays_count, min_seconds=0.2):
     reference, naive_rate = rays_per_second(naive, rays, min_seconds, max_repeats=3)
     rows = {"naive": {"rays_per_second": naive_rate}}
     for split in ("mean", "sah"):
-        start = time.perf_counter()
-        bvh = accel.build("bvh", geometry, split=split)
-        build_seconds = time.perf_counter() - start
-        tracemalloc.start()
-        accel.build("bvh", geometry, split=split)
-        python_peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
+        bvh, build_seconds, python_peak = measured_build(geometry, split)
         stats = bvh.stats()
         leaves = bvh.count[bvh.count > 0]
         hits, rate = rays_per_second(bvh, rays, min_seconds)

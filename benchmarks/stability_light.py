@@ -371,6 +371,14 @@ def section_hemisphere(quick, chart_dir):
         f"Reproduce: `{REPRODUCE}{' --quick' if quick else ''}` (or `{REPRODUCE_ALL}`).", ""])
 
 
+def save_chart(plt, figure, chart_dir, name):
+    """Lay out, save into chart_dir and close a chart; return its file name for the report."""
+    figure.tight_layout()
+    figure.savefig(Path(chart_dir) / name, dpi=110)
+    plt.close(figure)
+    return name
+
+
 def chart_hemisphere(chart_dir, results):
     plt = pyplot()
     figure, axis = plt.subplots(figsize=(6, 4))
@@ -385,11 +393,7 @@ def chart_hemisphere(chart_dir, results):
     axis.set_title("Direct light on a floor: variance against light size")
     axis.legend()
     axis.grid(True, which="both", alpha=0.3)
-    figure.tight_layout()
-    path = Path(chart_dir) / "stability_light_hemisphere.png"
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path.name
+    return save_chart(plt, figure, chart_dir, "stability_light_hemisphere.png")
 
 
 # -- 2. adaptive sampling stopping too early ---------------------------------------------------
@@ -557,11 +561,7 @@ def chart_adaptive(chart_dir, tables, batches):
     axis.set_title("Adaptive sampling: false convergence (tol 0.05)")
     axis.legend(fontsize=8)
     axis.grid(True, alpha=0.3)
-    figure.tight_layout()
-    path = Path(chart_dir) / "stability_light_adaptive.png"
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path.name
+    return save_chart(plt, figure, chart_dir, "stability_light_adaptive.png")
 
 
 # -- 3. Russian roulette and depth; fireflies --------------------------------------------------
@@ -774,11 +774,7 @@ def chart_roulette(chart_dir, runs, ref):
     right.legend(fontsize=7)
     right.grid(True, alpha=0.3)
     figure.suptitle("Cornell box: fixed depth against Russian roulette")
-    figure.tight_layout()
-    path = Path(chart_dir) / "stability_light_roulette.png"
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path.name
+    return save_chart(plt, figure, chart_dir, "stability_light_roulette.png")
 
 
 CLAMPS = (3, 10, 30, 100, 300, 1000)   # clamp thresholds, in multiples of the image mean
@@ -904,11 +900,7 @@ def chart_fireflies(chart_dir, stats):
     axis.set_title("CBspheres: what a per-sample clamp would cost")
     axis.legend()
     axis.grid(True, which="both", alpha=0.3)
-    figure.tight_layout()
-    path = Path(chart_dir) / "stability_light_fireflies.png"
-    figure.savefig(path, dpi=110)
-    plt.close(figure)
-    return path.name
+    return save_chart(plt, figure, chart_dir, "stability_light_fireflies.png")
 
 
 # -- the report --------------------------------------------------------------------------------

@@ -6,8 +6,6 @@ A test here that starts failing because a method got *better* (the BVH gains on 
 boxes, the float64 kernel becomes watertight) is asking for the report to be rerun and updated.
 """
 import math
-import time
-import tracemalloc
 
 import numba
 import numpy as np
@@ -33,13 +31,7 @@ def compiled_kernels():
 @pytest.mark.parametrize("name", list(stability.DISTRIBUTIONS))
 def test_bvh_build_is_bounded_and_exact(name, split):
     geometry, rays = stability.study_rays(name, N, RAYS)
-    start = time.perf_counter()
-    bvh = accel.build("bvh", geometry, split=split)
-    seconds = time.perf_counter() - start
-    tracemalloc.start()
-    accel.build("bvh", geometry, split=split)
-    python_peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
+    bvh, seconds, python_peak = stability.measured_build(geometry, split)
     stats = bvh.stats()
     P = geometry.primitive_count
     # time: measured 0.003-0.03 s at this size; 2 s means the build went superlinear
