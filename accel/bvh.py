@@ -20,13 +20,16 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from .kernels import NO_HIT, better, slab_entry, sphere_hit, triangle_hit
+from .kernels import (NO_HIT, better, inverse_direction, near_columns,
+                      slab_entry, sphere_hit, triangle_edges,
+                      triangle_hit_edges)
 from .types import Hits
 
 STACK_SIZE = 128
 MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
 SPLITS = ("mean", "sah")   # the seed's mean-centroid split; a binned surface-area heuristic
 SAH_BINS = 16
+RAY_BLOCK = 64           # rays per parallel work item of the traversal kernels
 
 
 @njit(cache=True, inline="always")
@@ -199,132 +202,193 @@ def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, us
     return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
 
 
-@njit(cache=True, parallel=True)
-def _intersect(lower, upper, child_or_first, count, order, vertices, faces, centers, radii,
-               origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v, out_visits,
-               out_tests):
-    n_tri = faces.shape[0]
+def _aligned_empty(rows, columns):
+    """An empty float64 (rows, columns) array whose first row starts on a 64-byte boundary
+    (numpy only promises 16), so each 8-float node row is exactly one cache line."""
+    buffer = np.empty(rows * columns + 8)
+    skip = (-buffer.ctypes.data % 64) // 8
+    return buffer[skip:skip + rows * columns].reshape(rows, columns)
+
+
+@njit(cache=True)
+def _pack(lower, upper, child_or_first, count, order, vertices, faces, nodes):
+    """The traversal's layout: one row of 8 floats per node (lower xyz, upper xyz, child or
+    first, count: one 64-byte cache line, and a node's two children are adjacent rows), and
+    each triangle's (p0, e1, e2) in leaf order, so a leaf reads its triangles from consecutive
+    rows instead of through order -> faces -> vertices."""
     n_nodes = lower.shape[0]
-    for r in prange(origins.shape[0]):
-        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-        ix = 1.0 / dx if dx != 0.0 else np.inf
-        iy = 1.0 / dy if dy != 0.0 else np.inf
-        iz = 1.0 / dz if dz != 0.0 else np.inf
-        lo = tmin[r]
-        best_t = tmax[r]
-        best_prim = NO_HIT
-        best_u = 0.0
-        best_v = 0.0
-        visits = 0
-        tests = 0
+    for i in range(n_nodes):
+        for a in range(3):
+            nodes[i, a] = lower[i, a]
+            nodes[i, 3 + a] = upper[i, a]
+        nodes[i, 6] = child_or_first[i]
+        nodes[i, 7] = count[i]
+    n_tri = faces.shape[0]
+    tris = np.zeros((order.shape[0], 9))
+    for i in range(order.shape[0]):
+        if order[i] < n_tri:
+            (tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4], tris[i, 5],
+             tris[i, 6], tris[i, 7], tris[i, 8]) = triangle_edges(vertices, faces, order[i])
+    return tris
+
+
+@njit(cache=True, parallel=True)
+def _intersect(nodes, tris, order, n_tri, centers, radii, origins, directions, tmin, tmax,
+               out_t, out_prim, out_u, out_v, out_visits, out_tests):
+    n_rays = origins.shape[0]
+    n_nodes = nodes.shape[0]
+    # Rays go in blocks so that each block allocates its traversal stack once, not per ray.
+    for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
         stack = np.empty(STACK_SIZE, dtype=np.int64)
         entry = np.empty(STACK_SIZE)
-        top = 0
-        if n_nodes > 0:
-            t_root = slab_entry(lower, upper, 0, ox, oy, oz, ix, iy, iz, lo, best_t)
-            if t_root != np.inf:
-                stack[0] = 0
-                entry[0] = t_root
-                top = 1
-        while top > 0:
-            top -= 1
-            node = stack[top]
-            if entry[top] > best_t:
-                continue
-            visits += 1
-            k = count[node]
-            if k > 0:
-                first = child_or_first[node]
-                for i in range(first, first + k):
-                    p = order[i]
-                    if p < n_tri:
-                        tests += 1
-                        t, u, v = triangle_hit(vertices, faces, p, ox, oy, oz, dx, dy, dz)
-                        if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
-                            best_t, best_prim, best_u, best_v = t, p, u, v
-                    else:
-                        t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
-                                       lo, best_t)
-                        if t <= best_t and better(t, p, best_t, best_prim):
-                            best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
-                continue
-            left = child_or_first[node]
-            right = left + 1
-            t_left = slab_entry(lower, upper, left, ox, oy, oz, ix, iy, iz, lo, best_t)
-            t_right = slab_entry(lower, upper, right, ox, oy, oz, ix, iy, iz, lo, best_t)
-            # push the farther child first so the nearer one is popped first
-            if t_left <= t_right:
-                if t_right != np.inf:
+        for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
+            ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+            dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+            ix = inverse_direction(dx)
+            iy = inverse_direction(dy)
+            iz = inverse_direction(dz)
+            nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+            lo = tmin[r]
+            best_t = tmax[r]
+            best_prim = NO_HIT
+            best_u = 0.0
+            best_v = 0.0
+            visits = 0
+            tests = 0
+            top = 0
+            if n_nodes > 0:
+                t_root = slab_entry(nodes, 0, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz,
+                                    lo, best_t)
+                if t_root != np.inf:
+                    stack[0] = 0
+                    entry[0] = t_root
+                    top = 1
+            while top > 0:
+                top -= 1
+                node = stack[top]
+                if entry[top] > best_t:
+                    continue
+                visits += 1
+                k = int(nodes[node, 7])
+                if k > 0:
+                    first = int(nodes[node, 6])
+                    for i in range(first, first + k):
+                        p = order[i]
+                        if p < n_tri:
+                            tests += 1
+                            t, u, v = triangle_hit_edges(
+                                tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
+                                tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
+                                ox, oy, oz, dx, dy, dz)
+                            if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
+                                best_t, best_prim, best_u, best_v = t, p, u, v
+                        else:
+                            t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
+                                           lo, best_t)
+                            if t <= best_t and better(t, p, best_t, best_prim):
+                                best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
+                    continue
+                left = int(nodes[node, 6])
+                right = left + 1
+                t_left = slab_entry(nodes, left, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy,
+                                fz, lo, best_t)
+                t_right = slab_entry(nodes, right, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy,
+                                fz, lo, best_t)
+                # push the farther child first so the nearer one is popped first
+                if t_left <= t_right:
+                    if t_right != np.inf:
+                        stack[top] = right
+                        entry[top] = t_right
+                        top += 1
+                    if t_left != np.inf:
+                        stack[top] = left
+                        entry[top] = t_left
+                        top += 1
+                else:
+                    if t_left != np.inf:
+                        stack[top] = left
+                        entry[top] = t_left
+                        top += 1
                     stack[top] = right
                     entry[top] = t_right
                     top += 1
-                if t_left != np.inf:
-                    stack[top] = left
-                    entry[top] = t_left
-                    top += 1
-            else:
-                if t_left != np.inf:
-                    stack[top] = left
-                    entry[top] = t_left
-                    top += 1
-                stack[top] = right
-                entry[top] = t_right
-                top += 1
-        if best_prim == NO_HIT:
-            best_t = np.inf
-        out_t[r] = best_t
-        out_prim[r] = best_prim
-        out_u[r] = best_u
-        out_v[r] = best_v
-        out_visits[r] = visits
-        out_tests[r] = tests
+            if best_prim == NO_HIT:
+                best_t = np.inf
+            out_t[r] = best_t
+            out_prim[r] = best_prim
+            out_u[r] = best_u
+            out_v[r] = best_v
+            out_visits[r] = visits
+            out_tests[r] = tests
 
 
 @njit(cache=True, parallel=True)
-def _occluded(lower, upper, child_or_first, count, order, vertices, faces, centers, radii,
-              origins, directions, tmin, tmax, out):
-    n_tri = faces.shape[0]
-    n_nodes = lower.shape[0]
-    for r in prange(origins.shape[0]):
-        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-        dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-        ix = 1.0 / dx if dx != 0.0 else np.inf
-        iy = 1.0 / dy if dy != 0.0 else np.inf
-        iz = 1.0 / dz if dz != 0.0 else np.inf
-        lo = tmin[r]
-        hi = tmax[r]
-        hit = False
+def _occluded(nodes, tris, order, n_tri, centers, radii, origins, directions, tmin, tmax, out):
+    n_rays = origins.shape[0]
+    n_nodes = nodes.shape[0]
+    for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
         stack = np.empty(STACK_SIZE, dtype=np.int64)
-        top = 0
-        if n_nodes > 0:
-            stack[0] = 0
-            top = 1
-        while top > 0 and not hit:
-            top -= 1
-            node = stack[top]
-            if slab_entry(lower, upper, node, ox, oy, oz, ix, iy, iz, lo, hi) == np.inf:
-                continue
-            k = count[node]
-            if k > 0:
-                first = child_or_first[node]
-                for i in range(first, first + k):
-                    p = order[i]
-                    if p < n_tri:
-                        t, u, v = triangle_hit(vertices, faces, p, ox, oy, oz, dx, dy, dz)
-                        if t >= lo and t <= hi:
+        for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
+            ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+            dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+            ix = inverse_direction(dx)
+            iy = inverse_direction(dy)
+            iz = inverse_direction(dz)
+            nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+            lo = tmin[r]
+            hi = tmax[r]
+            hit = False
+            top = 0
+            if n_nodes > 0 and slab_entry(nodes, 0, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy,
+                                          fz, lo, hi) != np.inf:
+                stack[0] = 0
+                top = 1
+            while top > 0 and not hit:
+                top -= 1
+                node = stack[top]
+                k = int(nodes[node, 7])
+                if k > 0:
+                    first = int(nodes[node, 6])
+                    for i in range(first, first + k):
+                        p = order[i]
+                        if p < n_tri:
+                            t, u, v = triangle_hit_edges(
+                                tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
+                                tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
+                                ox, oy, oz, dx, dy, dz)
+                            if t >= lo and t <= hi:
+                                hit = True
+                                break
+                        elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
+                                        lo, hi) <= hi:
                             hit = True
                             break
-                    elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
-                                    lo, hi) <= hi:
-                        hit = True
-                        break
-                continue
-            left = child_or_first[node]
-            stack[top] = left + 1
-            stack[top + 1] = left
-            top += 2
-        out[r] = hit
+                    continue
+                left = int(nodes[node, 6])
+                t_left = slab_entry(nodes, left, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz,
+                                    lo, hi)
+                t_right = slab_entry(nodes, left + 1, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx,
+                                     fy, fz, lo, hi)
+                # any hit ends the ray: visit the nearer child first all the same, where an
+                # occluder is likelier to be found
+                if t_left <= t_right:
+                    if t_right != np.inf:
+                        stack[top] = left + 1
+                        top += 1
+                    if t_left != np.inf:
+                        stack[top] = left
+                        top += 1
+                else:
+                    if t_left != np.inf:
+                        stack[top] = left
+                        top += 1
+                    stack[top] = left + 1
+                    top += 1
+            out[r] = hit
+
+
+def _mean(values):
+    return float(values.mean()) if values.size else 0.0
 
 
 class BVHAccelerator:
@@ -350,11 +414,16 @@ class BVHAccelerator:
         (self.lower, self.upper, self.child_or_first, self.count, self.order,
          self.max_depth) = _build(prim_lower, prim_upper, centroid, max_leaf_size,
                                   MEAN_SPLIT_DEPTH, split == "sah")
+        # the build returns views of buffers sized for 2n - 1 nodes: copy to free the rest
+        self.lower, self.upper = self.lower.copy(), self.upper.copy()
+        self.child_or_first, self.count = self.child_or_first.copy(), self.count.copy()
+        self._nodes = _aligned_empty(self.lower.shape[0], 8)
+        self._tris = _pack(self.lower, self.upper, self.child_or_first, self.count, self.order,
+                           geometry.vertices, geometry.faces, self._nodes)
         self._build_seconds = time.perf_counter() - start
         # a traversal stack holds at most depth + 1 entries
         assert self.max_depth < STACK_SIZE - 1, "BVH deeper than the traversal stack"
-        self.last_mean_visits = None          # nodes visited per ray in the last intersect()
-        self.last_mean_triangle_tests = None  # ray-triangle tests per ray in the last intersect()
+        self._last_work = None
 
     def intersect(self, rays):
         rays.validate()
@@ -363,25 +432,33 @@ class BVHAccelerator:
         visits = np.empty(n, dtype=np.int64)
         tests = np.empty(n, dtype=np.int64)
         g = self.geometry
-        _intersect(self.lower, self.upper, self.child_or_first, self.count, self.order,
-                   g.vertices, g.faces, g.centers, g.radii, rays.origins, rays.directions,
-                   rays.tmin, rays.tmax, hits.t, hits.prim, hits.u, hits.v, visits, tests)
-        self.last_mean_visits = float(visits.mean()) if n else 0.0
-        self.last_mean_triangle_tests = float(tests.mean()) if n else 0.0
+        _intersect(self._nodes, self._tris, self.order, g.triangle_count, g.centers, g.radii,
+                   rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t, hits.prim,
+                   hits.u, hits.v, visits, tests)
+        self._last_work = (visits, tests)   # averaged only when asked for (see below)
         return hits
+
+    @property
+    def last_mean_visits(self):
+        """Nodes visited per ray in the last intersect() (None before the first)."""
+        return None if self._last_work is None else _mean(self._last_work[0])
+
+    @property
+    def last_mean_triangle_tests(self):
+        """Ray-triangle tests per ray in the last intersect() (None before the first)."""
+        return None if self._last_work is None else _mean(self._last_work[1])
 
     def occluded(self, rays):
         rays.validate()
         out = np.empty(len(rays), dtype=np.bool_)
         g = self.geometry
-        _occluded(self.lower, self.upper, self.child_or_first, self.count, self.order,
-                  g.vertices, g.faces, g.centers, g.radii, rays.origins, rays.directions,
-                  rays.tmin, rays.tmax, out)
+        _occluded(self._nodes, self._tris, self.order, g.triangle_count, g.centers, g.radii,
+                  rays.origins, rays.directions, rays.tmin, rays.tmax, out)
         return out
 
     def stats(self):
         nodes = int(self.lower.shape[0])
-        arrays = (self.lower, self.upper, self.child_or_first, self.count, self.order)
+        arrays = (self._nodes, self._tris, self.order)   # what traversal reads
         return {"kind": self.kind, "primitives": self.geometry.primitive_count,
                 "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
                 "build_seconds": self._build_seconds, "split": self.split,

@@ -15,24 +15,27 @@ MISS = np.nan
 
 
 @njit(cache=True, inline="always")
-def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
-    """Möller–Trumbore: (t, u, v) of the ray against triangle `tri`; t = MISS (NaN) on a miss.
-
-    Edges are inclusive (u, v, 1-u-v in [0, 1]); no determinant epsilon and no back-face
-    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses.
-    """
+def triangle_edges(vertices, faces, tri):
+    """(p0, e1, e2) of triangle `tri`, nine floats: the part of Möller–Trumbore that does not
+    depend on the ray (the BVH stores it per triangle, in leaf order)."""
     i0 = faces[tri, 0]
     i1 = faces[tri, 1]
     i2 = faces[tri, 2]
     p0x = vertices[i0, 0]
     p0y = vertices[i0, 1]
     p0z = vertices[i0, 2]
-    e1x = vertices[i1, 0] - p0x
-    e1y = vertices[i1, 1] - p0y
-    e1z = vertices[i1, 2] - p0z
-    e2x = vertices[i2, 0] - p0x
-    e2y = vertices[i2, 1] - p0y
-    e2z = vertices[i2, 2] - p0z
+    return (p0x, p0y, p0z,
+            vertices[i1, 0] - p0x, vertices[i1, 1] - p0y, vertices[i1, 2] - p0z,
+            vertices[i2, 0] - p0x, vertices[i2, 1] - p0y, vertices[i2, 2] - p0z)
+
+
+@njit(cache=True, inline="always")
+def triangle_hit_edges(p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z, ox, oy, oz, dx, dy, dz):
+    """Möller–Trumbore on a triangle given as (p0, e1, e2): (t, u, v); t = MISS (NaN) on a miss.
+
+    Edges are inclusive (u, v, 1-u-v in [0, 1]); no determinant epsilon and no back-face
+    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses.
+    """
     # s1 = d x e2
     s1x = dy * e2z - dz * e2y
     s1y = dz * e2x - dx * e2z
@@ -56,6 +59,16 @@ def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
         return MISS, 0.0, 0.0
     t = (s2x * e2x + s2y * e2y + s2z * e2z) * inv
     return t, u, v
+
+
+@njit(cache=True, inline="always")
+def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
+    """Möller–Trumbore: (t, u, v) of the ray against triangle `tri`; t = MISS (NaN) on a miss.
+    The same arithmetic as triangle_hit_edges on triangle_edges, so every backend computes
+    bit-identical t, u, v whether it reads the mesh or the BVH's per-triangle copy."""
+    p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z = triangle_edges(vertices, faces, tri)
+    return triangle_hit_edges(p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z,
+                              ox, oy, oz, dx, dy, dz)
 
 
 @njit(cache=True, inline="always")
@@ -102,53 +115,38 @@ def sphere_hit(centers, radii, sphere, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, inline="always")
-def slab_entry(lo, hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax):
+def inverse_direction(d):
+    """1/d for the slab test; a zero component becomes 1e300 (finite, signed like +0), so
+    (plane - o) * inverse is never NaN: a ray parallel to a slab is inside it (t from -1e300
+    to +1e300, or up to inf) or outside it (an empty interval), never wrongly culled."""
+    if d == 0.0:
+        return 1e300
+    return 1.0 / d
+
+
+@njit(cache=True, inline="always")
+def near_columns(ix, iy, iz):
+    """Columns of a node row holding the near and far planes of a ray with inverse direction
+    (ix, iy, iz): lower corner (0, 1, 2) first where the inverse is positive, else upper."""
+    nx = 0 if ix > 0.0 else 3
+    ny = 1 if iy > 0.0 else 4
+    nz = 2 if iz > 0.0 else 5
+    return nx, ny, nz, (nx + 3) % 6, (ny + 3) % 6, (nz + 3) % 6
+
+
+@njit(cache=True, inline="always")
+def slab_entry(nodes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, tmin, tmax):
     """Entry t of the ray into box `node` clipped to [tmin, tmax]; inf if it misses.
 
-    ix, iy, iz are 1/direction (inf for a zero component). A zero component is handled
-    explicitly so that 0 * inf never produces NaN: the ray is inside that slab or misses.
+    nodes[node, 0:3] is the box's lower corner and nodes[node, 3:6] its upper corner. ix, iy,
+    iz are inverse_direction() of the ray's direction; nx, ny, nz the columns of the near
+    planes and fx, fy, fz of the far ones (near_columns()), so no per-box comparison is needed
+    to order the two planes.
     """
-    t0 = tmin
-    t1 = tmax
-    # x
-    if ix == np.inf or ix == -np.inf:
-        if ox < lo[node, 0] or ox > hi[node, 0]:
-            return np.inf
-    else:
-        a = (lo[node, 0] - ox) * ix
-        b = (hi[node, 0] - ox) * ix
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
-    # y
-    if iy == np.inf or iy == -np.inf:
-        if oy < lo[node, 1] or oy > hi[node, 1]:
-            return np.inf
-    else:
-        a = (lo[node, 1] - oy) * iy
-        b = (hi[node, 1] - oy) * iy
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
-    # z
-    if iz == np.inf or iz == -np.inf:
-        if oz < lo[node, 2] or oz > hi[node, 2]:
-            return np.inf
-    else:
-        a = (lo[node, 2] - oz) * iz
-        b = (hi[node, 2] - oz) * iz
-        if a > b:
-            a, b = b, a
-        if a > t0:
-            t0 = a
-        if b < t1:
-            t1 = b
+    t0 = max(tmin, (nodes[node, nx] - ox) * ix, (nodes[node, ny] - oy) * iy,
+             (nodes[node, nz] - oz) * iz)
+    t1 = min(tmax, (nodes[node, fx] - ox) * ix, (nodes[node, fy] - oy) * iy,
+             (nodes[node, fz] - oz) * iz)
     # The slab t values carry rounding error; widen the far end so a box never rejects a hit
     # the primitive test would accept (boxes are also padded at build time).
     if t0 > t1 + abs(t1) * 4e-16:

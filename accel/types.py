@@ -6,6 +6,7 @@ Embree can take them as they are.
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 
 def _float_array(name, value, shape_tail):
@@ -114,10 +115,26 @@ class Rays:
 
     def validate(self):
         """Raise ValueError for rays no backend can answer (NaN or infinite parts)."""
-        if not (np.isfinite(self.origins).all() and np.isfinite(self.directions).all()):
+        problem = _ray_problem(self.origins, self.directions, self.tmin, self.tmax)
+        if problem == 1:
             raise ValueError("rays contain NaN or infinite origins or directions")
-        if np.isnan(self.tmin).any() or np.isnan(self.tmax).any() or np.isinf(self.tmin).any():
+        if problem == 2:
             raise ValueError("rays contain NaN t bounds or an infinite tmin")
+
+
+@njit(cache=True)
+def _ray_problem(origins, directions, tmin, tmax):
+    """0 if every ray is answerable, 1 for a non-finite origin or direction, 2 for a NaN t
+    bound or an infinite tmin. One pass and no temporaries: every wave of a render is
+    validated, and numpy's isfinite/all over each array cost more than the check is worth."""
+    for i in range(origins.shape[0]):
+        for c in range(3):
+            if not (np.isfinite(origins[i, c]) and np.isfinite(directions[i, c])):
+                return 1
+    for i in range(tmin.shape[0]):
+        if not np.isfinite(tmin[i]) or np.isnan(tmax[i]):
+            return 2
+    return 0
 
 
 @dataclass(frozen=True, eq=False)

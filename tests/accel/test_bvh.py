@@ -95,3 +95,43 @@ def test_bad_options_are_refused():
         accel.build("bvh", geometric_series_geometry(4), max_leaf_size=0)
     with pytest.raises(ValueError):
         accel.build("bvh", geometric_series_geometry(4), split="median-of-nothing")
+
+
+def test_axis_aligned_rays_on_box_planes_match_naive():
+    """The slab test orders planes by the direction's sign and maps a zero component to a
+    finite 1e300 inverse (never NaN): rays along the axes (two zero components) whose origin
+    lies exactly on node box planes in those two components, with tmin > 0, must give naive's
+    answers bit for bit, closest hit and any hit."""
+    rng = np.random.default_rng(11)
+    # 400 axis-aligned unit squares (two triangles each) at integer coordinates
+    corners = rng.integers(0, 8, size=(400, 3)).astype(np.float64)
+    axis = rng.integers(0, 3, size=400)
+    u, v = (axis + 1) % 3, (axis + 2) % 3
+    quad = np.zeros((400, 4, 3))
+    quad[:] = corners[:, None, :]
+    rows = np.arange(400)
+    quad[rows, 1, u] += 1
+    quad[rows, 2, u] += 1
+    quad[rows, 2, v] += 1
+    quad[rows, 3, v] += 1
+    vertices = quad.reshape(-1, 3)
+    base = 4 * rows[:, None]
+    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
+    geometry = accel.Geometry(vertices, faces)
+    naive = accel.build("naive", geometry)
+    n = 4000
+    for split in ("mean", "sah"):
+        bvh = accel.build("bvh", geometry, split=split)
+        planes = np.concatenate([bvh.lower, bvh.upper])          # (2 * nodes, 3)
+        starts = planes[rng.integers(0, len(planes), n)]          # on a box plane, per axis
+        along = rng.integers(0, 3, n)
+        starts[np.arange(n), along] = rng.uniform(-1.0, 9.0, n)
+        directions = np.zeros((n, 3))
+        directions[np.arange(n), along] = rng.choice([-1.0, 1.0], n)
+        rays = accel.Rays(starts, directions, 1e-3, rng.choice([np.inf, 3.0], n))
+        expected = naive.intersect(rays)
+        assert 0.05 < (expected.prim >= 0).mean() < 0.95
+        hits = bvh.intersect(rays)
+        np.testing.assert_array_equal(hits.prim, expected.prim)
+        np.testing.assert_array_equal(hits.t, expected.t)
+        np.testing.assert_array_equal(bvh.occluded(rays), naive.occluded(rays))
