@@ -316,3 +316,29 @@ def bounce(seed, vertex, pixel, sample, directions, point, geo_normal, normal, m
         out_origin[i, 0], out_origin[i, 1], out_origin[i, 2] = ox, oy, oz
         out_direction[i, 0], out_direction[i, 1], out_direction[i, 2] = wx, wy, wz
         out_delta[i] = is_delta(kinds[m])
+
+
+@njit(cache=True)
+def retire_and_compact(alive, owner, pixel, sample, throughput, radiance, delta, origins,
+                       directions, out, keep_owner, keep_pixel, keep_sample, keep_throughput,
+                       keep_radiance, keep_delta, keep_origins, keep_directions):
+    """Add each finished path's radiance to out[owner] (its radiance is final) and copy the live
+    paths' state, in order, to the keep_* arrays; return how many live. One serial pass instead
+    of a dozen numpy gathers over the wave: at 2^16 paths those cost more than the kernels."""
+    j = 0
+    for i in range(alive.shape[0]):
+        if not alive[i]:
+            for c in range(3):
+                out[owner[i], c] += radiance[i, c]
+            continue
+        keep_owner[j] = owner[i]
+        keep_pixel[j] = pixel[i]
+        keep_sample[j] = sample[i]
+        keep_delta[j] = delta[i]
+        for c in range(3):
+            keep_throughput[j, c] = throughput[i, c]
+            keep_radiance[j, c] = radiance[i, c]
+            keep_origins[j, c] = origins[i, c]
+            keep_directions[j, c] = directions[i, c]
+        j += 1
+    return j

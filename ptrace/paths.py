@@ -89,20 +89,22 @@ class PathTracer:
             k.bounce(self.seed, vertex, pixel, sample, directions, point, geo, normal, material,
                      offset, alive, self.kinds, m.albedo, m.transmittance, m.ior, m.alpha, m.eta,
                      m.k, throughput, vertex >= 2, origins, new_dirs, delta)
-            # retire finished paths: their radiance is final
-            np.add.at(out, owner[~alive], radiance[~alive])
-            keep = np.nonzero(alive)[0]
-            owner, pixel, sample = owner[keep], pixel[keep], sample[keep]
-            throughput, radiance, delta = throughput[keep], radiance[keep], delta[keep]
-            directions = np.ascontiguousarray(new_dirs[keep])
-            bounce_rays = accel.Rays(origins[keep], directions)
+            # retire finished paths into out; compact the live ones for the bounce wave
+            live = (np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64),
+                    np.empty(count, dtype=np.int64), np.empty((count, 3)), np.empty((count, 3)),
+                    np.empty(count, dtype=np.bool_), np.empty((count, 3)), np.empty((count, 3)))
+            n_live = k.retire_and_compact(alive, owner, pixel, sample, throughput, radiance,
+                                          delta, origins, new_dirs, out, *live)
+            owner, pixel, sample, throughput, radiance, delta, origins, directions = \
+                (array[:n_live] for array in live)
+            bounce_rays = accel.Rays(origins, directions)
             hits = self.backend.intersect(bounce_rays)
             self.rays_traced += len(bounce_rays)
             point, geo, normal, material, offset = self._surface(bounce_rays, hits)
             alive = material >= 0
             # a delta bounce sees emitters directly (light sampling cannot)
             k.add_emission(material, self.kinds, m.emission, throughput, alive & delta, radiance)
-        np.add.at(out, owner, radiance)
+        out[owner] += radiance
         return out
 
     def _direct(self, vertex, pixel, sample, directions, point, geo, normal, material, offset,

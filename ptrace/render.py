@@ -6,6 +6,7 @@ the sample count; adaptive sampling (-a) retires converged pixels after each pas
 numbers are keyed by (seed, pixel, sample, dimension), and pass sizes depend only on -s and -a,
 so an image does not depend on threads, chunk size or backend.
 """
+import ctypes
 import sys
 import time
 import warnings
@@ -154,7 +155,35 @@ def trace_pixels(tracer, camera, seed, width, spp, pixel_x, pixel_y, first_sampl
     return nonfinite
 
 
+_MALLOC_TUNED = False
+
+
+def keep_freed_memory():
+    """Ask glibc's malloc to keep freed memory for reuse instead of handing it back to the OS.
+
+    Every wave allocates and frees arrays of a few MB (rays, hits, path state). By default glibc
+    returns the top of its heap to the OS once 2x the largest such array is free, and the next
+    wave page-faults all of it back in, zeroed: on the cow command at 480x360 that was 760,000
+    page faults and a quarter of the wall time (6.1 s against 4.4 s kept; peak memory the
+    same, 199 MB). A fixed mmap threshold (32 MB, glibc's largest) keeps those arrays in the
+    heap, and a 1 GB trim threshold keeps the heap. Process-wide and idempotent; nothing on
+    other C libraries."""
+    global _MALLOC_TUNED
+    if _MALLOC_TUNED or not sys.platform.startswith("linux"):
+        return
+    _MALLOC_TUNED = True
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):   # not glibc (musl has no mallopt)
+        return
+    M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+    mallopt(M_MMAP_THRESHOLD, 32 << 20)
+    mallopt(M_TRIM_THRESHOLD, 1 << 30)
+
+
 def make_tracer(scene, backend, seed, integrator, options):
+    keep_freed_memory()
     return PathTracer(scene, backend, seed, integrator,
                       light_samples=int(options.get("light_samples", 1)),
                       max_depth=int(options.get("max_depth", 1)),
