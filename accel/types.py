@@ -76,11 +76,16 @@ class Geometry:
         return lower.reshape(-1, 3), upper.reshape(-1, 3)
 
     def bounds(self):
-        """(lower, upper) of the whole geometry, or None when it is empty."""
+        """(lower, upper) of the whole geometry, or None when it is empty. Computed once (every
+        render asks, for its camera); the geometry's arrays are not to be changed in place."""
         if self.primitive_count == 0:
             return None
-        lower, upper = self.primitive_bounds()
-        return lower.min(axis=0), upper.max(axis=0)
+        cached = self.__dict__.get("_bounds")
+        if cached is None:
+            lower, upper = self.primitive_bounds()
+            cached = (lower.min(axis=0), upper.max(axis=0))
+            object.__setattr__(self, "_bounds", cached)
+        return cached[0].copy(), cached[1].copy()
 
 
 @dataclass(frozen=True, eq=False)

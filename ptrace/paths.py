@@ -11,7 +11,7 @@ from .shading import normal_colours, shading_normals
 
 class PathTracer:
     def __init__(self, scene, backend, seed, integrator="path", light_samples=1, max_depth=1,
-                 hemisphere=False):
+                 hemisphere=False, roulette=True):
         self.scene = scene
         self.backend = backend
         self.seed = int(seed)
@@ -19,10 +19,11 @@ class PathTracer:
         self.light_samples = light_samples
         self.max_depth = max_depth
         self.hemisphere = hemisphere
+        self.roulette = roulette
         self.rays_traced = 0
         self.warnings = []
         geometry = scene.geometry
-        self.scale = k.primitive_scale(geometry)
+        self.scale = k.primitive_scale(geometry) if integrator == "path" else None
         materials = scene.materials
         self.kinds = np.ascontiguousarray(materials.kind, dtype=np.int64)
         lights = scene.lights
@@ -88,7 +89,8 @@ class PathTracer:
             delta = np.zeros(count, dtype=np.bool_)
             k.bounce(self.seed, vertex, pixel, sample, directions, point, geo, normal, material,
                      offset, alive, self.kinds, m.albedo, m.transmittance, m.ior, m.alpha, m.eta,
-                     m.k, throughput, vertex >= 2, origins, new_dirs, delta)
+                     m.k, throughput, self.roulette and vertex >= 2, origins, new_dirs,
+                     delta)
             # retire finished paths into out; compact the live ones for the bounce wave
             live = (np.empty(count, dtype=np.int64), np.empty(count, dtype=np.int64),
                     np.empty(count, dtype=np.int64), np.empty((count, 3)), np.empty((count, 3)),

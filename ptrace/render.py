@@ -44,6 +44,40 @@ def camera_samples(seed, pixel_x, pixel_y, width, first_sample, count, spp, out_
                 out_y[i] = pixel_y[k] + uniform(seed, pixel, first_sample + j, 1)
 
 
+@njit(cache=True)
+def accumulate(radiance, pass_n, rows, sum_rgb, sum_l, sum_l2, count):
+    """Add pass_n consecutive samples per pixel into the per-pixel sums at `rows`: radiance,
+    illuminance and its square, and the count of finite samples (a sample with a non-finite
+    channel is dropped); return how many were dropped. Each pixel's pass is summed from zero
+    and then added, so a distributed tile's sums (a pass from zero, added by the client) are
+    bit-identical to an in-process render's."""
+    l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
+    dropped = 0
+    for p in range(rows.shape[0]):
+        r = g = b = lum = lum2 = 0.0
+        n = 0
+        for i in range(p * pass_n, (p + 1) * pass_n):
+            x, y, z = radiance[i, 0], radiance[i, 1], radiance[i, 2]
+            if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
+                dropped += 1
+                continue
+            value = x * l0 + y * l1 + z * l2
+            r += x
+            g += y
+            b += z
+            lum += value
+            lum2 += value * value
+            n += 1
+        row = rows[p]
+        sum_rgb[row, 0] += r
+        sum_rgb[row, 1] += g
+        sum_rgb[row, 2] += b
+        sum_l[row] += lum
+        sum_l2[row] += lum2
+        count[row] += n
+    return dropped
+
+
 def _check_options(spp, accel_kind, integrator, width, height, crop, options):
     if not (isinstance(spp, (int, np.integer)) and spp >= 1):
         raise PtraceError(f"samples per pixel must be a positive integer, got {spp!r}")
@@ -58,7 +92,7 @@ def _check_options(spp, accel_kind, integrator, width, height, crop, options):
         if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > width or y + dy > height:
             raise PtraceError(f"crop cell x={x} y={y} dx={dx} dy={dy} is not inside the "
                               f"{width}x{height} image")
-    unknown = set(options) - {"light_samples", "max_depth", "adaptive", "hemisphere"}
+    unknown = set(options) - {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette"}
     if unknown:
         raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
     if options.get("light_samples", 1) < 1:
@@ -82,7 +116,8 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     rescale); crop (x, y, dx, dy) renders only that cell (y counted from the bottom, like the
     course) and returns it alone; camera overrides the course's camera; options are the light
     transport flags: light_samples (-l, default 1), max_depth (-m, default 1), adaptive (-a,
-    (batch, tolerance) or None) and hemisphere (-H). stats, if a dict, receives build and render
+    (batch, tolerance) or None), hemisphere (-H) and roulette (default True; False runs every
+    path to max_depth, for comparisons: the course has no such flag). stats, if a dict, receives build and render
     seconds, rays traced, per-pixel sample counts ("samples", (H, W)), the number of non-finite
     samples dropped, and whether Ctrl-C interrupted the render.
     """
@@ -142,14 +177,7 @@ def trace_pixels(tracer, camera, seed, width, spp, pixel_x, pixel_y, first_sampl
         pixel_ids = np.repeat(py * width + px, pass_n)
         sample_ids = np.tile(np.arange(first_sample, first_sample + pass_n), px.size)
         radiance = tracer.trace(pixel_ids, sample_ids, rays)
-        finite = np.isfinite(radiance).all(axis=1)
-        nonfinite += int((~finite).sum())
-        radiance[~finite] = 0.0
-        lum = radiance @ LUMINANCE
-        sum_rgb[rows] += radiance.reshape(px.size, pass_n, 3).sum(axis=1)
-        sum_l[rows] += lum.reshape(px.size, pass_n).sum(axis=1)
-        sum_l2[rows] += (lum * lum).reshape(px.size, pass_n).sum(axis=1)
-        count[rows] += finite.reshape(px.size, pass_n).sum(axis=1)
+        nonfinite += accumulate(radiance, pass_n, rows, sum_rgb, sum_l, sum_l2, count)
         if on_chunk is not None:
             on_chunk(n)
     return nonfinite
@@ -187,7 +215,8 @@ def make_tracer(scene, backend, seed, integrator, options):
     return PathTracer(scene, backend, seed, integrator,
                       light_samples=int(options.get("light_samples", 1)),
                       max_depth=int(options.get("max_depth", 1)),
-                      hemisphere=bool(options.get("hemisphere", False)))
+                      hemisphere=bool(options.get("hemisphere", False)),
+                      roulette=bool(options.get("roulette", True)))
 
 
 def _render(scene, spp, accel_kind, integrator, width, height, seed, crop, camera, progress,

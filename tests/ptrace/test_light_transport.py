@@ -38,6 +38,25 @@ def test_furnace_is_exact_without_roulette(depth):
     np.testing.assert_allclose(image, expected, rtol=1e-5)
 
 
+def test_roulette_off_runs_every_path_to_max_depth():
+    """roulette=False: from the third vertex on paths are no longer cut at random, so a deep
+    furnace is exact (every vertex gets the same direct light, no variance) where roulette's
+    image is only right on average; the default is roulette on."""
+    albedo, power, depth = 0.5, 2.0, 6
+    scene, camera = furnace(albedo, power)
+    expected = albedo * power / math.pi * sum(albedo ** k for k in range(depth))
+    off, on, default = {}, {}, {}
+    exact = ptrace.render(scene, camera=camera, resolution=(16, 16), spp=2, max_depth=depth,
+                          roulette=False, stats=off)
+    np.testing.assert_allclose(exact, expected, rtol=1e-5)
+    noisy = ptrace.render(scene, camera=camera, resolution=(16, 16), spp=2, max_depth=depth,
+                          roulette=True, stats=on)
+    assert np.abs(noisy / expected - 1).max() > 1e-3 and on["rays"] < off["rays"]
+    again = ptrace.render(scene, camera=camera, resolution=(16, 16), spp=2, max_depth=depth,
+                          stats=default)
+    np.testing.assert_array_equal(again, noisy)
+
+
 @pytest.mark.parametrize("accel_kind", ["bvh", "embree"])
 def test_furnace_converges_with_roulette(accel_kind):
     albedo, power = 0.7, 1.0
