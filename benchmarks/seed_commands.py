@@ -54,6 +54,40 @@ COURSE = {
 }
 
 
+NAIVE_RUN_TRIANGLES = 1000   # naive runs a command for real up to this many triangles
+
+
+def time_command(scene, kind, spp, light_samples, depth, resolution, extra, naive_shrink=4,
+                 bvh_rays=None):
+    """One timed `ptrace.render` of a command on a loaded scene with backend `kind`.
+
+    Wall time includes the acceleration build (compile the kernels first). naive on a scene of
+    more than NAIVE_RUN_TRIANGLES triangles instead renders resolution // naive_shrink per axis
+    at -s 1 to measure its rays per second, and its wall time is estimated as `bvh_rays` (the
+    bvh run's exact ray count: naive traces the same paths) divided by that rate, plus its build
+    time. Returns a dict: wall, rays_per_second, estimated, spp and resolution (as run), stats
+    (ptrace.render's) and image.
+    """
+    import ptrace
+    run_spp, run_resolution = spp, resolution
+    estimated = kind == "naive" and scene.triangle_count > NAIVE_RUN_TRIANGLES
+    if estimated:
+        if bvh_rays is None:
+            raise SystemExit("naive estimates need bvh in --backends before naive")
+        run_spp = 1
+        run_resolution = (resolution[0] // naive_shrink, resolution[1] // naive_shrink)
+    stats = {}
+    start = time.perf_counter()
+    image = ptrace.render(scene, spp=run_spp, light_samples=light_samples, max_depth=depth,
+                          resolution=run_resolution, accel=kind, stats=stats, **extra)
+    wall = time.perf_counter() - start
+    rays_per_second = stats["rays"] / stats["render_seconds"]
+    if estimated:
+        wall = stats["build_seconds"] + bvh_rays / rays_per_second
+    return {"wall": wall, "rays_per_second": rays_per_second, "estimated": estimated,
+            "spp": run_spp, "resolution": run_resolution, "stats": stats, "image": image}
+
+
 def main(argv=None):
     import ptrace
     from ptrace.image import write_image
@@ -75,31 +109,20 @@ def main(argv=None):
         ptrace.render(scene, spp=1, light_samples=1, max_depth=2, resolution=(8, 6), **extra)
         bvh_rays = None
         for kind in args.backends:
-            run_spp = max(1, spp // args.spp_scale)
-            run_resolution = resolution
-            estimate = kind == "naive" and scene.triangle_count > 1000
-            if estimate:
-                run_spp = 1
-                run_resolution = (resolution[0] // args.naive_shrink,
-                                  resolution[1] // args.naive_shrink)
-            stats = {}
-            start = time.perf_counter()
-            image = ptrace.render(scene, spp=run_spp, light_samples=light_samples,
-                                  max_depth=depth, resolution=run_resolution, accel=kind,
-                                  stats=stats, **extra)
-            wall = time.perf_counter() - start
-            rays_per_second = stats["rays"] / stats["render_seconds"]
+            run = time_command(scene, kind, max(1, spp // args.spp_scale), light_samples, depth,
+                               resolution, extra, naive_shrink=args.naive_shrink,
+                               bvh_rays=bvh_rays)
+            stats, image, wall = run["stats"], run["image"], run["wall"]
+            rays_per_second = run["rays_per_second"]
             if kind == "bvh":
                 bvh_rays = stats["rays"]
-            if estimate:
-                if bvh_rays is None:
-                    raise SystemExit("naive estimates need bvh in --backends before naive")
-                wall = stats["build_seconds"] + bvh_rays / rays_per_second
+            if run["estimated"]:
+                run_resolution, run_spp = run["resolution"], run["spp"]
                 rows.append(f"| {name} | naive | est. from {stats['rays']:,} rays "
                             f"({run_resolution[0]}x{run_resolution[1]}, -s {run_spp}) | "
                             f"{wall:.0f} | {bvh_rays:,} | {rays_per_second:,.0f} | |")
             else:
-                rows.append(f"| {name} | {kind} | {run_spp} | {wall:.1f} | "
+                rows.append(f"| {name} | {kind} | {run['spp']} | {wall:.1f} | "
                             f"{stats['rays']:,} | {rays_per_second:,.0f} | "
                             f"{stats['samples'].mean():.1f} |")
             rows[-1] += f" {COURSE.get(name, '') if kind == args.backends[0] else ''} |"
