@@ -81,3 +81,24 @@ def test_runner_all_passes_quick_and_output(tmp_path, monkeypatch, capsys):
     assert report.RESULTS == results
     out = capsys.readouterr().out
     assert "no_such_module: skipped" in out and "report: skipped (no main(argv))" in out
+
+
+def test_error_vs_time_verdicts_follow_the_numbers():
+    from benchmarks import error_vs_time
+    point = lambda spp, seconds, error: (spp, seconds, error, float(spp))   # noqa: E731
+    curves = {
+        "light -l 1": [point(1, 1.0, 0.01)], "light -l 4": [point(1, 2.0, 0.01)],
+        "light -l 16": [point(1, 8.0, 0.01)], "hemisphere -H -l 4": [point(1, 1.0, 1.0)],
+        "adaptive -a 8 0.05 -l 4": [point(8, 1.0, 0.01)],
+        "roulette off -l 4": [point(1, 4.0, 0.01)],
+        "naive -l 4": [point(1, 20.0, 0.01)], "embree -l 4": [point(1, 3.0, 0.0101)],
+        "Mitsuba 3 scalar_rgb": [point(1, 0.5, 0.01)]}
+    best = {k: min(p[1] * p[2] for p in v) for k, v in curves.items()}
+    text = "\n".join(error_vs_time.verdict_lines(curves, best))
+    assert "light -l 1 is 100x more efficient than hemisphere" in text
+    assert "best first light -l 1 (0.0100), light -l 4 (0.0200), light -l 16" in text
+    assert "adaptive is more efficient (0.0100 against 0.0200, 2.00x)" in text
+    assert "roulette is more efficient (0.0200 against 0.0400, 2.00x)" in text
+    assert "naive: relative MSE within 0.00% of bvh's at every -s, median time 10.00x" in text
+    assert "embree: relative MSE within 1.00%" in text
+    assert "needs 2.00x the wall time" in text
