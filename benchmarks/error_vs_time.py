@@ -53,16 +53,17 @@ def verdict_lines(curves, best):
     lines.append(f"- Light sampling against hemisphere sampling: {light} is "
                  f"{ratio(light, hemisphere):.0f}x more efficient than {hemisphere}.")
     order = sorted((k for k in best if k.startswith("light -l")), key=best.get)
+    fewest_best = order[0] == "light -l 1"
     lines.append("- Light samples per vertex: best first " + ", ".join(
-        f"{k} ({best[k]:.4f})" for k in order) + " (more shadow rays per vertex cost more time "
-        "than the variance they remove here, with one small light and diffuse walls).")
+        f"{k} ({best[k]:.4f})" for k in order) + (
+        " (more shadow rays per vertex cost more time than the variance they remove here)."
+        if fewest_best else "."))
     adaptive = next(k for k in best if k.startswith("adaptive"))
     uniform = "light -l 4"
     word = "more" if best[adaptive] < best[uniform] else "less"
     lines.append(f"- Adaptive against uniform sampling at -l 4: adaptive is {word} efficient "
                  f"({best[adaptive]:.4f} against {best[uniform]:.4f}, "
-                 f"{max(ratio(adaptive, uniform), ratio(uniform, adaptive)):.2f}x): this scene's "
-                 "noise is spread evenly, so there is little for adaptive sampling to save.")
+                 f"{max(ratio(adaptive, uniform), ratio(uniform, adaptive)):.2f}x).")
     off = "roulette off -l 4"
     word = "more" if best[uniform] < best[off] else "less"
     lines.append(f"- Russian roulette on against off (-m {DEPTH}, -l 4): roulette is {word} "

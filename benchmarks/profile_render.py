@@ -41,7 +41,7 @@ BOUNCE_HIT = "bounce rays closest hit (accelerator.intersect)"
 HEMISPHERE_HIT = "hemisphere rays closest hit (accelerator.intersect, -H)"
 SHADOW_HIT = "shadow rays any-hit traversal (accelerator.occluded)"
 BUILD = "acceleration structure build (accel.build)"
-GLUE = "Python/numpy glue: compaction, np.add.at, Rays, accumulation, setup"
+GLUE = "Python/numpy glue: array allocation, Rays and hits, wave and render setup"
 TRAVERSAL = (CAMERA_HIT, BOUNCE_HIT, HEMISPHERE_HIT, SHADOW_HIT)
 KERNEL_LABELS = {
     "surfaces": "surfaces kernel (hit points, normals, materials)",
@@ -161,7 +161,7 @@ def profiling(profile):
         patch(render_module, "camera_samples",
               profile.wrap("camera_samples kernel", render_module.camera_samples))
         patch(ptrace.camera.Camera, "directions",
-              profile.wrap("camera ray directions (Camera.directions, numpy)",
+              profile.wrap("camera ray directions (Camera.directions kernel)",
                            ptrace.camera.Camera.directions))
         yield profile
     finally:
@@ -275,7 +275,8 @@ def main(argv=None):
              "Embree, float32 conversion and its thread pool). The numba kernels run in parallel "
              "on all threads, so a phase's seconds are the wall seconds of its calls, not CPU "
              "seconds. The glue row is wall time minus the sum of the phases: numpy between the "
-             "kernels (index compaction, np.add.at, building Rays, per-pixel accumulation) and "
+             "kernels (allocating path state, building Rays and hits, the per-wave Python in "
+             "ptrace/paths.py, the per-pixel accumulation kernel) and "
              "per-render setup. Scenes are loaded and kernels compiled before timing; each "
              f"command runs once untimed first. {args.threads} threads; "
              + ("--quick: 120x90, -s divided by 16. " if args.quick else "480x360. ")
