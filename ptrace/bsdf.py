@@ -104,7 +104,7 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
 
 # -- the interface ---------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters."""
     if kind == DIFFUSE:
