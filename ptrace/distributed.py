@@ -42,6 +42,21 @@ _KEEP = 2
 builds = 0                           # acceleration structures built by this process (tests)
 
 
+class _DropSyncCancelRace(logging.Filter):
+    """Drops one log record: when Ctrl-C interrupts a blocking client call, the cancel callback
+    of distributed.utils.sync (dask/distributed 2024-2025) can run before its coroutine has
+    assigned `future`, and tornado logs the resulting NameError with a traceback on the user's
+    terminal. The interrupt itself is handled (ptrace cancels its tasks and writes what was
+    merged); every other record passes."""
+
+    def filter(self, record):
+        error = record.exc_info[1] if record.exc_info else None
+        return not (isinstance(error, NameError) and "'future'" in str(error))
+
+
+logging.getLogger("tornado.application").addFilter(_DropSyncCancelRace())
+
+
 def _dask():
     try:
         import dask.distributed as dd

@@ -209,3 +209,23 @@ def test_tile_pixels_targets_work_per_task():
     assert distributed.tile_pixels(100, 17, 16, 2) == 25            # two tiles per worker
     assert distributed.tile_pixels(1, 17, 16, 8) == 1
 
+
+
+def test_only_the_sync_cancel_race_is_dropped_from_tornado_logs():
+    """The NameError distributed.utils.sync's cancel callback raises when Ctrl-C comes before
+    its coroutine assigned `future` is not shown; other tornado errors still are."""
+    import logging
+
+    def record(error):
+        try:
+            raise error
+        except Exception:
+            return logging.LogRecord("tornado.application", logging.ERROR, __file__, 1,
+                                     "Exception in callback", None, sys.exc_info())
+
+    logger = logging.getLogger("tornado.application")
+    race = record(NameError("cannot access free variable 'future' where it is not associated "
+                            "with a value in enclosing scope"))
+    other = record(NameError("name 'x' is not defined"))
+    assert not logger.filter(race)
+    assert logger.filter(other) and logger.filter(record(RuntimeError("boom")))
