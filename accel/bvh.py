@@ -20,9 +20,8 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from .kernels import (NO_HIT, better, inverse_direction, near_columns,
-                      slab_entry, sphere_hit, triangle_edges,
-                      triangle_hit_edges)
+from .kernels import (NO_HIT, better, ray_setup, slab_entry, sphere_hit, stored_triangle_hit,
+                      triangle_edges)
 from .types import Hits
 
 STACK_SIZE = 128
@@ -242,12 +241,8 @@ def _intersect(nodes, tris, order, n_tri, centers, radii, origins, directions, t
         stack = np.empty(STACK_SIZE, dtype=np.int64)
         entry = np.empty(STACK_SIZE)
         for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-            dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-            ix = inverse_direction(dx)
-            iy = inverse_direction(dy)
-            iz = inverse_direction(dz)
-            nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+            ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz = \
+                ray_setup(origins, directions, r)
             lo = tmin[r]
             best_t = tmax[r]
             best_prim = NO_HIT
@@ -276,10 +271,7 @@ def _intersect(nodes, tris, order, n_tri, centers, radii, origins, directions, t
                         p = order[i]
                         if p < n_tri:
                             tests += 1
-                            t, u, v = triangle_hit_edges(
-                                tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
-                                tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
-                                ox, oy, oz, dx, dy, dz)
+                            t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
                             if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
                                 best_t, best_prim, best_u, best_v = t, p, u, v
                         else:
@@ -329,12 +321,8 @@ def _occluded(nodes, tris, order, n_tri, centers, radii, origins, directions, tm
     for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
         stack = np.empty(STACK_SIZE, dtype=np.int64)
         for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-            dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-            ix = inverse_direction(dx)
-            iy = inverse_direction(dy)
-            iz = inverse_direction(dz)
-            nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+            ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz = \
+                ray_setup(origins, directions, r)
             lo = tmin[r]
             hi = tmax[r]
             hit = False
@@ -352,10 +340,7 @@ def _occluded(nodes, tris, order, n_tri, centers, radii, origins, directions, tm
                     for i in range(first, first + k):
                         p = order[i]
                         if p < n_tri:
-                            t, u, v = triangle_hit_edges(
-                                tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
-                                tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
-                                ox, oy, oz, dx, dy, dz)
+                            t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
                             if t >= lo and t <= hi:
                                 hit = True
                                 break

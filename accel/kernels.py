@@ -135,6 +135,27 @@ def near_columns(ix, iy, iz):
 
 
 @njit(cache=True, inline="always")
+def ray_setup(origins, directions, r):
+    """What a BVH traversal needs of ray r: origin, direction, inverse direction and the near
+    and far plane columns (near_columns)."""
+    ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+    dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
+    ix = inverse_direction(dx)
+    iy = inverse_direction(dy)
+    iz = inverse_direction(dz)
+    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    return ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz
+
+
+@njit(cache=True, inline="always")
+def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
+    """triangle_hit_edges on row i of an array of triangle_edges rows."""
+    return triangle_hit_edges(tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
+                              tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
+                              ox, oy, oz, dx, dy, dz)
+
+
+@njit(cache=True, inline="always")
 def slab_entry(nodes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, tmin, tmax):
     """Entry t of the ray into box `node` clipped to [tmin, tmax]; inf if it misses.
 
