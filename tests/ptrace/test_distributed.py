@@ -108,6 +108,23 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
     client, cluster = distributed.local_client(2)
     try:
         pids = client.run(os.getpid)
+
+        def slow_tasks():
+            # every task waits 0.5 s first and counts itself when done, so the render outlasts
+            # the kill however fast the tracing gets (it ended before the kill once renders
+            # became 2x faster); finished tiles are merged and released at once, so the
+            # scheduler cannot be asked how many finished
+            import importlib
+            module = importlib.import_module("ptrace.render")   # ptrace.render is the function
+            trace = module.trace_pixels
+
+            def slow(*args):
+                time.sleep(0.5)
+                counts = trace(*args)
+                module.finished_tiles = getattr(module, "finished_tiles", 0) + 1
+                return counts
+            module.trace_pixels = slow
+        client.run(slow_tasks)
         result = {}
 
         def render():
@@ -118,12 +135,12 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
         worker = threading.Thread(target=render)
         worker.start()
 
-        def finished_tiles(dask_scheduler):
-            return sum(1 for key, task in dask_scheduler.tasks.items()
-                       if str(key).startswith("ptrace-tile") and task.state == "memory")
+        def finished_tiles():
+            import importlib
+            return getattr(importlib.import_module("ptrace.render"), "finished_tiles", 0)
         deadline = time.monotonic() + 120
-        while client.run_on_scheduler(finished_tiles) < 2 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        while sum(client.run(finished_tiles).values()) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
         assert worker.is_alive(), "the render ended before a worker could be killed"
         os.kill(next(iter(pids.values())), signal.SIGKILL)
         worker.join(timeout=300)
