@@ -152,7 +152,7 @@ def test_ctrl_c_writes_what_was_rendered(tmp_path):
     assert run("-s", 1, "-m", 3, "-r", 4, 3, "-f", tmp_path / "warm.png", SHIPPED).returncode == 0
     for warm in tmp_path.glob("warm*"):
         warm.unlink()
-    process = subprocess.Popen(ptrace_command() + ["-s", "100000", "-m", "3", "-r", "32", "24",
+    process = subprocess.Popen(ptrace_command() + ["-s", "1000000", "-m", "3", "-r", "32", "24",
                                                    "-f", str(output), str(SHIPPED)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     time.sleep(12)

@@ -172,7 +172,7 @@ def test_cli_workers_writes_the_in_process_image(tmp_path):
 
 def test_cli_ctrl_c_cancels_and_writes_what_was_merged(tmp_path):
     output = tmp_path / "box.png"
-    process = subprocess.Popen(ptrace_command() + ["--workers", "2", "-s", "100000", "-m", "3",
+    process = subprocess.Popen(ptrace_command() + ["--workers", "2", "-s", "1000000", "-m", "3",
                                                    "-r", "32", "24", "-f", str(output),
                                                    str(SHIPPED)],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
