@@ -4,7 +4,7 @@ import pytest
 
 import accel
 from accel import raygen
-from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE
+from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, WIDTH
 
 import ptrace
 
@@ -39,6 +39,51 @@ def check_invariants(bvh):
     stats = bvh.stats()
     assert stats["nodes"] == nodes and stats["leaves"] == int((bvh.count > 0).sum())
     assert stats["bytes"] > 0 or n == 0
+    check_wide_invariants(bvh)
+
+
+def check_wide_invariants(bvh):
+    """The 4-wide tree the traversal walks: from row 0 it reaches every wide row once and
+    every binary leaf once (same first entry, count and box), each interior slot's box holds
+    its row's boxes, unused slots are empty boxes after the used ones, and a row has fewer
+    than WIDTH children only when all of them are leaves."""
+    wide = bvh._nodes
+    assert bvh.stats()["wide_nodes"] == wide.shape[0]
+    if bvh.lower.shape[0] == 0:
+        assert wide.shape[0] == 0
+        return
+    leaves = {int(bvh.child_or_first[b]): b for b in np.flatnonzero(bvh.count > 0)}
+    lower = wide[:, :3 * WIDTH].reshape(-1, 3, WIDTH)
+    upper = wide[:, 3 * WIDTH:6 * WIDTH].reshape(-1, 3, WIDTH)
+    links = wide[:, 6 * WIDTH:7 * WIDTH].astype(int)
+    counts = wide[:, 7 * WIDTH:].astype(int)
+    reached_rows = np.zeros(wide.shape[0], dtype=int)
+    reached_leaves = []
+    todo = [(0, 0)]
+    while todo:
+        row, depth = todo.pop()
+        assert depth <= bvh.max_depth
+        reached_rows[row] += 1
+        used = np.isfinite(lower[row, 0])
+        n_used = int(used.sum())
+        assert used[:n_used].all() and n_used >= 1
+        assert (lower[row, :, ~used] == np.inf).all() and (upper[row, :, ~used] == -np.inf).all()
+        assert n_used == WIDTH or (counts[row, :n_used] > 0).all()
+        for c in range(n_used):
+            if counts[row, c] > 0:
+                b = leaves[links[row, c]]
+                assert counts[row, c] == bvh.count[b]
+                np.testing.assert_array_equal(lower[row, :, c], bvh.lower[b])
+                np.testing.assert_array_equal(upper[row, :, c], bvh.upper[b])
+                reached_leaves.append(b)
+            else:
+                child = links[row, c]
+                child_used = np.isfinite(lower[child, 0])
+                assert (lower[row, :, c, None] <= lower[child][:, child_used]).all()
+                assert (upper[child][:, child_used] <= upper[row, :, c, None]).all()
+                todo.append((child, depth + 1))
+    np.testing.assert_array_equal(reached_rows, 1)
+    assert sorted(reached_leaves) == sorted(leaves.values())
 
 
 @pytest.mark.parametrize("split", ["mean", "sah"])
