@@ -18,13 +18,15 @@ count[n] is 0 for an interior node and the number of primitives for a leaf.
 Traversal does not walk that binary tree: after the build, `_collapse` folds it into a 4-wide
 tree (each wide node takes its binary node's two children, then keeps opening the interior child
 of largest surface area until it has four), which halves the nodes a ray visits and so the chain
-of dependent memory loads (measured against the binary traversal, 2 threads, 1M rays: random
-rays 1.22-1.35x faster on cow, CBbunny and maxplanck, camera rays 1.07-1.19x; an 8-wide tree and
-float32 boxes were no faster). A wide node is one row of 32 floats (256 bytes, 64-byte
-aligned): for each of the six planes lower x, y, z, upper x, y, z the value of its 4 children,
-then the 4 children's links, then their counts. A link is a wide node's row when its count is 0
-and the first entry in `order` of a leaf otherwise; an unused slot has an empty box (lower +inf,
-upper -inf) that no ray enters. Triangles are stored as (p0, e1, e2) rows in leaf order.
+of dependent memory loads (measured side by side with the binary traversal, 2 threads, 1M rays,
+on cow, CBbunny and maxplanck: closest-hit random rays 1.17-1.31x faster, secondary rays
+1.18-1.24x, camera rays 0.99-1.07x; any-hit 1.13-2.9x. A prototype 8-wide tree was no faster on
+random rays and slower on camera rays; float32 boxes were slower). A wide node is one row of 32
+floats (256 bytes, 64-byte aligned): for each of the six planes lower x, y, z, upper x, y, z the
+value of its 4 children, then the 4 children's links, then their counts. A link is a wide node's
+row when its count is 0 and the first entry in `order` of a leaf otherwise; an unused slot has an
+empty box (lower +inf, upper -inf) that no ray enters. Triangles are stored as (p0, e1, e2) rows
+in leaf order.
 """
 import time
 
@@ -222,12 +224,6 @@ def _aligned_empty(rows, columns):
     return buffer[skip:skip + rows * columns].reshape(rows, columns)
 
 
-@njit(cache=True, inline="always")
-def _node_half_area(lower, upper, i):
-    dx, dy, dz = upper[i, 0] - lower[i, 0], upper[i, 1] - lower[i, 1], upper[i, 2] - lower[i, 2]
-    return dx * dy + dy * dz + dz * dx
-
-
 @njit(cache=True)
 def _collapse(lower, upper, child_or_first, count, wide):
     """Fold the binary tree into WIDTH-wide rows of `wide` (see the module docstring); row 0
@@ -254,7 +250,9 @@ def _collapse(lower, upper, child_or_first, count, wide):
             best, best_area = -1, -1.0
             for j in range(m):
                 if count[kids[j]] == 0:
-                    area = _node_half_area(lower, upper, kids[j])
+                    c = kids[j]
+                    area = _half_area(lower[c, 0], lower[c, 1], lower[c, 2], upper[c, 0],
+                                      upper[c, 1], upper[c, 2])
                     if area > best_area:
                         best, best_area = j, area
             if best < 0:
@@ -475,8 +473,11 @@ class BVHAccelerator:
         self._nodes[:] = wide[:used]
         self._tris = _pack_triangles(self.order, geometry.vertices, geometry.faces)
         self._build_seconds = time.perf_counter() - start
-        # a traversal stack holds at most depth + 1 entries
-        assert self.max_depth < STACK_SIZE - 1, "BVH deeper than the traversal stack"
+        # A wide row at level L comes from a binary node at depth >= L, and popping it leaves
+        # at most 3 L + 4 entries on a traversal stack: depth < STACK_SIZE - 1 keeps that
+        # within WIDE_STACK.
+        if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
+            raise RuntimeError("BVH deeper than the traversal stack")
         self._last_work = None
 
     def intersect(self, rays):
@@ -494,7 +495,9 @@ class BVHAccelerator:
 
     @property
     def last_mean_visits(self):
-        """Wide nodes visited per ray in the last intersect() (None before the first)."""
+        """Interior wide nodes visited per ray in the last intersect() (None before the
+        first); leaves are counted by last_mean_triangle_tests. Not comparable with figures
+        from before the 4-wide traversal, which counted binary nodes, leaves included."""
         return None if self._last_work is None else _mean(self._last_work[0])
 
     @property

@@ -1,4 +1,5 @@
-"""Primitive tests shared by every backend: Möller–Trumbore triangles, analytic spheres, slabs.
+"""Primitive tests shared by every backend: Möller–Trumbore triangles, analytic spheres; and the
+per-ray set-up of the BVH's slab tests.
 
 All three backends call these same functions, so naive and bvh compute bit-identical t values.
 A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course). Between two
@@ -126,8 +127,9 @@ def inverse_direction(d):
 
 @njit(cache=True, inline="always")
 def near_columns(ix, iy, iz):
-    """Columns of a node row holding the near and far planes of a ray with inverse direction
-    (ix, iy, iz): lower corner (0, 1, 2) first where the inverse is positive, else upper."""
+    """The near and far box planes (0, 1, 2: lower x, y, z; 3, 4, 5: upper x, y, z) of a ray
+    with inverse direction (ix, iy, iz): the lower plane is near where the inverse is
+    positive, else the upper one."""
     nx = 0 if ix > 0.0 else 3
     ny = 1 if iy > 0.0 else 4
     nz = 2 if iz > 0.0 else 5
@@ -137,7 +139,7 @@ def near_columns(ix, iy, iz):
 @njit(cache=True, inline="always")
 def ray_setup(origins, directions, r):
     """What a BVH traversal needs of ray r: origin, direction, inverse direction and the near
-    and far plane columns (near_columns)."""
+    and far planes (near_columns)."""
     ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
     dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
     ix = inverse_direction(dx)
@@ -153,26 +155,6 @@ def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
     return triangle_hit_edges(tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
                               tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
                               ox, oy, oz, dx, dy, dz)
-
-
-@njit(cache=True, inline="always")
-def slab_entry(nodes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, tmin, tmax):
-    """Entry t of the ray into box `node` clipped to [tmin, tmax]; inf if it misses.
-
-    nodes[node, 0:3] is the box's lower corner and nodes[node, 3:6] its upper corner. ix, iy,
-    iz are inverse_direction() of the ray's direction; nx, ny, nz the columns of the near
-    planes and fx, fy, fz of the far ones (near_columns()), so no per-box comparison is needed
-    to order the two planes.
-    """
-    t0 = max(tmin, (nodes[node, nx] - ox) * ix, (nodes[node, ny] - oy) * iy,
-             (nodes[node, nz] - oz) * iz)
-    t1 = min(tmax, (nodes[node, fx] - ox) * ix, (nodes[node, fy] - oy) * iy,
-             (nodes[node, fz] - oz) * iz)
-    # The slab t values carry rounding error; widen the far end so a box never rejects a hit
-    # the primitive test would accept (boxes are also padded at build time).
-    if t0 > t1 + abs(t1) * 4e-16:
-        return np.inf
-    return t0
 
 
 @njit(cache=True, inline="always")
