@@ -226,9 +226,7 @@ def hemisphere_samples(seed, vertex, pixel, sample, directions, point, geo_norma
     for i in prange(material.shape[0]):
         m = material[i]
         usable = alive[i] and m >= 0 and not is_delta(kinds[m]) and kinds[m] != EMISSION
-        # Defined on every path: inside a prange body a variable assigned only under `if`
-        # compiled to an undefined value that LLVM was free to replace, so the frame the
-        # microfacet BSDF saw (wo) depended on what else had been compiled first.
+        # defined on every path, as in light_samples
         xx = xy = xz = yx = yy = yz = nx = ny = nz = wox = woy = woz = 0.0
         if usable:
             xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
