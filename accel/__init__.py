@@ -4,6 +4,8 @@
     Accelerator.intersect(rays) -> Hits      closest hit with tmin <= t <= tmax
     Accelerator.occluded(rays) -> bool array any hit with tmin <= t <= tmax
     Accelerator.stats() -> dict
+    Accelerator.compiled                     its compiled face's record (accel.compiled): one
+                                             ray's closest hit and any hit from numba code
 
 A new backend is one module and one line in _BACKENDS.
 """
@@ -32,4 +34,12 @@ def build(kind, geometry, **options):
     return backend(geometry, **options)
 
 
-__all__ = ["Geometry", "Rays", "Hits", "KINDS", "build"]
+def record_class(kind):
+    """The namedtuple class of backend `kind`'s compiled face (accel.compiled), without building."""
+    if kind not in _BACKENDS:
+        raise ValueError(f"unknown accelerator {kind!r}; choose one of {', '.join(KINDS)}")
+    module_name, class_name = _BACKENDS[kind]
+    return getattr(importlib.import_module(module_name), class_name).record_class
+
+
+__all__ = ["Geometry", "Rays", "Hits", "KINDS", "build", "record_class"]

@@ -29,19 +29,21 @@ empty box (lower +inf, upper -inf) that no ray enters. Triangles are stored as (
 in leaf order.
 """
 import time
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
 
-from .kernels import (NO_HIT, better, ray_setup, sphere_hit, stored_triangle_hit,
-                      triangle_edges)
+from . import compiled
+from .kernels import (NO_HIT, better, inverse_direction, near_columns, sphere_hit,
+                      stored_triangle_hit, triangle_edges)
 from .types import Hits
 
 STACK_SIZE = 128
 MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
 SPLITS = ("mean", "sah")   # the seed's mean-centroid split; a binned surface-area heuristic
 SAH_BINS = 16
-RAY_BLOCK = 64           # rays per parallel work item of the traversal kernels
+RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDTH = 4                # children per node of the traversal's tree
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
 
@@ -318,122 +320,138 @@ def _pack_triangles(order, vertices, faces):
     return tris
 
 
-@njit(cache=True, parallel=True)
-def _intersect(nodes, tris, order, n_tri, centers, radii, origins, directions, tmin, tmax,
-               out_t, out_prim, out_u, out_v, out_visits, out_tests):
-    n_rays = origins.shape[0]
-    n_nodes = nodes.shape[0]
-    # Rays go in blocks so that each block allocates its traversal stack once, not per ray.
-    for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
-        stack = np.empty(WIDE_STACK, dtype=np.int64)    # link
-        counts = np.empty(WIDE_STACK, dtype=np.int64)   # 0: wide node, else leaf size
-        entry = np.empty(WIDE_STACK)                     # t where the ray enters its box
-        entries = np.empty(WIDTH)
-        for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz = \
-                ray_setup(origins, directions, r)
-            lo = tmin[r]
-            best_t = tmax[r]
-            best_prim = NO_HIT
-            best_u = 0.0
-            best_v = 0.0
-            visits = 0
-            tests = 0
-            top = 0
-            if n_nodes > 0:   # the root's children are tested when it is popped
-                stack[0], counts[0], entry[0] = 0, 0, lo
-                top = 1
-            while top > 0:
-                top -= 1
-                if entry[top] > best_t:
-                    continue
-                link = stack[top]
-                k = counts[top]
-                if k > 0:
-                    for i in range(link, link + k):
-                        p = order[i]
-                        if p < n_tri:
-                            tests += 1
-                            t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
-                            if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
-                                best_t, best_prim, best_u, best_v = t, p, u, v
-                        else:
-                            t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
-                                           lo, best_t)
-                            if t <= best_t and better(t, p, best_t, best_prim):
-                                best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
-                    continue
-                visits += 1
-                _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo,
-                               best_t, entries)
-                # push the children hit, farthest deepest, so the nearest is popped first
-                # (an insertion sort of at most WIDTH entries above `base`)
-                base = top
-                for c in range(WIDTH):
-                    t = entries[c]
-                    if t == np.inf:
-                        continue
-                    j = top
-                    while j > base and entry[j - 1] < t:
-                        stack[j], counts[j], entry[j] = stack[j - 1], counts[j - 1], entry[j - 1]
-                        j -= 1
-                    stack[j] = int(nodes[link, 6 * WIDTH + c])
-                    counts[j] = int(nodes[link, 7 * WIDTH + c])
-                    entry[j] = t
-                    top += 1
-            if best_prim == NO_HIT:
-                best_t = np.inf
-            out_t[r] = best_t
-            out_prim[r] = best_prim
-            out_u[r] = best_u
-            out_v[r] = best_v
-            out_visits[r] = visits
-            out_tests[r] = tests
+BVHRecord = namedtuple("BVHRecord", ["nodes", "tris", "order", "n_tri", "centers", "radii"])
+
+
+@njit(cache=True)
+def new_scratch(record):
+    """Traversal stacks for one block of rays: links, their counts (0: a wide node, else a leaf
+    size), the t where the ray enters each box, and the WIDTH children's entries."""
+    return (np.empty(WIDE_STACK, dtype=np.int64), np.empty(WIDE_STACK, dtype=np.int64),
+            np.empty(WIDE_STACK), np.empty(WIDTH))
+
+
+@njit(cache=True)
+def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
+    """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, triangle tests)."""
+    nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
+    centers, radii = record.centers, record.radii
+    stack, counts, entry, entries = scratch
+    ix = inverse_direction(dx)
+    iy = inverse_direction(dy)
+    iz = inverse_direction(dz)
+    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    best_t = hi
+    best_prim = NO_HIT
+    best_u = 0.0
+    best_v = 0.0
+    visits = 0
+    tests = 0
+    top = 0
+    if nodes.shape[0] > 0:   # the root's children are tested when it is popped
+        stack[0], counts[0], entry[0] = 0, 0, lo
+        top = 1
+    while top > 0:
+        top -= 1
+        if entry[top] > best_t:
+            continue
+        link = stack[top]
+        k = counts[top]
+        if k > 0:
+            for i in range(link, link + k):
+                p = order[i]
+                if p < n_tri:
+                    tests += 1
+                    t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
+                    if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
+                        best_t, best_prim, best_u, best_v = t, p, u, v
+                else:
+                    t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, best_t)
+                    if t <= best_t and better(t, p, best_t, best_prim):
+                        best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
+            continue
+        visits += 1
+        _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, best_t,
+                       entries)
+        # push the children hit, farthest deepest, so the nearest is popped first
+        # (an insertion sort of at most WIDTH entries above `base`)
+        base = top
+        for c in range(WIDTH):
+            t = entries[c]
+            if t == np.inf:
+                continue
+            j = top
+            while j > base and entry[j - 1] < t:
+                stack[j], counts[j], entry[j] = stack[j - 1], counts[j - 1], entry[j - 1]
+                j -= 1
+            stack[j] = int(nodes[link, 6 * WIDTH + c])
+            counts[j] = int(nodes[link, 7 * WIDTH + c])
+            entry[j] = t
+            top += 1
+    if best_prim == NO_HIT:
+        best_t = np.inf
+    return best_t, best_prim, best_u, best_v, visits, tests
+
+
+@njit(cache=True)
+def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    t, prim, u, v, _, _ = _closest(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return t, prim, u, v
+
+
+@njit(cache=True)
+def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
+    """Any-hit traversal of one ray: children are tested before they are pushed, leaves stop at
+    the first primitive hit."""
+    nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
+    centers, radii = record.centers, record.radii
+    stack, counts, _, entries = scratch
+    ix = inverse_direction(dx)
+    iy = inverse_direction(dy)
+    iz = inverse_direction(dz)
+    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    top = 0
+    if nodes.shape[0] > 0:
+        stack[0], counts[0] = 0, 0
+        top = 1
+    while top > 0:
+        top -= 1
+        link = stack[top]
+        k = counts[top]
+        if k > 0:
+            for i in range(link, link + k):
+                p = order[i]
+                if p < n_tri:
+                    t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
+                    if t >= lo and t <= hi:
+                        return True
+                elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, hi) <= hi:
+                    return True
+            continue
+        _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, hi,
+                       entries)
+        for c in range(WIDTH):
+            if entries[c] != np.inf:
+                stack[top] = int(nodes[link, 6 * WIDTH + c])
+                counts[top] = int(nodes[link, 7 * WIDTH + c])
+                top += 1
+    return False
+
+
+compiled.register(BVHRecord, new_scratch, closest_hit, any_hit)
 
 
 @njit(cache=True, parallel=True)
-def _occluded(nodes, tris, order, n_tri, centers, radii, origins, directions, tmin, tmax, out):
+def _intersect(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v,
+               out_visits, out_tests):
+    """The batch closest hit, with each ray's visit and test counts (for the benchmarks)."""
     n_rays = origins.shape[0]
-    n_nodes = nodes.shape[0]
     for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
-        stack = np.empty(WIDE_STACK, dtype=np.int64)
-        counts = np.empty(WIDE_STACK, dtype=np.int64)
-        entries = np.empty(WIDTH)
+        scratch = new_scratch(record)
         for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz = \
-                ray_setup(origins, directions, r)
-            lo = tmin[r]
-            hi = tmax[r]
-            hit = False
-            top = 0
-            if n_nodes > 0:
-                stack[0], counts[0] = 0, 0
-                top = 1
-            while top > 0 and not hit:
-                top -= 1
-                link = stack[top]
-                k = counts[top]
-                if k > 0:
-                    for i in range(link, link + k):
-                        p = order[i]
-                        if p < n_tri:
-                            t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
-                            if t >= lo and t <= hi:
-                                hit = True
-                                break
-                        elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz,
-                                        lo, hi) <= hi:
-                            hit = True
-                            break
-                    continue
-                _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo,
-                               hi, entries)
-                for c in range(WIDTH):
-                    if entries[c] != np.inf:
-                        stack[top] = int(nodes[link, 6 * WIDTH + c])
-                        counts[top] = int(nodes[link, 7 * WIDTH + c])
-                        top += 1
-            out[r] = hit
+            (out_t[r], out_prim[r], out_u[r], out_v[r], out_visits[r], out_tests[r]) = _closest(
+                record, scratch, origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
+                directions[r, 1], directions[r, 2], tmin[r], tmax[r])
 
 
 def _mean(values):
@@ -442,6 +460,7 @@ def _mean(values):
 
 class BVHAccelerator:
     kind = "bvh"
+    record_class = BVHRecord
 
     def __init__(self, geometry, max_leaf_size=4, split="mean"):
         if split not in SPLITS:
@@ -479,6 +498,8 @@ class BVHAccelerator:
         if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
             raise RuntimeError("BVH deeper than the traversal stack")
         self._last_work = None
+        self.compiled = BVHRecord(self._nodes, self._tris, self.order, geometry.triangle_count,
+                                  geometry.centers, geometry.radii)
 
     def intersect(self, rays):
         rays.validate()
@@ -486,10 +507,8 @@ class BVHAccelerator:
         hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
         visits = np.empty(n, dtype=np.int64)
         tests = np.empty(n, dtype=np.int64)
-        g = self.geometry
-        _intersect(self._nodes, self._tris, self.order, g.triangle_count, g.centers, g.radii,
-                   rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t, hits.prim,
-                   hits.u, hits.v, visits, tests)
+        _intersect(self.compiled, rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t,
+                   hits.prim, hits.u, hits.v, visits, tests)
         self._last_work = (visits, tests)   # averaged only when asked for (see below)
         return hits
 
@@ -507,11 +526,7 @@ class BVHAccelerator:
 
     def occluded(self, rays):
         rays.validate()
-        out = np.empty(len(rays), dtype=np.bool_)
-        g = self.geometry
-        _occluded(self._nodes, self._tris, self.order, g.triangle_count, g.centers, g.radii,
-                  rays.origins, rays.directions, rays.tmin, rays.tmax, out)
-        return out
+        return compiled.run_occluded(self.compiled, rays)
 
     def stats(self):
         nodes = int(self.lower.shape[0])

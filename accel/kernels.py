@@ -137,19 +137,6 @@ def near_columns(ix, iy, iz):
 
 
 @njit(cache=True, inline="always")
-def ray_setup(origins, directions, r):
-    """What a BVH traversal needs of ray r: origin, direction, inverse direction and the near
-    and far planes (near_columns)."""
-    ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-    dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-    ix = inverse_direction(dx)
-    iy = inverse_direction(dy)
-    iz = inverse_direction(dz)
-    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
-    return ox, oy, oz, dx, dy, dz, ix, iy, iz, nx, ny, nz, fx, fy, fz
-
-
-@njit(cache=True, inline="always")
 def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
     """triangle_hit_edges on row i of an array of triangle_edges rows."""
     return triangle_hit_edges(tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
@@ -161,3 +148,24 @@ def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
 def better(t, prim, best_t, best_prim):
     """True if a hit (t, prim) beats the current best: nearer, or as near with a lower id."""
     return t < best_t or (t == best_t and (best_prim == NO_HIT or prim < best_prim))
+
+
+@njit(cache=True, inline="always")
+def spheres_closest(centers, radii, first_id, ox, oy, oz, dx, dy, dz, tmin, best_t, best_prim,
+                    best_u, best_v):
+    """Fold every sphere into a closest hit found so far (best_t is the current tmax; sphere s
+    has primitive id first_id + s, so a tie with a triangle goes to the triangle)."""
+    for s in range(centers.shape[0]):
+        t = sphere_hit(centers, radii, s, ox, oy, oz, dx, dy, dz, tmin, best_t)
+        if t <= best_t and better(t, first_id + s, best_t, best_prim):
+            best_t, best_prim, best_u, best_v = t, first_id + s, 0.0, 0.0
+    return best_t, best_prim, best_u, best_v
+
+
+@njit(cache=True, inline="always")
+def spheres_any(centers, radii, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """True if any sphere is hit with tmin <= t <= tmax."""
+    for s in range(centers.shape[0]):
+        if sphere_hit(centers, radii, s, ox, oy, oz, dx, dy, dz, tmin, tmax) <= tmax:
+            return True
+    return False

@@ -1,7 +1,8 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
 from .errors import PtraceError, SceneError
 from .io import load
-from .render import render
+from .renderer import render
+from .settings import Settings
 from .scene import Scene
 
-__all__ = ["PtraceError", "SceneError", "Scene", "load", "render"]
+__all__ = ["PtraceError", "SceneError", "Scene", "Settings", "load", "render"]

@@ -57,7 +57,7 @@ def _positive_float(name):
 
 def build_parser():
     import accel
-    from .render import INTEGRATORS
+    from .settings import INTEGRATORS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
     add = parser.add_argument
@@ -143,6 +143,10 @@ def _one_line_warnings():
     warnings.showwarning = show
 
 
+def _notice(text):
+    print(f"ptrace: {text}", file=sys.stderr, flush=True)
+
+
 def run(argv):
     from . import load, render
     from .camera import load_camera_settings
@@ -189,7 +193,7 @@ def run(argv):
                        progress=not args.quiet and sys.stderr.isatty(), stats=stats,
                        client=client, light_samples=args.light_samples,
                        max_depth=args.max_depth, adaptive=args.adaptive,
-                       hemisphere=args.hemisphere)
+                       hemisphere=args.hemisphere, notice=None if args.quiet else _notice)
         write_image(output, image)
         write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     finally:

@@ -5,7 +5,7 @@ default mode never imports dask. Install the extra with `pip install "ptrace[dis
 
 The unit of work is one tile (a contiguous run of the image's pixels, bottom row first) for one
 pass; a task returns per-pixel sums of radiance, of illuminance and of its square, and sample
-counts, computed by the same ptrace.render.trace_pixels as in-process. The client adds them into
+counts, computed by the same ptrace.tiles.TileWork as in-process. The client adds them into
 the image in a fixed (pass, tile) order, whatever order tasks finish in, and each pixel's
 arithmetic is then the in-process one: previous sum + this pass's sum. Adaptive sampling decides
 convergence after each pass's merge, exactly as in-process (so adaptive passes run one after
@@ -30,13 +30,14 @@ import numpy as np
 import accel
 
 from .errors import PtraceError
+from .tiles import TileWork, new_sums
 
 TASK_RAYS = 1 << 19       # rays per task: about 0.1-0.3 s of work at 2-5 M rays/s
 CONNECT_TIMEOUT = 10      # seconds to reach a scheduler before giving up
 INSTALL_HINT = 'distributed rendering needs Dask: pip install "ptrace[dist]"'
 
 _built = collections.OrderedDict()   # (scene key, accel kind) -> (backend, build seconds)
-_tracers = collections.OrderedDict()  # job token -> tracer
+_works = collections.OrderedDict()   # job token -> (backend, TileWork)
 _lock = threading.Lock()             # one tile at a time per worker process: numba runs threads
 _KEEP = 2
 builds = 0                           # acceleration structures built by this process (tests)
@@ -116,39 +117,37 @@ def default_worker_threads(client):
 
 def tile_task(scene, job, pass_index, tile_index, first_sample, pass_n, pixel_x, pixel_y):
     """Run on a worker: sums for one tile of one pass (see the module docstring)."""
-    from .render import make_tracer, trace_pixels
     global builds
     try:
         with _lock:
             build_seconds = 0.0
-            key = (job["scene_key"], job["accel"])
+            settings = job["settings"]
+            key = (job["scene_key"], settings.accel)
             if key not in _built:
                 start = time.perf_counter()
-                _built[key] = accel.build(job["accel"], scene.geometry)
+                _built[key] = accel.build(settings.accel, scene.geometry)
                 build_seconds = time.perf_counter() - start
                 builds += 1
                 while len(_built) > _KEEP:
                     _built.popitem(last=False)
             backend = _built[key]
-            tracer = _tracers.get(job["token"])
-            if tracer is None or tracer.backend is not backend:
-                tracer = make_tracer(scene, backend, job["seed"], job["integrator"],
-                                     job["options"])
-                _tracers[job["token"]] = tracer
-                while len(_tracers) > _KEEP:
-                    _tracers.popitem(last=False)
+            work = _works.get(job["token"])
+            if work is None or work[0] is not backend:
+                work = (backend, TileWork(scene, backend, settings, job["camera"]))
+                _works[job["token"]] = work
+                while len(_works) > _KEEP:
+                    _works.popitem(last=False)
+            work = work[1]
             threads = job["threads"]
             if threads is not None:
                 numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
             n = pixel_x.shape[0]
-            sums = (np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64))
-            rays_before = tracer.rays_traced
+            sums = new_sums(n)
+            rays_before = work.rays_traced
             start = time.perf_counter()
-            nonfinite = trace_pixels(tracer, job["camera"], job["seed"], job["width"],
-                                     job["spp"], pixel_x, pixel_y, first_sample, pass_n, sums,
-                                     np.arange(n))
+            nonfinite = work.trace(pixel_x, pixel_y, first_sample, pass_n, sums, np.arange(n))
             seconds = time.perf_counter() - start
-            return sums, nonfinite, tracer.rays_traced - rays_before, build_seconds, seconds
+            return sums, nonfinite, work.rays_traced - rays_before, build_seconds, seconds
     except Exception as error:   # name the tile and pass; keep the worker's message
         raise PtraceError(f"tile {tile_index} (pixels {pixel_y[0]}:{pixel_x[0]} .., {len(pixel_x)} "
                           f"of them) of pass {pass_index} (samples {first_sample}.."
@@ -164,8 +163,9 @@ def tile_pixels(n_pixels, rays_per_path, pass_n, workers):
     return max(1, size)
 
 
-def render_passes(client, scene, accel_kind, integrator, options, seed, width, spp, camera,
-                  rays_per_path, pixel_x, pixel_y, passes, worker_threads=None):
+def render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
+                  worker_threads=None):
+    """Run the pass schedule as tiles x passes on the cluster; the settings travel whole."""
     dd = _dask()
     start = time.perf_counter()
     workers = len(client.scheduler_info()["workers"])
@@ -173,10 +173,8 @@ def render_passes(client, scene, accel_kind, integrator, options, seed, width, s
         raise PtraceError(f"the Dask cluster at {client.scheduler.address} has no workers")
     token = uuid.uuid4().hex
     scene_future = client.scatter(scene, broadcast=True, hash=False)
-    job = dict(token=token, scene_key=scene_future.key, accel=accel_kind, integrator=integrator,
-               options={k: options[k] for k in ("light_samples", "max_depth", "hemisphere")
-                        if k in options},
-               seed=seed, width=width, spp=spp, camera=camera,
+    rays_per_path = settings.rays_per_path(scene)
+    job = dict(token=token, scene_key=scene_future.key, settings=settings, camera=camera,
                threads=worker_threads if worker_threads is not None
                else default_worker_threads(client))
     [job_future] = client.scatter([job], broadcast=True, hash=False)

@@ -1,16 +1,26 @@
-"""The path integrator as wavefront passes: numba kernels over arrays of paths, with every ray
-batch going through the accelerator (intersect for camera and bounce rays, occluded for shadow
-rays). The estimator is CS184.md 4.5-4.6 with the departures listed in the README.
+"""The path integrator as one compiled loop: each thread carries a path from the camera to its end.
 
-Per wave: emission seen by camera rays; then at each of up to max_depth vertices: direct light
-(light sampling, or uniform hemisphere sampling with -H) unless the BSDF is delta; a BSDF sample;
-Russian roulette from the second bounce on; the bounce ray; emission seen through a delta bounce.
+`render_pixels` runs on many small blocks of pixels at once; for every (pixel, sample) it
+makes the camera ray, intersects it through the accelerator's compiled face (accel.compiled:
+naive, bvh or embree, one specialisation of this kernel each), adds the emission it sees, and at
+each of up to max_depth vertices samples direct light (light sampling with shadow rays, or
+uniform hemisphere sampling with -H) unless the BSDF is delta, samples the BSDF, applies Russian
+roulette from the second bounce on, and traces the bounce ray; emission seen through a delta
+bounce is added too. No Python, no array and no kernel launch between bounces. The estimator is
+the course's (CS184.md 4.5-4.6) with the departures listed in the README.
+
+Kernel state travels as a few named records (namedtuples of flat arrays and scalars, built once
+per scene by `scene_records`). Random numbers are keyed by (seed, pixel, sample, dimension), and
+each pixel's samples are summed from zero, in sample order, by one thread, then added to the
+pixel's running sums: the image does not depend on threads, blocks or backend.
 """
 import math
+from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
+from accel.compiled import any_hit, closest_hit, new_scratch
 
 from .bsdf import bsdf_eval, bsdf_sample, is_delta, uniform_hemisphere
 from .lights import light_is_delta, sample_light
@@ -19,9 +29,27 @@ from .scene import EMISSION, GLASS, REFRACTION
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
-RR_CAP = 0.95           # Russian roulette continuation probability: min(RR_CAP, max(throughput))
+RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
+PATH, NORMALS = 0, 1    # what render_pixels computes per sample
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
+                                         "vertex_normals", "material_index", "scale"])
+MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance", "emission",
+                                               "ior", "alpha", "eta", "k"])
+LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
+                                         "edge_y", "area"])
+CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
+                                           "screen_dist", "znear", "zfar", "width"])
+Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
+                                 "hemisphere", "roulette", "rr_cap"])
+
+
+def _f64(array, shape_tail=None):
+    array = np.ascontiguousarray(array, dtype=np.float64)
+    return array if shape_tail is None else array.reshape((-1,) + shape_tail)
 
 
 def primitive_scale(geometry):
@@ -32,7 +60,29 @@ def primitive_scale(geometry):
     return np.ascontiguousarray(np.concatenate([corners, spheres]))
 
 
-@njit(cache=True, inline="always")
+def scene_records(scene):
+    """(SceneArrays, MaterialArrays, LightArrays) of a scene, with the dtypes the kernel takes."""
+    g, m, lights = scene.geometry, scene.materials, scene.lights
+    shapes = SceneArrays(g.vertices, g.faces, g.centers, g.radii, _f64(scene.vertex_normals, (3,)),
+                         np.ascontiguousarray(scene.material_index, dtype=np.int64),
+                         primitive_scale(g))
+    materials = MaterialArrays(np.ascontiguousarray(m.kind, dtype=np.int64), _f64(m.albedo, (3,)),
+                               _f64(m.transmittance, (3,)), _f64(m.emission, (3,)), _f64(m.ior),
+                               _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)))
+    light_arrays = LightArrays(np.ascontiguousarray(lights.kind, dtype=np.int64),
+                               _f64(lights.radiance, (3,)), _f64(lights.position, (3,)),
+                               _f64(lights.direction, (3,)), _f64(lights.edge_x, (3,)),
+                               _f64(lights.edge_y, (3,)), _f64(lights.area))
+    return shapes, materials, light_arrays
+
+
+def camera_record(camera):
+    return CameraArrays(_f64(camera.position), _f64(camera.camera_to_world),
+                        0.5 * camera.width, 0.5 * camera.height, float(camera.screen_dist),
+                        float(camera.znear), float(camera.zfar), int(camera.width))
+
+
+@njit(cache=True)
 def frame(nx, ny, nz):
     """Orthonormal (x, y, z = n) like the course: h = n with its smallest component set to 1."""
     hx, hy, hz = nx, ny, nz
@@ -49,302 +99,316 @@ def frame(nx, ny, nz):
     return ny * yz - nz * yy, nz * yx - nx * yz, nx * yy - ny * yx, yx, yy, yz
 
 
-@njit(cache=True, inline="always")
-def local_frame(normal, directions, i):
-    """The shading frame at path i (x, y axes; z = normal) and wo = -direction in it."""
-    nx, ny, nz = normal[i, 0], normal[i, 1], normal[i, 2]
-    xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-    dx, dy, dz = -directions[i, 0], -directions[i, 1], -directions[i, 2]
-    return (xx, xy, xz, yx, yy, yz, nx, ny, nz, dx * xx + dy * xy + dz * xz,
-            dx * yx + dy * yy + dz * yz, dx * nx + dy * ny + dz * nz)
-
-
-@njit(cache=True, parallel=True)
-def surfaces(vertices, faces, centers, radii, vertex_normals, material_index, kinds, scale,
-             origins, directions, t, prim, u, v, point, geo_normal, normal, material, offset):
-    """Hit point (barycentric for triangles, projected onto spheres), geometric and shading
-    normals, material and spawn offset of every hit. Opaque surfaces are two-sided: both
-    normals are turned toward the side the ray came from. Glass and refraction keep the outward
-    normal so that wo.z tells inside from outside."""
+@njit(cache=True)
+def surface(shapes, kinds, ox, oy, oz, dx, dy, dz, t, prim, u, v):
+    """What a hit leaves for shading: (material, point, geometric normal, shading normal, spawn
+    offset); material -1 on a miss or a zero-area triangle. Opaque surfaces are two-sided: both
+    normals turn toward the side the ray came from. Glass and refraction keep the outward normal
+    so that wo.z tells inside from outside."""
+    vertices, faces, normals = shapes.vertices, shapes.faces, shapes.vertex_normals
     n_tri = faces.shape[0]
-    for i in prange(t.shape[0]):
-        p = prim[i]
-        if p < 0:
-            material[i] = -1
-            continue
-        if p < n_tri:
-            a, b, c = faces[p, 0], faces[p, 1], faces[p, 2]
-            w = 1.0 - u[i] - v[i]
-            for k in range(3):
-                point[i, k] = w * vertices[a, k] + u[i] * vertices[b, k] + v[i] * vertices[c, k]
-                normal[i, k] = (w * vertex_normals[a, k] + u[i] * vertex_normals[b, k]
-                                + v[i] * vertex_normals[c, k])
-            e1x, e1y, e1z = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1],
-                             vertices[b, 2] - vertices[a, 2])
-            e2x, e2y, e2z = (vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1],
-                             vertices[c, 2] - vertices[a, 2])
-            gx, gy, gz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        else:
-            s = p - n_tri
-            for k in range(3):
-                normal[i, k] = origins[i, k] + t[i] * directions[i, k] - centers[s, k]
-            length = math.sqrt(normal[i, 0] ** 2 + normal[i, 1] ** 2 + normal[i, 2] ** 2)
-            for k in range(3):
-                normal[i, k] /= length
-                point[i, k] = centers[s, k] + radii[s] * normal[i, k]
-            gx, gy, gz = normal[i, 0], normal[i, 1], normal[i, 2]
-        g_len = math.sqrt(gx * gx + gy * gy + gz * gz)
-        s_len = math.sqrt(normal[i, 0] ** 2 + normal[i, 1] ** 2 + normal[i, 2] ** 2)
-        if g_len == 0.0:
-            material[i] = -1   # a zero-area triangle: nothing to shade
-            continue
-        gx, gy, gz = gx / g_len, gy / g_len, gz / g_len
-        if s_len == 0.0:
-            normal[i, 0], normal[i, 1], normal[i, 2] = gx, gy, gz
-            s_len = 1.0
-        # shading normal on the geometric normal's side
-        sign = 1.0 if normal[i, 0] * gx + normal[i, 1] * gy + normal[i, 2] * gz >= 0.0 else -1.0
-        m = material_index[p]
-        kind = kinds[m]
-        if kind != GLASS and kind != REFRACTION:
-            if gx * directions[i, 0] + gy * directions[i, 1] + gz * directions[i, 2] > 0.0:
-                gx, gy, gz = -gx, -gy, -gz   # face the incoming ray
-                sign = -sign
-        geo_normal[i, 0], geo_normal[i, 1], geo_normal[i, 2] = gx, gy, gz
-        for k in range(3):
-            normal[i, k] *= sign / s_len
-        material[i] = m
-        magnitude = max(abs(point[i, 0]), abs(point[i, 1]), abs(point[i, 2]), scale[p])
-        offset[i] = OFFSET * magnitude
+    px = py = pz = gx = gy = gz = sx = sy = sz = 0.0
+    if prim < 0:
+        return -1, px, py, pz, gx, gy, gz, sx, sy, sz, 0.0
+    if prim < n_tri:
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        w = 1.0 - u - v
+        px = w * vertices[a, 0] + u * vertices[b, 0] + v * vertices[c, 0]
+        py = w * vertices[a, 1] + u * vertices[b, 1] + v * vertices[c, 1]
+        pz = w * vertices[a, 2] + u * vertices[b, 2] + v * vertices[c, 2]
+        sx = w * normals[a, 0] + u * normals[b, 0] + v * normals[c, 0]
+        sy = w * normals[a, 1] + u * normals[b, 1] + v * normals[c, 1]
+        sz = w * normals[a, 2] + u * normals[b, 2] + v * normals[c, 2]
+        e1x, e1y, e1z = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1],
+                         vertices[b, 2] - vertices[a, 2])
+        e2x, e2y, e2z = (vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1],
+                         vertices[c, 2] - vertices[a, 2])
+        gx, gy, gz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+    else:
+        s = prim - n_tri
+        centers, radius = shapes.centers, shapes.radii[s]
+        sx = ox + t * dx - centers[s, 0]
+        sy = oy + t * dy - centers[s, 1]
+        sz = oz + t * dz - centers[s, 2]
+        length = math.sqrt(sx ** 2 + sy ** 2 + sz ** 2)
+        sx, sy, sz = sx / length, sy / length, sz / length
+        px = centers[s, 0] + radius * sx
+        py = centers[s, 1] + radius * sy
+        pz = centers[s, 2] + radius * sz
+        gx, gy, gz = sx, sy, sz
+    g_len = math.sqrt(gx * gx + gy * gy + gz * gz)
+    s_len = math.sqrt(sx ** 2 + sy ** 2 + sz ** 2)
+    if g_len == 0.0:
+        return -1, px, py, pz, gx, gy, gz, sx, sy, sz, 0.0   # zero area: nothing to shade
+    gx, gy, gz = gx / g_len, gy / g_len, gz / g_len
+    if s_len == 0.0:
+        sx, sy, sz = gx, gy, gz
+        s_len = 1.0
+    # shading normal on the geometric normal's side
+    sign = 1.0 if sx * gx + sy * gy + sz * gz >= 0.0 else -1.0
+    m = shapes.material_index[prim]
+    kind = kinds[m]
+    if kind != GLASS and kind != REFRACTION:
+        if gx * dx + gy * dy + gz * dz > 0.0:
+            gx, gy, gz = -gx, -gy, -gz   # face the incoming ray
+            sign = -sign
+    scale = sign / s_len
+    magnitude = max(abs(px), abs(py), abs(pz), shapes.scale[prim])
+    return m, px, py, pz, gx, gy, gz, sx * scale, sy * scale, sz * scale, OFFSET * magnitude
 
 
-@njit(cache=True, parallel=True)
-def add_emission(material, kinds, emission, throughput, mask, radiance):
-    """radiance += throughput * Le for paths in mask that hit an emitter (both sides emit)."""
-    for i in prange(material.shape[0]):
-        m = material[i]
-        if mask[i] and m >= 0 and kinds[m] == EMISSION:
-            for k in range(3):
-                radiance[i, k] += throughput[i, k] * emission[m, k]
-
-
-@njit(cache=True, inline="always")
-def spawn(point, geo_normal, offset, i, wx, wy, wz):
+@njit(cache=True)
+def spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz):
     """Offset the origin along the geometric normal, on the side of the new direction."""
-    side = 1.0 if wx * geo_normal[i, 0] + wy * geo_normal[i, 1] + wz * geo_normal[i, 2] >= 0.0 \
-        else -1.0
-    e = side * offset[i]
-    return (point[i, 0] + e * geo_normal[i, 0], point[i, 1] + e * geo_normal[i, 1],
-            point[i, 2] + e * geo_normal[i, 2])
+    e = offset if wx * gx + wy * gy + wz * gz >= 0.0 else -offset
+    return px + e * gx, py + e * gy, pz + e * gz
 
 
-@njit(cache=True, parallel=True)
-def light_samples(seed, vertex, pixel, sample, directions, point, geo_normal, normal, material,
-                  offset, alive, kinds, albedo, alpha, eta, k_cond, light_kind, light_radiance,
-                  light_position, light_direction, light_edge_x, light_edge_y, light_area,
-                  light_samples_per_area, samples_per_path, out_origin, out_direction, out_tmax,
-                  out_weight):
-    """One shadow ray per light sample per path: weight = L f cos / (n pdf), the per-light
-    average summed over lights (CS184.md 4.5). A sample that cannot contribute gets weight 0 and
-    an empty interval (tmax = -1) so the accelerator rejects it at once."""
-    n_lights = light_kind.shape[0]
-    for i in prange(material.shape[0]):
-        m = material[i]
-        usable = alive[i] and m >= 0 and not is_delta(kinds[m]) and kinds[m] != EMISSION
-        # Defined on every path: inside a prange body a variable assigned only under `if`
-        # compiled to an undefined value that LLVM was free to replace, so the frame the
-        # microfacet BSDF saw (wo) depended on what else had been compiled first.
-        xx = xy = xz = yx = yy = yz = nx = ny = nz = wox = woy = woz = 0.0
-        if usable:
-            xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
-        j = 0
-        for light in range(n_lights):
-            count = 1 if light_is_delta(light_kind[light]) else light_samples_per_area
-            for s in range(count):
-                r = i * samples_per_path + j
-                j += 1
-                out_weight[r, 0] = 0.0
-                out_weight[r, 1] = 0.0
-                out_weight[r, 2] = 0.0
-                out_tmax[r] = -1.0
-                out_origin[r, 0] = 0.0
-                out_origin[r, 1] = 0.0
-                out_origin[r, 2] = 0.0
-                out_direction[r, 0] = 0.0
-                out_direction[r, 1] = 0.0
-                out_direction[r, 2] = 1.0
-                if not usable:
-                    continue
-                dim = vertex * DIMS_PER_VERTEX + DIM_LIGHT + 2 * (j - 1)
-                u1 = uniform(seed, pixel[i], sample[i], dim)
-                u2 = uniform(seed, pixel[i], sample[i], dim + 1)
-                lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
-                    light_kind[light], light_radiance, light_position, light_direction,
-                    light_edge_x, light_edge_y, light_area, light, point[i, 0], point[i, 1],
-                    point[i, 2], u1, u2)
-                if pdf < 1e-11:
-                    continue
-                wiz = wx * nx + wy * ny + wz * nz
-                if wiz <= 0.0:
-                    continue
-                wix = wx * xx + wy * xy + wz * xz
-                wiy = wx * yx + wy * yy + wz * yz
-                fr, fg, fb = bsdf_eval(kinds[m], albedo, alpha, eta, k_cond, m, wox, woy, woz,
-                                       wix, wiy, wiz)
-                scale = wiz / (count * pdf)
-                out_weight[r, 0] = lr * fr * scale
-                out_weight[r, 1] = lg * fg * scale
-                out_weight[r, 2] = lb * fb * scale
-                ox, oy, oz = spawn(point, geo_normal, offset, i, wx, wy, wz)
-                out_origin[r, 0], out_origin[r, 1], out_origin[r, 2] = ox, oy, oz
-                if dist == math.inf:   # directional light
-                    out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
-                    out_tmax[r] = math.inf
-                else:
-                    # aim from the spawned origin at the light's point and stop just short of
-                    # it: measured from the shading point instead, the spawn offset could carry
-                    # the ray's end past the light onto an emitter lying on it
-                    dx = point[i, 0] + dist * wx - ox
-                    dy = point[i, 1] + dist * wy - oy
-                    dz = point[i, 2] + dist * wz - oz
-                    length = math.sqrt(dx * dx + dy * dy + dz * dz)
-                    if length > 0.0:
-                        out_direction[r, 0] = dx / length
-                        out_direction[r, 1] = dy / length
-                        out_direction[r, 2] = dz / length
-                    else:   # the light sits at the origin: nothing can be in between
-                        out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
-                    out_tmax[r] = length * (1.0 - SHADOW_SHORTEN)
+@njit(cache=True)
+def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
+                 px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
+                 woz, tr, tg, tb):
+    """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
-
-@njit(cache=True, parallel=True)
-def hemisphere_samples(seed, vertex, pixel, sample, directions, point, geo_normal, normal,
-                       material, offset, alive, kinds, albedo, alpha, eta, k_cond,
-                       samples_per_path, out_origin, out_direction, out_tmax, out_weight):
-    """-H: samples_per_path uniform hemisphere rays per path, weight f cos / (pdf N); the
-    caller multiplies by the emission the ray finds (CS184.md 4.5)."""
-    for i in prange(material.shape[0]):
-        m = material[i]
-        usable = alive[i] and m >= 0 and not is_delta(kinds[m]) and kinds[m] != EMISSION
-        # defined on every path, as in light_samples
-        xx = xy = xz = yx = yy = yz = nx = ny = nz = wox = woy = woz = 0.0
-        if usable:
-            xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
-        for j in range(samples_per_path):
-            r = i * samples_per_path + j
-            for k in range(3):
-                out_weight[r, k] = 0.0
-                out_origin[r, k] = 0.0
-                out_direction[r, k] = 0.0
-            out_direction[r, 2] = 1.0
-            out_tmax[r] = -1.0
-            if not usable:
-                continue
+    Light sampling: -l samples of each area or ambient light and one of each delta light, each
+    weighted L f cos / (n pdf) and kept if its shadow ray is clear (CS184.md 4.5). With -H:
+    -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the emission its
+    ray finds."""
+    seed = options.seed
+    kind = materials.kind[m]
+    r = g = b = 0.0
+    rays = 0
+    if options.hemisphere:
+        count = lights.kind.shape[0] * options.light_samples
+        for j in range(count):
             dim = vertex * DIMS_PER_VERTEX + DIM_LIGHT + 2 * j
-            lx, ly, lz = uniform_hemisphere(uniform(seed, pixel[i], sample[i], dim),
-                                            uniform(seed, pixel[i], sample[i], dim + 1))
-            fr, fg, fb = bsdf_eval(kinds[m], albedo, alpha, eta, k_cond, m, wox, woy, woz,
-                                   lx, ly, lz)
-            scale = lz * 2.0 * math.pi / samples_per_path
+            lx, ly, lz = uniform_hemisphere(uniform(seed, pixel, sample, dim),
+                                            uniform(seed, pixel, sample, dim + 1))
+            fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
+                                   materials.k, m, wox, woy, woz, lx, ly, lz)
+            scale = lz * 2.0 * math.pi / count
             wx = lx * xx + ly * yx + lz * nx
             wy = lx * xy + ly * yy + lz * ny
             wz = lx * xz + ly * yz + lz * nz
-            out_weight[r, 0], out_weight[r, 1], out_weight[r, 2] = fr * scale, fg * scale, fb * scale
-            ox, oy, oz = spawn(point, geo_normal, offset, i, wx, wy, wz)
-            out_origin[r, 0], out_origin[r, 1], out_origin[r, 2] = ox, oy, oz
-            out_direction[r, 0], out_direction[r, 1], out_direction[r, 2] = wx, wy, wz
-            out_tmax[r] = math.inf
-
-
-@njit(cache=True, parallel=True)
-def gather(weight, visible, emission_kind, material_of_ray, kinds, emission, samples_per_path,
-           throughput, radiance):
-    """radiance[i] += throughput[i] * sum over its samples of weight * (1 or Le of the hit).
-
-    visible[r] says whether sample r counts (a shadow ray that was not occluded); with
-    emission_kind the weight is also multiplied by the emission of the primitive ray r hit."""
-    for i in prange(throughput.shape[0]):
-        for j in range(samples_per_path):
-            r = i * samples_per_path + j
-            if not visible[r]:
+            ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+            rays += 1
+            t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, wx, wy, wz, 0.0, math.inf)
+            if prim < 0:
                 continue
-            if emission_kind:
-                m = material_of_ray[r]
-                if m < 0 or kinds[m] != EMISSION:
-                    continue
-                for k in range(3):
-                    radiance[i, k] += throughput[i, k] * weight[r, k] * emission[m, k]
-            else:
-                for k in range(3):
-                    radiance[i, k] += throughput[i, k] * weight[r, k]
+            e = shapes.material_index[prim]
+            if materials.kind[e] != EMISSION:
+                continue
+            emission = materials.emission
+            r += tr * (fr * scale) * emission[e, 0]
+            g += tg * (fg * scale) * emission[e, 1]
+            b += tb * (fb * scale) * emission[e, 2]
+        return r, g, b, rays
+    j = 0
+    for light in range(lights.kind.shape[0]):
+        count = 1 if light_is_delta(lights.kind[light]) else options.light_samples
+        for s in range(count):
+            dim = vertex * DIMS_PER_VERTEX + DIM_LIGHT + 2 * j
+            j += 1
+            lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
+                lights.kind[light], lights.radiance, lights.position, lights.direction,
+                lights.edge_x, lights.edge_y, lights.area, light, px, py, pz,
+                uniform(seed, pixel, sample, dim), uniform(seed, pixel, sample, dim + 1))
+            if pdf < 1e-11:
+                continue
+            wiz = wx * nx + wy * ny + wz * nz
+            if wiz <= 0.0:
+                continue
+            wix = wx * xx + wy * xy + wz * xz
+            wiy = wx * yx + wy * yy + wz * yz
+            fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
+                                   materials.k, m, wox, woy, woz, wix, wiy, wiz)
+            scale = wiz / (count * pdf)
+            ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+            sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional light
+            if dist != math.inf:
+                # aim from the spawned origin at the light's point and stop just short of it:
+                # measured from the shading point instead, the spawn offset could carry the
+                # ray's end past the light onto an emitter lying on it
+                ax = px + dist * wx - ox
+                ay = py + dist * wy - oy
+                az = pz + dist * wz - oz
+                length = math.sqrt(ax * ax + ay * ay + az * az)
+                if length > 0.0:   # else the light sits at the origin: nothing in between
+                    sdx, sdy, sdz = ax / length, ay / length, az / length
+                tmax = length * (1.0 - SHADOW_SHORTEN)
+            rays += 1
+            if any_hit(record, scratch, ox, oy, oz, sdx, sdy, sdz, 0.0, tmax):
+                continue
+            r += tr * (lr * fr * scale)
+            g += tg * (lg * fg * scale)
+            b += tb * (lb * fb * scale)
+    return r, g, b, rays
 
 
-@njit(cache=True, parallel=True)
-def bounce(seed, vertex, pixel, sample, directions, point, geo_normal, normal, material,
-           offset, alive, kinds, albedo, transmittance, ior, alpha, eta, k_cond, throughput,
-           roulette, out_origin, out_direction, out_delta):
-    """Sample each live path's BSDF, update its throughput (Russian roulette from the second
-    bounce on: continue with q = min(RR_CAP, max throughput), divide by q) and write the bounce
-    ray. Paths that stop are marked dead."""
-    for i in prange(material.shape[0]):
-        m = material[i]
-        if not alive[i] or m < 0:
-            alive[i] = False
-            continue
-        xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy, woz = local_frame(normal, directions, i)
+@njit(cache=True)
+def trace_path(shapes, materials, lights, options, record, scratch, pixel, sample, ox, oy, oz,
+               dx, dy, dz, tmin, tmax):
+    """Radiance of one camera path and the number of rays it traced."""
+    kinds, seed = materials.kind, options.seed
+    rays = 1
+    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx, dy, dz,
+                                                            t, prim, u, v)
+    r = g = b = 0.0
+    if m < 0:
+        return r, g, b, rays
+    if kinds[m] == EMISSION:
+        r, g, b = materials.emission[m, 0], materials.emission[m, 1], materials.emission[m, 2]
+    tr = tg = tb = 1.0
+    lit = lights.kind.shape[0] > 0
+    for vertex in range(1, options.max_depth + 1):
+        # the shading frame (x, y, n) and wo in it; every variable is assigned on every path
+        # (in an earlier wavefront kernel a frame set only under an `if` was undefined when
+        # compiled, and the microfacet BSDF, which reads wo.x and wo.y, saw garbage)
+        xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
+        wox = -dx * xx - dy * xy - dz * xz
+        woy = -dx * yx - dy * yy - dz * yz
+        woz = -dx * nx - dy * ny - dz * nz
+        kind = kinds[m]
+        if lit and kind != EMISSION and not is_delta(kind):
+            lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
+                                         pixel, sample, vertex, m, px, py, pz, gx, gy, gz,
+                                         offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
+                                         woz, tr, tg, tb)
+            r += lr
+            g += lg
+            b += lb
+            rays += n
+        if vertex == options.max_depth:
+            break
         base = vertex * DIMS_PER_VERTEX
-        u1 = uniform(seed, pixel[i], sample[i], base + DIM_BSDF)
-        u2 = uniform(seed, pixel[i], sample[i], base + DIM_BSDF + 1)
-        u3 = uniform(seed, pixel[i], sample[i], base + DIM_GLASS)
-        wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(kinds[m], albedo, transmittance, ior,
-                                                     alpha, eta, k_cond, m, wox, woy, woz,
-                                                     u1, u2, u3)
+        wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
+            kind, materials.albedo, materials.transmittance, materials.ior, materials.alpha,
+            materials.eta, materials.k, m, wox, woy, woz, uniform(seed, pixel, sample, base + DIM_BSDF),
+            uniform(seed, pixel, sample, base + DIM_BSDF + 1),
+            uniform(seed, pixel, sample, base + DIM_GLASS))
         if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
-            alive[i] = False
-            continue
+            break
         weight = abs(wiz) / pdf
-        throughput[i, 0] *= fr * weight
-        throughput[i, 1] *= fg * weight
-        throughput[i, 2] *= fb * weight
-        if roulette:
-            q = min(RR_CAP, max(throughput[i, 0], throughput[i, 1], throughput[i, 2]))
-            if not uniform(seed, pixel[i], sample[i], base + DIM_RR) < q:
-                alive[i] = False
-                continue
-            for k in range(3):
-                throughput[i, k] /= q
+        tr *= fr * weight
+        tg *= fg * weight
+        tb *= fb * weight
+        if options.roulette and vertex >= 2:
+            q = min(options.rr_cap, max(tr, tg, tb))
+            if not uniform(seed, pixel, sample, base + DIM_RR) < q:
+                break
+            tr /= q
+            tg /= q
+            tb /= q
         wx = wix * xx + wiy * yx + wiz * nx
         wy = wix * xy + wiy * yy + wiz * ny
         wz = wix * xz + wiy * yz + wiz * nz
         length = math.sqrt(wx * wx + wy * wy + wz * wz)
-        wx, wy, wz = wx / length, wy / length, wz / length
-        ox, oy, oz = spawn(point, geo_normal, offset, i, wx, wy, wz)
-        out_origin[i, 0], out_origin[i, 1], out_origin[i, 2] = ox, oy, oz
-        out_direction[i, 0], out_direction[i, 1], out_direction[i, 2] = wx, wy, wz
-        out_delta[i] = is_delta(kinds[m])
+        dx, dy, dz = wx / length, wy / length, wz / length
+        ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
+        rays += 1
+        t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
+        m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
+                                                                dy, dz, t, prim, u, v)
+        if m < 0:
+            break
+        if kinds[m] == EMISSION and is_delta(kind):   # light sampling cannot see it
+            r += tr * materials.emission[m, 0]
+            g += tg * materials.emission[m, 1]
+            b += tb * materials.emission[m, 2]
+    return r, g, b, rays
 
 
 @njit(cache=True)
-def retire_and_compact(alive, owner, pixel, sample, throughput, radiance, delta, origins,
-                       directions, out, keep_owner, keep_pixel, keep_sample, keep_throughput,
-                       keep_radiance, keep_delta, keep_origins, keep_directions):
-    """Add each finished path's radiance to out[owner] (its radiance is final) and copy the live
-    paths' state, in order, to the keep_* arrays; return how many live. One serial pass instead
-    of a dozen numpy gathers over the wave: at 2^16 paths those cost more than the kernels."""
-    j = 0
-    for i in range(alive.shape[0]):
-        if not alive[i]:
-            for c in range(3):
-                out[owner[i], c] += radiance[i, c]
-            continue
-        keep_owner[j] = owner[i]
-        keep_pixel[j] = pixel[i]
-        keep_sample[j] = sample[i]
-        keep_delta[j] = delta[i]
-        for c in range(3):
-            keep_throughput[j, c] = throughput[i, c]
-            keep_radiance[j, c] = radiance[i, c]
-            keep_origins[j, c] = origins[i, c]
-            keep_directions[j, c] = directions[i, c]
-        j += 1
-    return j
+def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """The course's normal shading, 0.5 n + 0.5 (black on a miss): n is the barycentric blend of
+    the vertex normals, not renormalised, like the course, or a sphere's unit outward normal."""
+    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if prim < 0:
+        return 0.0, 0.0, 0.0
+    faces, normals = shapes.faces, shapes.vertex_normals
+    if prim < faces.shape[0]:
+        w = 1.0 - u - v
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        nx = w * normals[a, 0] + u * normals[b, 0] + v * normals[c, 0]
+        ny = w * normals[a, 1] + u * normals[b, 1] + v * normals[c, 1]
+        nz = w * normals[a, 2] + u * normals[b, 2] + v * normals[c, 2]
+    else:
+        s = prim - faces.shape[0]
+        radius = shapes.radii[s]
+        nx = (ox + t * dx - shapes.centers[s, 0]) / radius
+        ny = (oy + t * dy - shapes.centers[s, 1]) / radius
+        nz = (oz + t * dz - shapes.centers[s, 2]) / radius
+    return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
+
+
+@njit(cache=True)
+def camera_ray(camera, seed, spp, pixel_x, pixel_y, pixel, sample):
+    """Direction (unit) of a camera ray through the pixel: its centre when spp is 1, else a
+    uniform jitter (CS184.md 4.1). (x - W/2) / screen_dist rather than (2u - 1) tan(hfov/2):
+    a pixel of a W x H window gets bit-identical rays to the same pixel of the 800 x 600 view."""
+    if spp == 1:
+        sx, sy = pixel_x + 0.5, pixel_y + 0.5
+    else:
+        sx = pixel_x + uniform(seed, pixel, sample, 0)
+        sy = pixel_y + uniform(seed, pixel, sample, 1)
+    sx = (sx - camera.half_width) / camera.screen_dist
+    sy = (sy - camera.half_height) / camera.screen_dist
+    m = camera.to_world
+    x = sx * m[0, 0] + sy * m[0, 1] - m[0, 2]
+    y = sx * m[1, 0] + sy * m[1, 1] - m[1, 2]
+    z = sx * m[2, 0] + sy * m[2, 1] - m[2, 2]
+    norm = np.sqrt(x * x + y * y + z * z)
+    return x / norm, y / norm, z / norm
+
+
+@njit(cache=True, nogil=True)
+def render_pixels(shapes, materials, lights, camera, options, record, pixel_x, pixel_y, rows,
+                  first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
+    """Samples first_sample .. first_sample + pass_n - 1 of each given pixel (y from the bottom):
+    per pixel, the samples' radiance, illuminance and its square are summed from zero, in sample
+    order, and added to row rows[k] of the sums, with the count of finite samples (a sample with
+    a non-finite channel is dropped and counted). Returns (dropped, rays traced).
+
+    Serial and without the GIL: the caller (ptrace.tiles) runs many such calls on small blocks
+    of pixels at once, one per thread (see there for why not prange)."""
+    l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
+    seed, width = options.seed, camera.width
+    cx, cy, cz = camera.position[0], camera.position[1], camera.position[2]
+    scratch = new_scratch(record)
+    dropped = 0
+    rays = 0
+    for k in range(pixel_x.shape[0]):
+        pixel = pixel_y[k] * width + pixel_x[k]
+        r = g = b = lum = lum2 = 0.0
+        n = 0
+        for sample in range(first_sample, first_sample + pass_n):
+            dx, dy, dz = camera_ray(camera, seed, options.spp, pixel_x[k], pixel_y[k], pixel,
+                                    sample)
+            if options.mode == NORMALS:
+                x, y, z = normal_colour(shapes, record, scratch, cx, cy, cz, dx, dy, dz,
+                                        camera.znear, camera.zfar)
+                rays += 1
+            else:
+                x, y, z, traced = trace_path(shapes, materials, lights, options, record, scratch,
+                                             pixel, sample, cx, cy, cz, dx, dy, dz, camera.znear,
+                                             camera.zfar)
+                rays += traced
+            if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
+                dropped += 1
+                continue
+            value = x * l0 + y * l1 + z * l2
+            r += x
+            g += y
+            b += z
+            lum += value
+            lum2 += value * value
+            n += 1
+        row = rows[k]
+        sum_rgb[row, 0] += r
+        sum_rgb[row, 1] += g
+        sum_rgb[row, 2] += b
+        sum_l[row] += lum
+        sum_l2[row] += lum2
+        count[row] += n
+    return dropped, rays

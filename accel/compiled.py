@@ -1,0 +1,125 @@
+"""The compiled face of every backend: one ray's closest hit and any hit, callable from numba code.
+
+    record = accelerator.compiled                 # a namedtuple of the backend's flat arrays
+    scratch = new_scratch(record)                 # once per block of rays (traversal stacks)
+    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    blocked = any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+
+The answers are the batch face's (accel.Hits): the closest hit with tmin <= t <= tmax, t = inf
+and prim = -1 on a miss, (u, v) barycentric for triangles and 0 for spheres.
+
+Each backend's record is a namedtuple class of its own, registered here with its three numba
+functions. The three names above are numba overloads that pick the registered functions by the
+record's type, so a numba kernel written against them is compiled once per backend (one
+specialisation each, each in numba's on-disk cache) and never names a backend; called from plain
+Python (a kernel's py_func, in tests) they dispatch the same way.
+"""
+import numpy as np
+from numba import njit, prange, types
+from numba.extending import overload
+
+RAY_BLOCK = 64   # rays per parallel work item of the batch kernels: scratch is made per block
+
+_FACES = {}      # record class -> (new_scratch, closest_hit, any_hit), numba functions
+
+
+def register(record_class, new_scratch_fn, closest_hit_fn, any_hit_fn):
+    """Make record_class's compiled face known (each backend module does this on import)."""
+    _FACES[record_class] = (new_scratch_fn, closest_hit_fn, any_hit_fn)
+
+
+def _face(record):
+    """The registered functions for a record's numba type, or None (not a backend record)."""
+    if isinstance(record, types.BaseNamedTuple):
+        return _FACES.get(record.instance_class)
+    return None
+
+
+def new_scratch(record):
+    """Per-block working memory of the backend (traversal stacks, a ray structure)."""
+    return _FACES[type(record)][0](record)
+
+
+def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """(t, prim, u, v) of the closest hit with tmin <= t <= tmax; (inf, -1, 0, 0) on a miss."""
+    return _FACES[type(record)][1](record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+
+
+def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """True if anything is hit with tmin <= t <= tmax (stops at the first hit found)."""
+    return _FACES[type(record)][2](record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+
+
+@overload(new_scratch, jit_options={"cache": True})
+def _new_scratch(record):
+    face = _face(record)
+    if face is not None:
+        function = face[0]
+        return lambda record: function(record)
+    return None
+
+
+@overload(closest_hit, jit_options={"cache": True})
+def _closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    face = _face(record)
+    if face is not None:
+        function = face[1]
+        return lambda record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax: function(
+            record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return None
+
+
+@overload(any_hit, jit_options={"cache": True})
+def _any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    face = _face(record)
+    if face is not None:
+        function = face[2]
+        return lambda record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax: function(
+            record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return None
+
+
+# -- the batch face on top of the compiled one (for backends without a batch kernel of their own)
+
+@njit(cache=True, parallel=True)
+def intersect_batch(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v):
+    """closest_hit for every ray of a batch, in parallel over blocks of RAY_BLOCK rays."""
+    n = origins.shape[0]
+    for block in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+        scratch = new_scratch(record)
+        for r in range(block * RAY_BLOCK, min(n, (block + 1) * RAY_BLOCK)):
+            t, prim, u, v = closest_hit(record, scratch, origins[r, 0], origins[r, 1],
+                                        origins[r, 2], directions[r, 0], directions[r, 1],
+                                        directions[r, 2], tmin[r], tmax[r])
+            out_t[r] = t
+            out_prim[r] = prim
+            out_u[r] = u
+            out_v[r] = v
+
+
+@njit(cache=True, parallel=True)
+def occluded_batch(record, origins, directions, tmin, tmax, out):
+    """any_hit for every ray of a batch, in parallel over blocks of RAY_BLOCK rays."""
+    n = origins.shape[0]
+    for block in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+        scratch = new_scratch(record)
+        for r in range(block * RAY_BLOCK, min(n, (block + 1) * RAY_BLOCK)):
+            out[r] = any_hit(record, scratch, origins[r, 0], origins[r, 1], origins[r, 2],
+                             directions[r, 0], directions[r, 1], directions[r, 2], tmin[r],
+                             tmax[r])
+
+
+def run_intersect(record, rays, hits_class):
+    """The batch intersect of a backend through its compiled face."""
+    n = len(rays)
+    hits = hits_class(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
+    intersect_batch(record, rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t,
+                    hits.prim, hits.u, hits.v)
+    return hits
+
+
+def run_occluded(record, rays):
+    """The batch occluded of a backend through its compiled face."""
+    out = np.empty(len(rays), dtype=np.bool_)
+    occluded_batch(record, rays.origins, rays.directions, rays.tmin, rays.tmax, out)
+    return out

@@ -1,0 +1,119 @@
+"""render(): validate the settings, pick an executor, assemble the image.
+
+The work itself is ptrace.tiles (the pass schedule and the tile work, through the compiled path
+loop of ptrace.integrator); an executor runs it in this process (ptrace.executors) or on a Dask
+cluster (ptrace.distributed). Random numbers are keyed by (seed, pixel, sample, dimension), and
+pass sizes depend only on -s and -a, so an image does not depend on threads, chunks, tiles or
+backend.
+"""
+import sys
+import warnings
+
+import numba
+import numpy as np
+
+from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
+from .errors import PtraceError
+from .executors import render_in_process
+from .integrator import LUMINANCE  # noqa: F401  (the luminance weights, for callers)
+from .scene import EMISSION
+from .settings import Settings
+from .tiles import Passes, new_sums
+
+
+def _check_frame(width, height, crop):
+    if width < 1 or height < 1:
+        raise PtraceError(f"resolution must be at least 1x1, got {width}x{height}")
+    if crop is not None:
+        x, y, dx, dy = crop
+        if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > width or y + dy > height:
+            raise PtraceError(f"crop cell x={x} y={y} dx={dx} dy={dy} is not inside the "
+                              f"{width}x{height} image")
+
+
+def scene_warnings(scene, settings):
+    """What a user should hear about this scene and these settings before a render."""
+    out = []
+    if settings.integrator == "path" and settings.hemisphere and settings.max_depth >= 1:
+        emitters = np.isin(scene.material_index,
+                           np.nonzero(scene.materials.kind == EMISSION)[0]).any()
+        if not emitters:
+            out.append("hemisphere sampling (-H) sees only emissive geometry and this scene has "
+                       "none (its lights are point, directional, ambient or area lights without "
+                       "a mesh): direct light will be black")
+    return out
+
+
+def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
+           threads=None, crop=None, camera=None, progress=False, stats=None, client=None,
+           notice=None, **options):
+    """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
+
+    resolution is (W, H), default the course's 800x600 (a crop of the same focal length, not a
+    rescale); crop (x, y, dx, dy) renders only that cell (y counted from the bottom, like the
+    course) and returns it alone; camera overrides the course's camera; options are the light
+    transport flags of ptrace.settings.Settings: light_samples (-l, default 1), max_depth (-m,
+    default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
+    (default True; False runs every path to max_depth, for comparisons: the course has no such
+    flag). stats, if a dict, receives build and render seconds, rays traced, per-pixel sample
+    counts ("samples", (H, W)), the number of non-finite samples dropped, and whether Ctrl-C
+    interrupted the render. client renders on a Dask cluster; notice, if given, is called with
+    a one-line message when the kernels must be compiled first (a cold numba cache).
+    """
+    settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
+                                     **options)
+    width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
+    _check_frame(width, height, crop)
+    previous_threads = numba.get_num_threads()
+    worker_threads = None
+    if client is not None:   # threads applies on the workers, not here
+        if threads is not None and threads < 1:
+            raise PtraceError(f"threads must be at least 1, got {threads}")
+        worker_threads, threads = threads, None
+    if threads is not None:
+        if not 1 <= threads <= numba.config.NUMBA_NUM_THREADS:
+            raise PtraceError(f"threads must be between 1 and {numba.config.NUMBA_NUM_THREADS}, "
+                              f"got {threads}")
+        numba.set_num_threads(threads)
+    try:
+        return _render(scene, settings, width, height, crop, camera, progress, stats, client,
+                       worker_threads, notice)
+    finally:
+        numba.set_num_threads(previous_threads)
+
+
+def _render(scene, settings, width, height, crop, camera, progress, stats, client,
+            worker_threads, notice):
+    camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
+    x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
+    for message in scene_warnings(scene, settings):
+        warnings.warn(message, RuntimeWarning, stacklevel=4)
+    ys, xs = np.mgrid[y0:y0 + cell_h, x0:x0 + cell_w]
+    pixel_x = xs.reshape(-1).astype(np.int64)
+    pixel_y = ys.reshape(-1).astype(np.int64)
+    n_pixels = pixel_x.shape[0]
+    sums = new_sums(n_pixels)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=n_pixels * settings.spp, unit="spl", unit_scale=True, leave=False,
+                   file=sys.stderr)
+    passes = Passes(settings, sums, bar)
+    try:
+        if client is not None:
+            from . import distributed
+            outcome = distributed.render_passes(client, scene, settings, camera, pixel_x,
+                                                pixel_y, passes, worker_threads)
+        else:
+            outcome = render_in_process(scene, settings, camera, pixel_x, pixel_y, passes,
+                                        notice)
+    finally:
+        if bar is not None:
+            bar.close()
+    sum_rgb, count = sums[0], sums[3]
+    image = np.where(count[:, None] > 0, sum_rgb / np.maximum(count, 1)[:, None], 0.0)
+    if stats is not None:
+        stats.update(outcome, spp=settings.spp,
+                     samples=count.reshape(cell_h, cell_w)[::-1].copy())
+    # rows were generated bottom row first; the returned image has the top row first
+    return image.reshape(cell_h, cell_w, 3)[::-1].astype(np.float32)

@@ -1,0 +1,101 @@
+"""The render settings: one frozen, validated value, built once and passed whole to every
+executor (in-process, or pickled to Dask workers), so no option can be dropped on the way."""
+from dataclasses import dataclass
+
+import numpy as np
+
+import accel
+
+from .errors import PtraceError
+from .integrator import NORMALS, PATH, RR_CAP, Options
+from .scene import DIRECTIONAL, POINT
+
+INTEGRATORS = ("path", "normals")
+
+
+def _is_int(value):
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What a render computes, apart from the scene, the camera and the pixels.
+
+    spp: samples per pixel (-s); accel: the backend (naive, bvh, embree); integrator: path or
+    normals; seed; light_samples (-l): samples per area or ambient light per shading point;
+    max_depth (-m); hemisphere (-H): direct light by uniform hemisphere sampling; roulette:
+    Russian roulette from the second bounce (False runs every path to max_depth; the course has
+    no such flag); rr_cap: roulette continues with probability min(rr_cap, max throughput);
+    adaptive (-a): None or (samples per batch, tolerance).
+    """
+    spp: int = 1
+    accel: str = "bvh"
+    integrator: str = "path"
+    seed: int = 0
+    light_samples: int = 1
+    max_depth: int = 1
+    hemisphere: bool = False
+    roulette: bool = True
+    rr_cap: float = RR_CAP
+    adaptive: tuple = None
+
+    def __post_init__(self):
+        if not (_is_int(self.spp) and self.spp >= 1):
+            raise PtraceError(f"samples per pixel must be a positive integer, got {self.spp!r}")
+        if self.accel not in accel.KINDS:
+            raise PtraceError(f"unknown accelerator {self.accel!r}; choose one of "
+                              f"{', '.join(accel.KINDS)}")
+        if self.integrator not in INTEGRATORS:
+            raise PtraceError(f"unknown integrator {self.integrator!r}; choose one of "
+                              f"{', '.join(INTEGRATORS)}")
+        if not (_is_int(self.seed) and self.seed >= 0):
+            raise PtraceError(f"seed must be a non-negative integer, got {self.seed!r}")
+        if not (_is_int(self.light_samples) and self.light_samples >= 1):
+            raise PtraceError("light samples must be at least 1")
+        if not (_is_int(self.max_depth) and self.max_depth >= 0):
+            raise PtraceError("max depth must not be negative")
+        if not 0.0 < self.rr_cap <= 1.0:
+            raise PtraceError(f"the roulette cap must be in (0, 1], got {self.rr_cap!r}")
+        set_ = object.__setattr__
+        for name in ("spp", "seed", "light_samples", "max_depth"):
+            set_(self, name, int(getattr(self, name)))
+        set_(self, "hemisphere", bool(self.hemisphere))
+        set_(self, "roulette", bool(self.roulette))
+        set_(self, "rr_cap", float(self.rr_cap))
+        if self.adaptive is not None:
+            try:
+                batch, tolerance = self.adaptive
+            except (TypeError, ValueError):
+                raise PtraceError(f"adaptive must be (batch, tolerance), got {self.adaptive!r}") \
+                    from None
+            if not (_is_int(batch) and batch >= 1) or not tolerance > 0:
+                raise PtraceError(f"adaptive sampling needs a batch >= 1 and a tolerance > 0, "
+                                  f"got {batch} {tolerance}")
+            set_(self, "adaptive", (int(batch), float(tolerance)))
+
+    @classmethod
+    def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
+        """Settings from render()'s keywords; an unknown option is an error, not ignored."""
+        known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap"}
+        unknown = set(options) - known
+        if unknown:
+            raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
+        return cls(spp=spp, accel=accel, integrator=integrator, seed=seed, **options)
+
+    def kernel_options(self):
+        """The integrator's Options record."""
+        mode = NORMALS if self.integrator == "normals" else PATH
+        return Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
+                       self.hemisphere, self.roulette, self.rr_cap)
+
+    def rays_per_path(self, scene):
+        """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the
+        size of a work unit, for tiling; deeper vertices add about as many each)."""
+        if self.integrator == "normals":
+            return 1
+        lights = scene.lights
+        if self.hemisphere:
+            return 1 + len(lights) * self.light_samples
+        delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
+        return 1 + delta + self.light_samples * (len(lights) - delta)
+

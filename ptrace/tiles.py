@@ -1,0 +1,168 @@
+"""The work of a render, apart from who runs it: the pass schedule with adaptive sampling's
+decisions between passes, and the tile work (samples of a set of pixels, through the compiled
+path loop) that an executor runs in-process or a Dask worker runs for one tile.
+
+Knows nothing of Dask. Per pixel a render keeps four sums: radiance (RGB), illuminance and its
+square, and the count of finite samples; every pass adds each pixel's pass sum, summed from
+zero, so a tile computed elsewhere and added later gives the same bits as one computed here.
+"""
+from concurrent.futures import ThreadPoolExecutor, wait
+
+import numba
+import numpy as np
+
+from .integrator import camera_record, render_pixels, scene_records
+
+PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
+BLOCK_PATHS = 1024       # (pixel, sample) pairs per kernel call (at least one pixel): Ctrl-C
+                         # and the progress bar act between calls; a call holds no memory that
+                         # depends on -s, -l or -m (a path keeps its state in registers)
+
+
+def new_sums(n_pixels):
+    """Zeroed per-pixel sums (rgb, l, l2, count) for n_pixels pixels."""
+    return (np.zeros((n_pixels, 3)), np.zeros(n_pixels), np.zeros(n_pixels),
+            np.zeros(n_pixels, dtype=np.int64))
+
+
+def converged(sum_l, sum_l2, count, tolerance, batch):
+    """The course's test, 1.96 sigma / sqrt(n) <= tolerance * mu on illuminance, except that a
+    pixel whose samples have all been equal (sigma = 0, typically all black) is not stopped
+    before it has two batches: one batch of zeros in a dim, noisy region says little."""
+    n = count.astype(np.float64)
+    mean = sum_l / n
+    variance = np.maximum(sum_l2 - sum_l * sum_l / n, 0.0) / np.maximum(n - 1, 1)
+    sigma = np.sqrt(variance)
+    return (1.96 * sigma / np.sqrt(n) <= tolerance * mean) & ((sigma > 0) | (n >= 2 * batch))
+
+
+class Passes:
+    """The pass schedule, shared by every executor: pass sizes depend only on -s and -a; after
+    each pass, adaptive sampling retires the converged active pixels."""
+
+    def __init__(self, settings, sums, bar=None):
+        self.spp = settings.spp
+        adaptive = settings.adaptive
+        self.batch = adaptive[0] if adaptive is not None else min(self.spp, PASS_SAMPLES)
+        self.tolerance = None if adaptive is None else adaptive[1]
+        self.sums, self.bar = sums, bar
+        self.active = np.arange(sums[1].shape[0])
+        self.done = 0
+
+    def __iter__(self):
+        """Yield (first_sample, pass_n, active pixel indices) until every pixel is done."""
+        while self.done < self.spp and self.active.size:
+            pass_n = min(self.batch, self.spp - self.done)
+            yield self.done, pass_n, self.active
+            self.done += pass_n
+            if self.tolerance is not None and self.done < self.spp:
+                _, sum_l, sum_l2, count = self.sums
+                a = self.active
+                stop = converged(sum_l[a], sum_l2[a], count[a], self.tolerance, self.batch)
+                if self.bar is not None:
+                    self.bar.update(int(stop.sum()) * (self.spp - self.done))
+                self.active = a[~stop]
+
+    @property
+    def adaptive(self):
+        return self.tolerance is not None
+
+    def fixed(self):
+        """The whole schedule up front (only without adaptive sampling)."""
+        if self.adaptive:
+            raise RuntimeError("an adaptive schedule is decided pass by pass")
+        schedule, done = [], 0
+        while done < self.spp:
+            pass_n = min(self.batch, self.spp - done)
+            schedule.append((done, pass_n))
+            done += pass_n
+        return schedule
+
+    def update(self, samples):
+        if self.bar is not None:
+            self.bar.update(samples)
+
+
+class _Threads:
+    """A pool of Python threads that run render_pixels (compiled with nogil) on blocks of pixels:
+    one kernel call per block, handed out as threads free up, so both cores stay busy to the
+    end however uneven the blocks' cost. Used instead of numba's prange: with the whole path
+    inlined into its body, prange's parallel lowering cost most of the first run's compile
+    time (about 7.5 of 10 s for the naive backend on 2 cores), and it splits the range
+    statically. Resized to numba's thread count (-t) on each use."""
+
+    def __init__(self):
+        self.pool, self.size = None, 0
+
+    def get(self, size):
+        if self.pool is None or self.size != size:
+            if self.pool is not None:
+                self.pool.shutdown(wait=True)
+            self.pool, self.size = ThreadPoolExecutor(size, thread_name_prefix="ptrace"), size
+        return self.pool
+
+
+_threads = _Threads()
+
+
+def _run_blocks(function, blocks):
+    """Run function(start, end) for every block on numba's thread count of threads; yield each
+    result in block order. If interrupted (Ctrl-C), cancel what has not started and wait for
+    the blocks running, so nothing writes into the sums after the caller returns."""
+    threads = numba.get_num_threads()
+    if threads == 1 or len(blocks) == 1:
+        for start, end in blocks:
+            yield function(start, end)
+        return
+    pool = _threads.get(threads)
+    futures = [pool.submit(function, start, end) for start, end in blocks]
+    try:
+        for future in futures:
+            yield future.result()
+    finally:
+        for future in futures:
+            future.cancel()
+        wait(futures)
+
+
+class TileWork:
+    """What rendering any set of pixels needs and a render keeps fixed: the scene's records, the
+    accelerator's compiled face, the kernel options and the camera. In-process renders and
+    Dask tiles both call trace(), so their per-pixel arithmetic is the same."""
+
+    def __init__(self, scene, backend, settings, camera):
+        self.records = scene_records(scene)
+        self.accel = backend.compiled
+        self.settings = settings
+        self.options = settings.kernel_options()
+        self.camera = camera_record(camera)
+        self.rays_traced = 0
+
+    def trace(self, pixel_x, pixel_y, first_sample, pass_n, sums, rows, on_chunk=None):
+        """Trace samples first_sample .. first_sample + pass_n - 1 of the given pixels (y from
+        the bottom) and add each pixel's sums into `sums` at `rows`. Work goes to the kernel in
+        blocks of about BLOCK_PATHS paths (whole pixels), on all threads; on_chunk(samples) is
+        called after each block, in order. Returns the number of non-finite samples dropped."""
+        shapes, materials, lights = self.records
+        sum_rgb, sum_l, sum_l2, count = sums
+        pixel_x = np.ascontiguousarray(pixel_x, dtype=np.int64)
+        pixel_y = np.ascontiguousarray(pixel_y, dtype=np.int64)
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        first_sample, pass_n = int(first_sample), int(pass_n)
+
+        def block(start, end):
+            return end - start, render_pixels(
+                shapes, materials, lights, self.camera, self.options, self.accel,
+                pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample, pass_n,
+                sum_rgb, sum_l, sum_l2, count)
+
+        size = max(1, BLOCK_PATHS // pass_n)
+        blocks = [(start, min(start + size, pixel_x.shape[0]))
+                  for start in range(0, pixel_x.shape[0], size)]
+        dropped = 0
+        for pixels, (block_dropped, rays) in _run_blocks(block, blocks):
+            dropped += block_dropped
+            self.rays_traced += rays
+            if on_chunk is not None:
+                on_chunk(pixels * pass_n)
+        return dropped
