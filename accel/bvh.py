@@ -331,7 +331,7 @@ def new_scratch(record):
             np.empty(WIDE_STACK), np.empty(WIDTH))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, triangle tests)."""
     nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
@@ -393,13 +393,13 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     return best_t, best_prim, best_u, best_v, visits, tests
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     t, prim, u, v, _, _ = _closest(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
     return t, prim, u, v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     """Any-hit traversal of one ray: children are tested before they are pushed, leaves stop at
     the first primitive hit."""

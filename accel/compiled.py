@@ -9,7 +9,11 @@ The answers are the batch face's (accel.Hits): the closest hit with tmin <= t <=
 and prim = -1 on a miss, (u, v) barycentric for triangles and 0 for spheres.
 
 Each backend's record is a namedtuple class of its own, registered here with its three numba
-functions. The three names above are numba overloads that pick the registered functions by the
+functions. The two query functions are compiled with `_nrt=False` (and so must be every function
+they call that takes arrays): a numba function that is not inlined increfs and decrefs every
+array it is passed, atomically, on every call; with a record of five arrays and a scratch of
+four, three levels of calls per ray cost more than the traversal (measured: 4 against 13 M
+camera rays/s on one thread). Without NRT a function cannot allocate, which none of them needs. The three names above are numba overloads that pick the registered functions by the
 record's type, so a numba kernel written against them is compiled once per backend (one
 specialisation each, each in numba's on-disk cache) and never names a backend; called from plain
 Python (a kernel's py_func, in tests) they dispatch the same way.
@@ -59,7 +63,7 @@ def _new_scratch(record):
     return None
 
 
-@overload(closest_hit, jit_options={"cache": True})
+@overload(closest_hit, jit_options={"cache": True, "_nrt": False, "forceinline": True})
 def _closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     face = _face(record)
     if face is not None:
@@ -69,7 +73,7 @@ def _closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return None
 
 
-@overload(any_hit, jit_options={"cache": True})
+@overload(any_hit, jit_options={"cache": True, "_nrt": False, "forceinline": True})
 def _any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     face = _face(record)
     if face is not None:

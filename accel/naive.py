@@ -21,7 +21,7 @@ def new_scratch(record):
     return np.empty(0)   # nothing to keep between rays
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     vertices, faces = record.vertices, record.faces
     n_tri = faces.shape[0]
@@ -41,7 +41,7 @@ def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return best_t, best_prim, best_u, best_v
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     vertices, faces = record.vertices, record.faces
     for tri in range(faces.shape[0]):

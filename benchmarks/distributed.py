@@ -36,7 +36,8 @@ OPTIONS = {"light_samples": 4, "max_depth": 5, "seed": 1}
 def main(argv=None):
     import ptrace
     from ptrace import distributed
-    from ptrace.render import PASS_SAMPLES, make_tracer
+    from ptrace.settings import Settings
+    from ptrace.tiles import PASS_SAMPLES
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="a smaller frame, one repeat")
@@ -131,14 +132,15 @@ def main(argv=None):
     # core busy, as on a worker machine), per pixel-sample
     busy_stats = measured[cores][1] if cores in measured else measured[2][1]
     per_core = busy_stats["task_seconds_total"] / (pixels * spp)
-    tracer = make_tracer(scene, None, 0, "path", OPTIONS)
+    rays_per_path = Settings(light_samples=OPTIONS["light_samples"],
+                             max_depth=OPTIONS["max_depth"]).rays_per_path(scene)
 
     def model(width, height, samples, machines, cores_each, start_cost):
         n_pixels = width * height
         passes = math.ceil(samples / PASS_SAMPLES)
         pass_n = min(samples, PASS_SAMPLES)
         workers = machines * cores_each
-        tile = distributed.tile_pixels(n_pixels, tracer.rays_per_path, pass_n, workers)
+        tile = distributed.tile_pixels(n_pixels, rays_per_path, pass_n, workers)
         tasks = passes * math.ceil(n_pixels / tile)
         task = per_core * tile * pass_n
         compute = tasks * (task + overhead) / workers + task

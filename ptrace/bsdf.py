@@ -16,12 +16,12 @@ INV_PI = 1.0 / math.pi
 SQRT_PI = math.sqrt(math.pi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def is_delta(kind):
     return kind == MIRROR or kind == GLASS or kind == REFRACTION
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cosine_hemisphere(u1, u2):
     """Cosine-weighted direction about +z (CS184.md 4.8): r = sqrt(u1), z = sqrt(1 - u1)."""
     r = math.sqrt(u1)
@@ -29,7 +29,7 @@ def cosine_hemisphere(u1, u2):
     return r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u1))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def uniform_hemisphere(u1, u2):
     """Uniform direction about +z: z = u1, pdf 1 / (2 pi)."""
     z = u1
@@ -40,7 +40,7 @@ def uniform_hemisphere(u1, u2):
 
 # -- microfacet (Beckmann, Smith G, conductor Fresnel) --------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def beckmann_d(alpha, cos_h):
     if cos_h <= 0.0:
         return 0.0
@@ -49,7 +49,7 @@ def beckmann_d(alpha, cos_h):
     return math.exp(-tan2 / (alpha * alpha)) / (math.pi * alpha * alpha * cos2 * cos2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def smith_lambda(alpha, cos_w):
     """Beckmann Lambda, textbook form: (erf(a) - 1)/2 + exp(-a^2) / (2 a sqrt(pi)), a = 1/(alpha tan)."""
     cos_w = abs(cos_w)
@@ -60,7 +60,7 @@ def smith_lambda(alpha, cos_w):
     return 0.5 * (math.erf(a) - 1.0) + math.exp(-a * a) / (2.0 * a * SQRT_PI)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def conductor_fresnel(eta, k, cos_i):
     """Unpolarised conductor Fresnel for one channel (CS184.md 4.8)."""
     c2 = cos_i * cos_i
@@ -70,7 +70,7 @@ def conductor_fresnel(eta, k, cos_i):
     return 0.5 * (rs + rp)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     if woz <= 0.0 or wiz <= 0.0:
         return 0.0, 0.0, 0.0
@@ -88,7 +88,7 @@ def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
             conductor_fresnel(eta[m, 2], k[m, 2], wiz) * scale)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
     if woz <= 0.0 or wiz <= 0.0:
         return 0.0
@@ -104,7 +104,7 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
 
 # -- the interface ---------------------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters."""
     if kind == DIFFUSE:
@@ -116,7 +116,7 @@ def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     return 0.0, 0.0, 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_pdf(kind, alpha, m, wox, woy, woz, wix, wiy, wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise."""
     if kind == DIFFUSE:
@@ -126,7 +126,7 @@ def bsdf_pdf(kind, alpha, m, wox, woy, woz, wix, wiy, wiz):
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, woz, u1, u2, u3):
     """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
 

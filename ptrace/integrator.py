@@ -20,7 +20,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from accel.compiled import any_hit, closest_hit, new_scratch
+from accel.compiled import any_hit, closest_hit
 
 from .bsdf import bsdf_eval, bsdf_sample, is_delta, uniform_hemisphere
 from .lights import light_is_delta, sample_light
@@ -99,7 +99,7 @@ def frame(nx, ny, nz):
     return ny * yz - nz * yy, nz * yx - nx * yz, nx * yy - ny * yx, yx, yy, yz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def surface(shapes, kinds, ox, oy, oz, dx, dy, dz, t, prim, u, v):
     """What a hit leaves for shading: (material, point, geometric normal, shading normal, spawn
     offset); material -1 on a miss or a zero-area triangle. Opaque surfaces are two-sided: both
@@ -164,7 +164,7 @@ def spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz):
     return px + e * gx, py + e * gy, pz + e * gz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
                  px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
                  woz, tr, tg, tb):
@@ -245,7 +245,7 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
     return r, g, b, rays
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def trace_path(shapes, materials, lights, options, record, scratch, pixel, sample, ox, oy, oz,
                dx, dy, dz, tmin, tmax):
     """Radiance of one camera path and the number of rays it traced."""
@@ -319,7 +319,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
     return r, g, b, rays
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False, forceinline=True)
 def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """The course's normal shading, 0.5 n + 0.5 (black on a miss): n is the barycentric blend of
     the vertex normals, not renormalised, like the course, or a sphere's unit outward normal."""
@@ -362,20 +362,23 @@ def camera_ray(camera, seed, spp, pixel_x, pixel_y, pixel, sample):
     return x / norm, y / norm, z / norm
 
 
-@njit(cache=True, nogil=True)
-def render_pixels(shapes, materials, lights, camera, options, record, pixel_x, pixel_y, rows,
-                  first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
+@njit(cache=True, nogil=True, _nrt=False)
+def render_pixels(shapes, materials, lights, camera, options, record, scratch, pixel_x, pixel_y,
+                  rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
     """Samples first_sample .. first_sample + pass_n - 1 of each given pixel (y from the bottom):
     per pixel, the samples' radiance, illuminance and its square are summed from zero, in sample
     order, and added to row rows[k] of the sums, with the count of finite samples (a sample with
     a non-finite channel is dropped and counted). Returns (dropped, rays traced).
 
     Serial and without the GIL: the caller (ptrace.tiles) runs many such calls on small blocks
-    of pixels at once, one per thread (see there for why not prange)."""
+    of pixels at once, one per thread (see there for why not prange). scratch is the backend's
+    (accel.compiled.new_scratch), one per concurrent call. This function and every function it
+    calls with arrays are compiled without NRT (`_nrt=False`, see accel.compiled): otherwise
+    each call between them increfs and decrefs the ~30 arrays of the records, atomically, once
+    per path and per vertex."""
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
     seed, width = options.seed, camera.width
     cx, cy, cz = camera.position[0], camera.position[1], camera.position[2]
-    scratch = new_scratch(record)
     dropped = 0
     rays = 0
     for k in range(pixel_x.shape[0]):

@@ -13,12 +13,12 @@ from .scene import AMBIENT, AREA, DIRECTIONAL, POINT
 INF = math.inf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def light_is_delta(kind):
     return kind == POINT or kind == DIRECTIONAL
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def sample_light(kind, radiance, position, direction, edge_x, edge_y, area, i,
                  px, py, pz, u1, u2):
     """Sample light i as seen from point p.

@@ -22,14 +22,14 @@ _S11 = np.uint64(11)
 _INV_2_53 = 1.0 / 9007199254740992.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mix(z):
     z = (z ^ (z >> _S30)) * _M1
     z = (z ^ (z >> _S27)) * _M2
     return z ^ (z >> _S31)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def uniform(seed, pixel, sample, dimension):
     """A number in [0, 1) determined only by the four counters."""
     key = _mix(np.uint64(seed) * _K_SEED + _mix(np.uint64(pixel) * _K_PIXEL

@@ -11,6 +11,8 @@ from concurrent.futures import ThreadPoolExecutor, wait
 import numba
 import numpy as np
 
+from accel.compiled import new_scratch
+
 from .integrator import camera_record, render_pixels, scene_records
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
@@ -153,8 +155,8 @@ class TileWork:
         def block(start, end):
             return end - start, render_pixels(
                 shapes, materials, lights, self.camera, self.options, self.accel,
-                pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample, pass_n,
-                sum_rgb, sum_l, sum_l2, count)
+                new_scratch(self.accel), pixel_x[start:end], pixel_y[start:end], rows[start:end],
+                first_sample, pass_n, sum_rgb, sum_l, sum_l2, count)
 
         size = max(1, BLOCK_PATHS // pass_n)
         blocks = [(start, min(start + size, pixel_x.shape[0]))

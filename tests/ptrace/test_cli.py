@@ -163,3 +163,18 @@ def test_ctrl_c_writes_what_was_rendered(tmp_path):
     pixels = read_image(output)
     assert pixels.shape == (24, 32, 3) and pixels.max() > 0   # a partial render, not black
     assert (tmp_path / "box_rate.png").exists()
+
+
+@pytest.mark.slow
+def test_a_cold_cache_says_it_is_compiling_and_a_warm_one_does_not(tmp_path):
+    """With an empty numba cache the first render prints one line saying that it compiles (the
+    first run used to sit at 0% for half a minute without a word); the next run loads the cache
+    and says nothing."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    args = [sys.executable, "-m", "ptrace", "--integrator", "normals", "-r", "8", "6", "-f",
+            str(tmp_path / "x.png"), str(SHIPPED)]
+    cold = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
+    assert cold.returncode == 0, cold.stderr
+    assert cold.stderr.count("ptrace: compiling kernels (first run only") == 1, cold.stderr
+    warm = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
+    assert warm.returncode == 0 and "compiling" not in warm.stderr, warm.stderr

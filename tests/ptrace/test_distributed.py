@@ -49,6 +49,18 @@ def test_path_render_is_bit_identical(client, course_scene):
     assert np.array_equal(alone, spread)
 
 
+@pytest.mark.parametrize("option", [dict(roulette=False), dict(hemisphere=True),
+                                    dict(rr_cap=0.3)])
+def test_light_transport_options_reach_the_workers(client, course_scene, option):
+    """Every setting travels to the workers whole: until the settings became one value, the
+    workers' whitelist dropped `roulette`, so roulette=False ran roulette on the cluster."""
+    scene = ptrace.load(course_scene("sky/CBspheres_lambertian.dae"))
+    kwargs = dict(spp=2, light_samples=2, max_depth=6, resolution=(24, 18), seed=5)
+    alone, spread, _ = both(scene, client, **kwargs, **option)
+    assert np.array_equal(alone, spread)
+    assert not np.array_equal(alone, ptrace.render(scene, **kwargs))   # the option matters
+
+
 def test_normals_and_adaptive_renders_are_bit_identical(client, course_scene):
     cow = ptrace.load(course_scene("meshedit/cow.dae"))
     alone, spread, _ = both(cow, client, integrator="normals", resolution=(64, 48))
@@ -114,16 +126,15 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
             # the kill however fast the tracing gets (it ended before the kill once renders
             # became 2x faster); finished tiles are merged and released at once, so the
             # scheduler cannot be asked how many finished
-            import importlib
-            module = importlib.import_module("ptrace.render")   # ptrace.render is the function
-            trace = module.trace_pixels
+            from ptrace import tiles
+            trace = tiles.TileWork.trace
 
-            def slow(*args):
+            def slow(*args, **kwargs):
                 time.sleep(0.5)
-                counts = trace(*args)
-                module.finished_tiles = getattr(module, "finished_tiles", 0) + 1
+                counts = trace(*args, **kwargs)
+                tiles.finished_tiles = getattr(tiles, "finished_tiles", 0) + 1
                 return counts
-            module.trace_pixels = slow
+            tiles.TileWork.trace = slow
         client.run(slow_tasks)
         result = {}
 
@@ -136,8 +147,8 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
         worker.start()
 
         def finished_tiles():
-            import importlib
-            return getattr(importlib.import_module("ptrace.render"), "finished_tiles", 0)
+            from ptrace import tiles
+            return getattr(tiles, "finished_tiles", 0)
         deadline = time.monotonic() + 120
         while sum(client.run(finished_tiles).values()) < 2 and time.monotonic() < deadline:
             time.sleep(0.02)

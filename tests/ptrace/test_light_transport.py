@@ -137,14 +137,13 @@ def test_cornell_walls_are_lit(scenes_dir):
 
 
 def test_same_seed_same_image_whatever_threads_chunks_and_backend(monkeypatch):
-    import importlib
-    render_module = importlib.import_module("ptrace.render")
+    from ptrace import tiles
     scene = ptrace.load(SHIPPED)
     kwargs = dict(resolution=(40, 30), spp=4, light_samples=2, max_depth=4, seed=7)
     reference = ptrace.render(scene, threads=1, **kwargs)
     assert np.array_equal(ptrace.render(scene, threads=2, **kwargs), reference)
     assert np.array_equal(ptrace.render(scene, accel="naive", **kwargs), reference)
-    monkeypatch.setattr(render_module, "CHUNK_RAYS", 97)
+    monkeypatch.setattr(tiles, "BLOCK_PATHS", 7)   # blocks of one pixel (4 samples each)
     assert np.array_equal(ptrace.render(scene, **kwargs), reference)
     embree = ptrace.render(scene, accel="embree", **kwargs)
     assert np.abs(embree - reference).mean() < 0.01 * reference.mean()
