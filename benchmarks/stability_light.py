@@ -15,10 +15,7 @@ includes the same sections (light_sections) in benchmarks/results/stability.md. 
 tests/ptrace/test_stability_light.py pins the claims of the report with the helpers below.
 """
 import argparse
-import contextlib
 import dataclasses
-import importlib
-import inspect
 import math
 import os
 import time
@@ -30,18 +27,19 @@ import numpy as np
 
 import accel
 import ptrace
-from ptrace import integrator
+from ptrace import integrator, tiles
 from ptrace.camera import Camera, course_camera
-from ptrace.render import LUMINANCE, camera_samples, make_tracer, trace_pixels
+from ptrace.integrator import LUMINANCE
 from ptrace.scene import (AREA, DIFFUSE, EMISSION, POINT, CameraSpec, Lights, Materials, Scene,
                           area_weighted_normals)
+from ptrace.settings import Settings
+from ptrace.tiles import TileWork, new_sums
 
 from . import report
 
 REPRODUCE = "python -m benchmarks.stability_light"
 REPRODUCE_ALL = "python -m benchmarks.stability"
 TEST = "tests/ptrace/test_stability_light.py"
-render_module = importlib.import_module("ptrace.render")   # ptrace.render is the function
 
 LIGHT_HEIGHT = 1.0        # the area light of the floor scenes, centred over the origin
 EYE_HEIGHT = 0.5          # the camera looks straight down from below the light
@@ -206,22 +204,27 @@ def reflector_reference(camera, side=1.0, light_side=0.2, radiance=25.0, n=32):
 
 
 # -- per-pixel sums and per-sample radiance, exactly as render() draws them --------------------
+def tile_work(scene, camera, spp, seed=0, **options):
+    """The TileWork render(scene, spp=spp, seed=seed, camera=camera, **options) runs (the bvh
+    backend, the path integrator): options are Settings' (max_depth, light_samples, hemisphere,
+    roulette, rr_cap, ...)."""
+    settings = Settings(spp=spp, accel="bvh", integrator="path", seed=seed, **options)
+    return TileWork(scene, accel.build(settings.accel, scene.geometry), settings, camera)
+
+
 def batch_sums(scene, camera, spp, step, seed=0, **options):
     """Trace `spp` samples per pixel in passes of `step`, as render() would; return the
     cumulative per-pixel (sum of illuminance, sum of its square, count) after each pass, as an
-    array (spp // step, 3, P) in render's pixel order, and the tracer (for rays_traced)."""
-    backend = accel.build("bvh", scene.geometry)
-    tracer = make_tracer(scene, backend, seed, "path", options)
+    array (spp // step, 3, P) in render's pixel order, and the TileWork (for rays_traced)."""
+    work = tile_work(scene, camera, spp, seed, **options)
     px, py = pixel_grid(camera)
-    n = px.size
-    sums = (np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros(n, dtype=np.int64))
-    where = np.arange(n)
+    sums = new_sums(px.size)
+    rows = np.arange(px.size)
     out = []
     for first in range(0, spp, step):
-        trace_pixels(tracer, camera, seed, camera.width, spp, px, py, first,
-                     min(step, spp - first), sums, where)
+        work.trace(px, py, first, min(step, spp - first), sums, rows)
         out.append(np.stack([sums[1], sums[2], sums[3].astype(np.float64)]))
-    return np.array(out), tracer
+    return np.array(out), work
 
 
 def pixel_stats(sums):
@@ -234,24 +237,17 @@ def pixel_stats(sums):
 
 def sample_radiance(scene, camera, spp, seed=0, **options):
     """Radiance of every sample, (P, spp, 3), pixels in render's order: the same samples
-    render(scene, spp=spp, seed=seed, camera=camera, ...) averages. Non-finite samples are 0."""
-    backend = accel.build("bvh", scene.geometry)
-    tracer = make_tracer(scene, backend, seed, "path", options)
+    render(scene, spp=spp, seed=seed, camera=camera, ...) averages. Non-finite samples are 0.
+    One pass of one sample per sample index: a pixel's sums of that pass are the sample's
+    radiance (zero, with count 0, if it was non-finite)."""
+    work = tile_work(scene, camera, spp, seed, **options)
     px, py = pixel_grid(camera)
+    rows = np.arange(px.size)
     out = np.zeros((px.size, spp, 3))
-    per_chunk = max(1, (render_module.CHUNK_RAYS // tracer.rays_per_path) // spp)
-    for first in range(0, px.size, per_chunk):
-        x, y = px[first:first + per_chunk], py[first:first + per_chunk]
-        n = x.size * spp
-        sx, sy = np.empty(n), np.empty(n)
-        camera_samples(seed, x, y, camera.width, 0, spp, spp, sx, sy)
-        directions = camera.directions(sx, sy)
-        rays = accel.Rays(np.broadcast_to(camera.position, directions.shape), directions,
-                          camera.znear, camera.zfar)
-        radiance = tracer.trace(np.repeat(y * camera.width + x, spp),
-                                np.tile(np.arange(spp), x.size), rays)
-        radiance[~np.isfinite(radiance).all(axis=1)] = 0.0
-        out[first:first + x.size] = radiance.reshape(x.size, spp, 3)
+    for sample in range(spp):
+        sums = new_sums(px.size)
+        work.trace(px, py, sample, 1, sums, rows)
+        out[:, sample] = sums[0]
     return out
 
 
@@ -406,7 +402,7 @@ def course_converged(sum_l, sum_l2, count, tolerance, batch):
     return 1.96 * np.sqrt(variance) / np.sqrt(n) <= tolerance * mean
 
 
-RULES = {"ptrace": lambda *a: render_module._converged(*a), "course": course_converged}
+RULES = {"ptrace": lambda *a: tiles.converged(*a), "course": course_converged}
 
 
 def simulate_adaptive(snapshots, step, batch, tolerance, rule):
@@ -501,7 +497,7 @@ def section_adaptive(quick, chart_dir):
          "render()'s pass schedule (the test after every pass but the last), which is exactly "
          "where an adaptive render with the same seed stops (the tests check the replay of "
          "ptrace's rule against `ptrace.render(..., adaptive=...)`). ptrace's rule is "
-         "`ptrace.render._converged` itself; the course's rule is 1.96 sigma / sqrt(n) <= "
+         "`ptrace.tiles.converged` itself; the course's rule is 1.96 sigma / sqrt(n) <= "
          "tol x mu with sigma = 0 allowed. A pixel is *falsely converged* if it stopped before "
          f"{spp} samples with its mean off the reference by more than 2 x tol x reference "
          "(twice what the rule's 95% interval promised); *false* is their fraction of all the "
@@ -565,49 +561,22 @@ def chart_adaptive(chart_dir, tables, batches):
 
 
 # -- 3. Russian roulette and depth; fireflies --------------------------------------------------
-ROULETTE_ARG = 19   # position of `roulette` in integrator.bounce's arguments
-_CAPPED_BOUNCE = []
+CAPS = (integrator.RR_CAP, 0.8, 0.5, 0.25)   # the continuation caps compared at m=100
 
 
-def capped_bounce():
-    """integrator.bounce with the cap as an argument (`rr_cap`, after `roulette`), compiled from
-    its source once (not parallel: compiling a parallel kernel takes minutes on 2 cores). numba
-    freezes module globals into a kernel when it compiles it, so assigning integrator.RR_CAP at
-    run time changes nothing (roulette_study checks it)."""
-    if not _CAPPED_BOUNCE:
-        source = inspect.getsource(integrator.bounce.py_func)
-        source = source[source.index("def bounce("):]
-        source = source.replace("roulette, out_origin", "roulette, rr_cap, out_origin", 1)
-        assert source.count("RR_CAP") == 2, "integrator.bounce changed: update capped_bounce"
-        source = source.replace("RR_CAP", "rr_cap").replace("prange(", "range(")
-        namespace = dict(vars(integrator))
-        exec(compile(source, "<capped bounce>", "exec"), namespace)
-        _CAPPED_BOUNCE.append(numba.njit(namespace["bounce"]))
-    return _CAPPED_BOUNCE[0]
-
-
-@contextlib.contextmanager
-def roulette(rule):
-    """rule None: ptrace as is; "off": no Russian roulette at all (paths run to max_depth);
-    a float: the continuation cap min(cap, max throughput) instead of RR_CAP. PathTracer calls
-    integrator.bounce through the module, so swapping the attribute reaches it."""
-    original = integrator.bounce
+def roulette_options(rule):
+    """render() options of a roulette rule. None: ptrace as is (the default cap,
+    ptrace.integrator.RR_CAP); "off": no Russian roulette at all (`roulette=False`: paths run to
+    max_depth); a float: continue with min(cap, max throughput) (`rr_cap=cap`). The cap is a
+    setting (ptrace.settings.Settings.rr_cap), passed to the compiled path loop with the other
+    options, so every rule runs the same kernel."""
     if rule is None:
-        yield
-        return
-    if rule == "off":
-        def bounce(*args):
-            return original(*args[:ROULETTE_ARG], False, *args[ROULETTE_ARG + 1:])
-    else:
-        kernel, cap = capped_bounce(), float(rule)
-
-        def bounce(*args):
-            return kernel(*args[:ROULETTE_ARG + 1], cap, *args[ROULETTE_ARG + 1:])
-    integrator.bounce = bounce
-    try:
-        yield
-    finally:
-        integrator.bounce = original
+        return {}
+    if isinstance(rule, str):
+        if rule != "off":
+            raise ValueError(f"unknown roulette rule {rule!r}: None, 'off' or a cap")
+        return dict(roulette=False)
+    return dict(rr_cap=float(rule))
 
 
 def unlit_by_camera(scene, camera, spp, seed=0):
@@ -618,13 +587,14 @@ def unlit_by_camera(scene, camera, spp, seed=0):
 
 def depth_run(scene, camera, spp, max_depth, rule=None, seed=0, mask=None):
     """Image mean illuminance, its standard error and relvar per sample over the pixels in mask
-    (default all), rays per sample and seconds of one render (light sampling, one sample)."""
+    (default all), rays per sample and seconds of one render (light sampling, one sample) under
+    a roulette rule (see roulette_options)."""
     start = time.perf_counter()
-    with roulette(rule):
-        sums, tracer = batch_sums(scene, camera, spp, spp, seed, max_depth=max_depth)
+    sums, work = batch_sums(scene, camera, spp, spp, seed, max_depth=max_depth,
+                            **roulette_options(rule))
     seconds = time.perf_counter() - start
     mean, variance = pixel_stats(sums[-1])
-    rays = tracer.rays_traced / (mean.size * spp)
+    rays = work.rays_traced / (mean.size * spp)
     if mask is not None:
         mean, variance = mean[mask], variance[mask]
     n_pixels = mean.size
@@ -634,7 +604,12 @@ def depth_run(scene, camera, spp, max_depth, rule=None, seed=0, mask=None):
                 rays=rays, seconds=seconds)
 
 
+def ptrace_rule_name(depth):
+    return f"RR (ptrace, cap {integrator.RR_CAP:g}), m={depth}"
+
+
 def roulette_study(quick):
+    """(runs by name, the cap runs by cap, size, spp, fraction of pixels kept)."""
     scene = ptrace.load(Path(__file__).resolve().parents[1] / "scenes" / "cornell.dae")
     size, spp = ((32, 24), 128) if quick else ((64, 48), 256)
     camera = small_course_camera(scene, *size)
@@ -642,26 +617,17 @@ def roulette_study(quick):
     runs = {}
     for depth in (1, 2, 4, 8, 16) if quick else (1, 2, 4, 8, 16, 32):
         runs[f"no RR, m={depth}"] = depth_run(scene, camera, spp, depth, "off", mask=mask)
-    runs["RR (ptrace, cap 0.95), m=100"] = depth_run(scene, camera, spp, 100, mask=mask)
-    runs["RR (ptrace, cap 0.95), m=5"] = depth_run(scene, camera, spp, 5, mask=mask)
-    if not quick:
-        capped_bounce()   # compile outside the timing
-        for cap in (0.95, 0.8, 0.5, 0.25):
-            runs[f"RR cap {cap} (serial copy), m=100"] = depth_run(scene, camera, spp, 100, cap,
-                                                                  mask=mask)
-    # numba froze RR_CAP into bounce: changing the module constant changes nothing
-    with_constant = depth_run(scene, camera, 4, 100)
-    saved = integrator.RR_CAP
-    integrator.RR_CAP = 0.1
-    try:
-        patched = depth_run(scene, camera, 4, 100)
-    finally:
-        integrator.RR_CAP = saved
-    return runs, size, spp, patched["mean"] == with_constant["mean"], float(mask.mean())
+    runs[ptrace_rule_name(100)] = depth_run(scene, camera, spp, 100, mask=mask)
+    runs[ptrace_rule_name(5)] = depth_run(scene, camera, spp, 5, mask=mask)
+    caps = {}
+    for cap in CAPS:   # the first is ptrace's default, given explicitly as rr_cap
+        caps[cap] = runs[f"RR cap {cap:g}, m=100"] = depth_run(scene, camera, spp, 100, cap,
+                                                               mask=mask)
+    return runs, caps, size, spp, float(mask.mean())
 
 
 def section_roulette(quick, chart_dir):
-    runs, size, spp, frozen, kept = roulette_study(quick)
+    runs, caps, size, spp, kept = roulette_study(quick)
     deepest = max((k for k in runs if k.startswith("no RR")), key=lambda k: int(k.split("=")[1]))
     ref = runs[deepest]
     rows = []
@@ -673,39 +639,43 @@ def section_roulette(quick, chart_dir):
         rows.append(f"| {name} | {r['mean']:.5f} | {r['stderr']:.5f} | {bias:+.2%} | "
                     f"{sigmas:+.1f} | {r['relvar']:.3f} | {r['rays']:.2f} | {r['seconds']:.1f} "
                     f"| {efficiency:.3f} |")
-    rr, rr5 = runs["RR (ptrace, cap 0.95), m=100"], runs["RR (ptrace, cap 0.95), m=5"]
+    rr, rr5 = runs[ptrace_rule_name(100)], runs[ptrace_rule_name(5)]
     m4, m8 = runs["no RR, m=4"], runs["no RR, m=8"]
     rr_sigma = (rr["mean"] - ref["mean"]) / math.hypot(rr["stderr"], ref["stderr"])
+    default_cap = integrator.RR_CAP
 
     def eff(r):
         return 1 / (r["relvar"] * r["rays"])
 
-    caps = {k: r for k, r in runs.items() if k.startswith("RR cap")}
-    copy = caps.get("RR cap 0.95 (serial copy), m=100")
-    if caps:
-        cap_text = (
-            " The caps were measured with a copy of `bounce` taking the cap as an argument "
-            "(`capped_bounce`, compiled serially, so its seconds are one thread's); at 0.95 it "
-            + ("reproduced ptrace's image mean exactly" if copy and copy["mean"] == rr["mean"]
-               else f"gave {copy['mean']:.5f} (ptrace {rr['mean']:.5f})" if copy else "")
-            + ". Efficiency by cap: " + ", ".join(
-                f"{k.split()[2]}: {eff(r):.3f} ({r['rays']:.2f} rays, relvar {r['relvar']:.3f})"
-                for k, r in caps.items()) + ".")
-        same = [k.split()[2] for k, r in caps.items() if r["mean"] == rr["mean"]
-                and r["relvar"] == rr["relvar"]]
-        if len(same) > 1:
-            cap_text += (
-                " Caps " + " and ".join(same) + " gave the same image: after a diffuse bounce "
-                "the throughput is multiplied by the albedo (at most 0.8 in this box) and "
-                "divided back to about 1 by the last q, so q = the albedo and a cap at or "
-                "above the largest albedo never binds (in this box, not even ptrace's 0.95); "
-                "the cap matters only after mirror or glass bounces or albedos above it, and "
-                "where it binds a lower cap trades variance for rays, as the lower caps show.")
-        else:
-            cap_text += " The lower the cap, the fewer rays and the more variance."
+    given = caps.get(default_cap)
+    cap_text = (
+        " The cap is a setting, `rr_cap` (`ptrace.render(..., rr_cap=...)`, "
+        f"`ptrace.Settings.rr_cap`; default `ptrace.integrator.RR_CAP` = {default_cap:g}), "
+        "passed to the compiled path loop with the other options, so every cap runs the same "
+        "kernel (the *RR cap c* rows: `rr_cap=c`, m=100)")
+    if given is not None:
+        same_bits = all(given[k] == rr[k] for k in ("mean", "stderr", "relvar", "rays"))
+        cap_text += (
+            f"; given explicitly, {default_cap:g} reproduced the default run to the bit (the "
+            "same mean, variance and rays)" if same_bits else
+            f"; GIVEN EXPLICITLY, {default_cap:g} DID NOT REPRODUCE the default run (mean "
+            f"{given['mean']:.5f} against {rr['mean']:.5f})")
+    cap_text += (". Efficiency by cap: " + ", ".join(
+        f"{cap:g}: {eff(r):.3f} ({r['rays']:.2f} rays, relvar {r['relvar']:.3f})"
+        for cap, r in caps.items()) + ".")
+    same = [f"{cap:g}" for cap, r in caps.items() if r["mean"] == rr["mean"]
+            and r["relvar"] == rr["relvar"]]
+    if len(same) > 1:
+        cap_text += (
+            " Caps " + " and ".join(same) + " gave the same image: after a diffuse bounce "
+            "the throughput is multiplied by the albedo (at most 0.8 in this box) and "
+            "divided back to about 1 by the last q, so q = the albedo and a cap at or "
+            f"above the largest albedo never binds (in this box, not even ptrace's "
+            f"{default_cap:g}); the cap matters only after mirror or glass bounces or albedos "
+            "above it, and where it binds a lower cap trades variance for rays, as the lower "
+            "caps show.")
     else:
-        cap_text = (" Other caps are measured only without --quick (they compile a copy of "
-                    "`bounce`).")
+        cap_text += " The lower the cap, the fewer rays and the more variance."
     chart = chart_roulette(chart_dir, runs, ref)
     return "\n".join([
         "## Russian roulette and path depth", "",
@@ -713,9 +683,10 @@ def section_roulette(quick, chart_dir):
          f"{size[0]}x{size[1]} pixels (the whole 800x600 view), {spp} samples per pixel, light "
          f"sampling with one light sample; figures over the {kept:.0%} of the pixels that "
          "never see the lamp directly (the lamp's edge pixels would swamp the variance). "
-         "*no RR, m=d*: Russian roulette disabled (every path runs to d vertices unless it "
-         "escapes the box); *RR*: ptrace as is, roulette from the second bounce with q = "
-         "min(cap, largest throughput channel), dividing by q. Every run has the same seed, so "
+         "*no RR, m=d*: Russian roulette disabled (`roulette=False`: every path runs to d "
+         "vertices unless it escapes the box); *RR*: ptrace as is, roulette from the second "
+         "bounce with q = min(cap, largest throughput channel), dividing by q; *RR cap c*: the "
+         "same with `rr_cap=c`. Every run has the same seed, so "
          "runs share their first vertices and differences of means are tighter than the "
          f"standard errors suggest. *bias* is against `{deepest}`; *sigmas* is that difference "
          "over the two standard errors combined. *relvar* as in the hemisphere section; *rays* "
@@ -732,22 +703,21 @@ def section_roulette(quick, chart_dir):
          "variance (a surviving path is divided by q), the more the lower the cap. ptrace's "
          "`-m` still bounds RR paths: with `m=5`, the course's usual setting, RR is biased "
          f"like a fixed depth ({(rr5['mean'] - ref['mean']) / ref['mean']:+.1%})."), "",
-        ("**What ptrace does.** q = min(0.95, largest throughput channel) from the second "
-         "bounce, dividing by q: unbiased. With m=100 its image mean was "
+        (f"**What ptrace does.** q = min({default_cap:g}, largest throughput channel) from the "
+         "second bounce, dividing by q: unbiased. With m=100 its image mean was "
          f"{rr['mean']:.5f} against {ref['mean']:.5f} for {deepest} ({rr_sigma:+.1f} sigmas), "
          f"at {rr['rays']:.2f} rays per sample against {ref['rays']:.2f} (efficiency "
-         f"{eff(rr):.3f} against {eff(ref):.3f}). The cap is `ptrace.integrator.RR_CAP`, frozen "
-         "into the compiled kernel: assigning the module constant at run time changed "
-         + ("nothing (the same image mean, to the bit)." if frozen
-            else "THE IMAGE (numba no longer freezes it?).")
-         + cap_text + " Pinned by "
+         f"{eff(rr):.3f} against {eff(ref):.3f})." + cap_text + " Pinned by "
          f"`{TEST}::test_roulette_is_unbiased` (the RR mean within 4 standard errors of m=16 "
          "without roulette, at under 0.8x its rays per sample), "
          "`::test_fixed_depth_without_roulette_is_biased_low` (means never fall with depth; "
-         "m=2 more than 10% darker than m=16), `::test_rr_cap_is_frozen_at_compile_time`, "
-         "`::test_capped_copy_of_bounce_reproduces_ptrace` (the copy at 0.95 gives ptrace's "
-         "image; at 0.25 it stays unbiased)."), "",
-        f"Reproduce: `{REPRODUCE}{' --quick' if quick else ''}` (or `{REPRODUCE_ALL}`).", ""])
+         "m=2 more than 10% darker than m=16), `::test_default_cap_is_integrator_rr_cap` (the "
+         "default image is the one with `rr_cap=ptrace.integrator.RR_CAP` given, bit for bit), "
+         "`::test_low_cap_changes_the_image_but_stays_unbiased` (cap 0.25 at m=100: another "
+         "image, its mean within 4 standard errors of m=16 without roulette) and "
+         "`::test_a_vanishing_cap_stops_every_path_at_the_second_bounce` (`rr_cap=1e-9` at "
+         "m=100 gives the m=2 image without roulette, bit for bit: an ignored cap fails it)."),
+        "", f"Reproduce: `{REPRODUCE}{' --quick' if quick else ''}` (or `{REPRODUCE_ALL}`).", ""])
 
 
 def chart_roulette(chart_dir, runs, ref):

@@ -15,7 +15,7 @@ import pytest
 import ptrace
 from benchmarks import stability_light as study
 from ptrace import integrator
-from ptrace.render import LUMINANCE
+from ptrace.integrator import LUMINANCE
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 SIZE = (16, 12)
@@ -151,26 +151,48 @@ def test_fixed_depth_without_roulette_is_biased_low(cornell):
     assert means[1] < 0.9 * means[-1]
 
 
-def test_rr_cap_is_frozen_at_compile_time(cornell, monkeypatch):
-    scene, camera, _ = cornell
-    kwargs = dict(camera=camera, resolution=SIZE, spp=2, max_depth=20)
-    before = ptrace.render(scene, **kwargs)
-    monkeypatch.setattr(integrator, "RR_CAP", 0.05)
-    np.testing.assert_array_equal(ptrace.render(scene, **kwargs), before)
+def test_default_cap_is_integrator_rr_cap(cornell):
+    """The cap is a setting whose default is ptrace.integrator.RR_CAP: giving that value
+    explicitly changes nothing, to the bit (through render() and through the study's runs)."""
+    scene, camera, mask = cornell
+    kwargs = dict(camera=camera, resolution=SIZE, spp=4, max_depth=100)
+    np.testing.assert_array_equal(ptrace.render(scene, rr_cap=integrator.RR_CAP, **kwargs),
+                                  ptrace.render(scene, **kwargs))
+    default = study.depth_run(scene, camera, 4, 100, mask=mask)
+    given = study.depth_run(scene, camera, 4, 100, integrator.RR_CAP, mask=mask)
+    assert {k: v for k, v in given.items() if k != "seconds"} == \
+        {k: v for k, v in default.items() if k != "seconds"}
 
 
 @pytest.mark.slow
-def test_capped_copy_of_bounce_reproduces_ptrace(cornell):
-    """The report's other caps come from a copy of bounce taking the cap as an argument: at
-    ptrace's cap it must give ptrace's image, and a low cap must stay unbiased."""
+def test_low_cap_changes_the_image_but_stays_unbiased(cornell):
+    """A cap that binds (0.25: below the box's albedos) gives another image, not ptrace's with
+    a new name, and roulette with it stays unbiased against a deep render without roulette."""
     scene, camera, mask = cornell
     kwargs = dict(camera=camera, resolution=SIZE, spp=8, max_depth=100)
-    ours = ptrace.render(scene, **kwargs)
-    with study.roulette(integrator.RR_CAP):
-        np.testing.assert_allclose(ptrace.render(scene, **kwargs), ours, rtol=1e-6, atol=1e-7)
+    assert not np.array_equal(ptrace.render(scene, rr_cap=0.25, **kwargs),
+                              ptrace.render(scene, **kwargs))
     low = study.depth_run(scene, camera, 64, 100, 0.25, mask=mask)
+    ours = study.depth_run(scene, camera, 64, 100, mask=mask)
     deep = study.depth_run(scene, camera, 64, 16, "off", mask=mask)
+    print(low, ours, deep)
+    assert low["mean"] != ours["mean"]
     assert abs(low["mean"] - deep["mean"]) < 4 * math.hypot(low["stderr"], deep["stderr"])
+
+
+def test_a_vanishing_cap_stops_every_path_at_the_second_bounce(cornell):
+    """Roulette from the second bounce continues with probability min(cap, throughput): with a
+    cap of 1e-9 no path survives it, so at m=100 every path ends where m=2 without roulette
+    ends it (the same vertices, the same random numbers): the same image and rays, to the bit.
+    A cap that did not reach the path loop would leave ptrace's m=100 image, far brighter."""
+    scene, camera, _ = cornell
+    kwargs = dict(camera=camera, resolution=SIZE, spp=4)
+    stats_cap, stats_m2 = {}, {}
+    capped = ptrace.render(scene, max_depth=100, rr_cap=1e-9, stats=stats_cap, **kwargs)
+    two = ptrace.render(scene, max_depth=2, roulette=False, stats=stats_m2, **kwargs)
+    np.testing.assert_array_equal(capped, two)
+    assert stats_cap["rays"] == stats_m2["rays"]
+    assert ptrace.render(scene, max_depth=100, **kwargs).mean() > 1.1 * two.mean()
 
 
 # -- fireflies -------------------------------------------------------------------------------------
