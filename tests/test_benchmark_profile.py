@@ -1,9 +1,11 @@
-"""The render profile benchmark in its quick mode: a table per command whose shares add up, the
-phases it names really reached, the wrapped functions put back, and images unchanged by it.
+"""The render profile benchmark: its helpers on tiny renders (the wall-time phases add up, the
+wrapper is put back, the counting face counts every ray and changes no pixel, the differencing
+rows add up), and a tiny quick run's report, with a failing embree backend skipped.
 
-The report goes to a temporary directory, never into benchmarks/results/.
+Reports go to a temporary directory, never into benchmarks/results/.
 """
-import importlib
+import pathlib
+import re
 
 import numba
 import numpy as np
@@ -11,105 +13,216 @@ import pytest
 
 import accel
 import ptrace
-import ptrace.camera
-import ptrace.integrator
-import ptrace.paths
-from benchmarks import profile_render, report
+import ptrace.tiles
+from benchmarks import profile_render as pr
+from benchmarks import report
 
-render_module = importlib.import_module("ptrace.render")   # ptrace.render is the function
-
-
-def patched_attributes():
-    """Every attribute the profiler replaces, with its current value."""
-    names = [(ptrace.integrator, n) for n in profile_render.integrator_kernels()]
-    names += [(ptrace.paths, "shading_normals"), (ptrace.paths, "normal_colours"),
-              (render_module, "camera_samples"), (render_module, "make_tracer"),
-              (accel, "build"), (ptrace.camera.Camera, "directions")]
-    return {(owner.__name__, name): getattr(owner, name) for owner, name in names}
+TINY = dict(spp=2, light_samples=2, max_depth=4, integrator="path", resolution=(24, 18))
+PIXELS = 24 * 18
+REPO = pathlib.Path(__file__).resolve().parents[1]
 
 
-def tables(text):
-    """{command: [(phase, calls, seconds, share)]} from the report's per-command sections."""
-    out = {}
-    for section in text.split("\n## ")[1:]:
-        title, _, body = section.partition("\n")
-        rows = [line.strip("|").split("|") for line in body.splitlines()
-                if line.startswith("| ") and not line.startswith("| phase")]
-        if body.count("| phase | calls | seconds | share of wall % |") == 1:
-            out[title] = [(p.strip(), c.strip(), float(s), float(sh)) for p, c, s, sh in rows]
-    return out
+@pytest.fixture(scope="module")
+def cow(course_scene):
+    return ptrace.load(course_scene("meshedit/cow.dae"))
 
 
-@pytest.mark.slow   # about 5 s on an idle machine; 40-70 s with the 2 cores shared or a cold cache
-def test_quick_profile_report(tmp_path, monkeypatch, scenes_dir):
-    monkeypatch.setenv("PTRACE_SCENES", str(scenes_dir))
-    monkeypatch.setattr(report, "RESULTS", tmp_path)
-    before = patched_attributes()
-    light_samples = ptrace.integrator.light_samples
-    threads = numba.get_num_threads()
-    try:
-        profile_render.main(["--quick", "--output", str(tmp_path / "p.md")])
-    finally:
-        numba.set_num_threads(threads)
-    assert ptrace.integrator.light_samples is light_samples
-    after = patched_attributes()
-    assert all(after[key] is value for key, value in before.items())
-    assert "light_samples" in profile_render.integrator_kernels()
-
-    text = (tmp_path / "p.md").read_text()
-    assert text.startswith("# ") and "- command: `" in text and "Method:" in text
-    by_command = tables(text)
-    assert set(by_command) == set(profile_render.COMMANDS)
-    for command, rows in by_command.items():
-        phases = {phase: (calls, seconds, share) for phase, calls, seconds, share in rows}
-        named = [share for phase, _, _, share in rows if phase != profile_render.GLUE]
-        assert profile_render.GLUE in phases and len(named) == len(rows) - 1, command
-        assert sum(named) <= 100 + 0.05 * len(named), command        # shares printed to 0.1
-        assert abs(sum(named) + phases[profile_render.GLUE][2] - 100) <= 1, command
-        assert [r[2] for r in rows] == sorted((r[2] for r in rows), reverse=True), command
-        # one camera intersect per chunk of camera rays, i.e. per camera_samples call
-        assert phases[profile_render.CAMERA_HIT][0] == phases["camera_samples kernel"][0]
-        assert phases[profile_render.BUILD][0] == "1"
-        section = text.split(f"## {command}\n", 1)[1].split("\n## ", 1)[0]
-        assert "profiled and un-profiled images identical" in section, command
-        assert "Three slowest parts:" in section
-        slowest = [line for line in section.splitlines() if line[:3] in ("1. ", "2. ", "3. ")]
-        assert len(slowest) == 3
-        assert all(line[3:].startswith(f"{r[0]}: ") for line, r in zip(slowest, rows)), command
-    for backend in ("bvh", "embree"):
-        cow = {phase: (seconds, share) for phase, _, seconds, share
-               in by_command[f"cow -s 64 -l 16 -m 6 ({backend})"]}
-        assert cow[profile_render.SHADOW_HIT][0] > 0 and cow[profile_render.SHADOW_HIT][1] > 0
-        assert cow[profile_render.BOUNCE_HIT][0] > 0
-    normals = {row[0] for row in by_command["cow normals -s 1 (bvh)"]}
-    assert "shading_normals kernel (normal shading)" in normals
-    assert profile_render.SHADOW_HIT not in normals and profile_render.BOUNCE_HIT not in normals
-    assert "## Traversal share by backend" in text
+def test_union_seconds():
+    assert pr.union_seconds([]) == 0
+    assert pr.union_seconds([(2.0, 3.0), (0.0, 1.0)]) == pytest.approx(2.0)
+    assert pr.union_seconds([(0.0, 1.0), (0.5, 2.0), (3.0, 4.0), (3.5, 3.6)]) == \
+        pytest.approx(3.0)
+    assert pr.union_seconds([(0.0, 5.0), (1.0, 2.0), (2.0, 6.0)]) == pytest.approx(6.0)
 
 
-def test_profiled_render_gives_the_same_image(course_scene):
-    scene = ptrace.load(course_scene("meshedit/cow.dae"))
-    options = dict(spp=2, light_samples=2, max_depth=3, resolution=(40, 30), threads=2)
-    for kind in ("bvh", "embree"):
-        plain = ptrace.render(scene, accel=kind, **options)
-        image, wall, profile = profile_render.profiled_render(scene, accel=kind, **options)
-        assert image.shape == (30, 40, 3) and np.abs(image).sum() > 0
-        assert np.array_equal(image, plain), kind
-        assert 0 < sum(profile.seconds.values()) <= wall
-        assert profile.calls[profile_render.SHADOW_HIT] > 0
+def test_wall_phases_add_up_to_the_wall_time(cow):
+    original = ptrace.tiles.render_pixels
+    plain = ptrace.render(cow, threads=2, accel="bvh", **TINY)
+    run = pr.timed_render(cow, 2, accel="bvh", **TINY)
+    assert ptrace.tiles.render_pixels is original
+    assert np.array_equal(run.image, plain)
+    phases = run.phases()
+    assert list(phases) == list(pr.WALL_PHASES)
+    assert sum(phases.values()) == pytest.approx(run.wall, rel=1e-9)
+    assert min(phases.values()) >= -1e-6, phases     # the calls lie inside the passes
+    assert run.calls == pr.planned_blocks(PIXELS, TINY["spp"]) == 1
+    assert 0 < run.thread_seconds <= 2 * run.span + 1e-6
+    assert run.rays > PIXELS * TINY["spp"]
 
 
-def test_wrappers_are_removed_when_the_render_fails(course_scene):
-    scene = ptrace.load(course_scene("meshedit/cow.dae"))
-    before = patched_attributes()
+def test_planned_blocks_match_the_calls_of_a_render(cow):
+    options = dict(TINY, spp=20, max_depth=1, resolution=(40, 30))   # passes of 16 and 4
+    run = pr.timed_render(cow, 2, accel="bvh", **options)
+    assert run.calls == pr.planned_blocks(1200, 20) == 19 + 5
+    assert 0 < run.busy <= 1 + 1e-6
 
-    def failing_kernel(*args):
+
+def test_the_wrapper_is_put_back_when_the_render_fails(cow, monkeypatch):
+    def failing(*args):
         raise RuntimeError("kernel failed")
 
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(ptrace.integrator, "bounce", failing_kernel)
-        before["ptrace.integrator", "bounce"] = failing_kernel
-        with pytest.raises(RuntimeError, match="kernel failed"):
-            profile_render.profiled_render(scene, spp=1, max_depth=2, resolution=(8, 6))
-        after = patched_attributes()
-        assert all(after[key] is value for key, value in before.items())
+    monkeypatch.setattr(ptrace.tiles, "render_pixels", failing)
+    with pytest.raises(RuntimeError, match="kernel failed"):
+        pr.timed_render(cow, 2, accel="bvh", **TINY)
+    assert ptrace.tiles.render_pixels is failing
+
+
+def cache_indexes():
+    """numba's cache index files of the library packages."""
+    return [p for package in ("ptrace", "accel")
+            for p in (REPO / package).rglob("*.nbi")]
+
+
+@pytest.mark.slow   # compiles the counting copy of the path loop: 10-30 s, once per process
+def test_the_counting_face_counts_every_ray_and_changes_no_pixel(cow):
+    stats = {}
+    options = dict(TINY, accel="bvh")
+    plain = ptrace.render(cow, threads=2, stats=stats, **options)
+    counter = pr.counting_plan(cow, options, stats["rays"])
+    saved = accel.build, ptrace.tiles.render_pixels, ptrace.tiles.new_scratch
+    run, backend = pr.counted_render(cow, 2, counter, **options)
+    assert (accel.build, ptrace.tiles.render_pixels, ptrace.tiles.new_scratch) == saved
+    assert np.array_equal(run.image, plain)
+    camera, bounce, shadow = counter.totals()
+    assert camera + bounce + shadow == stats["rays"] == run.rays
+    assert camera == PIXELS * TINY["spp"] and bounce > 0 and shadow > 0
+    assert counter.used == run.calls == 1
+    # one block: every ray was copied, camera rays from the eye with the camera's bounds
+    eye = ptrace.camera.course_camera(cow, 24, 18)
+    rays = [counter.captured(k) for k in range(3)]
+    assert [len(r) for r in rays] == [camera, bounce, shadow]
+    assert (rays[0].origins == eye.position).all()
+    assert (rays[0].tmin == eye.znear).all() and (rays[0].tmax == eye.zfar).all()
+    assert (rays[1].tmin == 0).all() and not (rays[1].origins == eye.position).all(axis=1).any()
+    # the loop-style replay asks the same questions as the batch face
+    for k in range(3):
+        array = pr.ray_array(rays[k])
+        scratch = accel.compiled.new_scratch(backend.compiled)
+        checksum = pr._replay(backend.compiled, scratch, array, 0, len(array), k == pr.SHADOW)
+        if k == pr.SHADOW:
+            assert checksum == backend.occluded(rays[k]).sum()
+        else:
+            hits = backend.intersect(rays[k])
+            assert checksum == hits.prim.sum() and (hits.prim >= 0).any()
+    # with -m 1 there are no bounce rays: every ray after the camera's is a shadow ray
+    stats = {}
+    one = dict(options, max_depth=1, spp=20, resolution=(40, 30))   # 24 blocks, 2 threads
+    ptrace.render(cow, threads=2, stats=stats, **one)
+    counter = pr.counting_plan(cow, one, stats["rays"])
+    run, _ = pr.counted_render(cow, 2, counter, **one)
+    assert counter.used == run.calls == pr.planned_blocks(1200, 20)
+    assert counter.totals() == (1200 * 20, 0, stats["rays"] - 1200 * 20)
+    # no numba cache index of the library names a type of the benchmark: a process that
+    # cannot import benchmarks/ would fail to read it
+    for index in cache_indexes():
+        data = index.read_bytes()
+        assert b"CountingRecord" not in data and b"profile_render" not in data, index
+
+
+def test_the_counting_face_refuses_a_render_with_more_blocks_than_rows():
+    counter = pr.RayCounter(np.zeros(3), blocks=4, capacity=[8, 8, 8], target=16)
+    assert counter.check() == 0
+    counter.used = counter.counts.shape[0]
+    with pytest.raises(RuntimeError, match="counts would race"):
+        counter.check()
+
+
+def test_the_differencing_rows_add_up():
+    loop = {"normals": 1.0, "m0": 1.5, "m1": 3.0, "full": 7.0}
+    rays = {"normals": 100, "m0": 100, "m1": 250, "full": 600}
+    est = pr.Estimate(counts=(100, 200, 300), replayed=(100, 200, 300),
+                      per_ray=(1e-3, 2e-3, 3e-3), batch_face=(None,) * 3,
+                      synthetic=(None,) * 3, run=None)
+    rows = pr.ladder_rows(loop, rays, est)
+    assert [r[1] for r in rows] == [100, 0, 150, 350, 600]
+    assert [r[2] for r in rows] == pytest.approx([1.0, 0.5, 1.5, 4.0, 7.0])
+    # camera rays; none; 150 first-vertex shadow rays; 200 bounce + 150 later shadow rays
+    assert [r[3] for r in rows] == pytest.approx([0.1, 0.0, 0.45, 0.85, 1.4])
+    assert rows[-1][3] == pytest.approx(est.traversal)
+    assert all(r[3] + r[4] == pytest.approx(r[2]) for r in rows)
+
+
+def table(section, first_header_cell):
+    """The rows (lists of cells) of the table whose header starts with first_header_cell."""
+    lines = section.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"| {first_header_cell}"))
+    rows = []
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
+
+
+def number(cell):
+    assert re.fullmatch(r"-?[0-9][0-9,]*(\.[0-9]+)?", cell), cell
+    return float(cell.replace(",", ""))
+
+
+@pytest.mark.slow   # a few seconds, and the counting copy of the loop compiled once per process
+def test_quick_report(tmp_path, monkeypatch, scenes_dir):
+    monkeypatch.setenv("PTRACE_SCENES", str(scenes_dir))
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
+    build = accel.build
+
+    def embree_fails(kind, geometry, **options):
+        if kind == "embree":
+            raise RuntimeError("embree is being rewritten")
+        return build(kind, geometry, **options)
+
+    monkeypatch.setattr(accel, "build", embree_fails)
+    names = ["cow -s 64 -l 16 -m 6 (bvh)", "cow -s 64 -l 16 -m 6 (embree)",
+             "cow normals -s 1 (bvh)"]
+    threads = numba.get_num_threads()
+    original = ptrace.tiles.render_pixels
+    path = pr.main(["--quick", "--resolution", "32x24", "--only", *names, "--output", "p.md"])
+    assert numba.get_num_threads() == threads and ptrace.tiles.render_pixels is original
+    assert accel.build is embree_fails
+    assert path == tmp_path / "p.md"
+    text = path.read_text()
+    assert text.startswith("# ") and "- command: `" in text and "Method." in text
+
+    summary = table(text.split("## Summary", 1)[1], "command")
+    assert [(row[0], row[1]) for row in summary] == [
+        ("cow -s 64 -l 16 -m 6", "bvh"), ("cow -s 64 -l 16 -m 6", "embree"),
+        ("cow normals -s 1", "bvh")]
+    assert summary[1][2] == "skipped"
+    embree = text.split("## cow -s 64 -l 16 -m 6 (embree)\n", 1)[1].split("\n## ", 1)[0]
+    assert 'Skipped: `accel="embree"` failed (RuntimeError: embree is being rewritten).' in embree
+
+    for name in (names[0], names[2]):
+        section = text.split(f"## {name}\n", 1)[1].split("\n## ", 1)[0]
+        assert "32x24" in section and "profiled and un-profiled images identical" in section
+        wall = table(section, "phase")
+        assert [row[0] for row in wall] == list(pr.WALL_PHASES) + [
+            "total: wall time of ptrace.render"]
+        seconds = [number(row[1]) for row in wall]
+        assert abs(sum(seconds[:-1]) - seconds[-1]) <= 0.0005 * len(seconds), name
+        assert abs(sum(number(row[2]) for row in wall[:-1]) - 100) <= 0.05 * len(wall), name
+        kinds = table(section, "ray kind")
+        assert [row[0] for row in kinds] == list(pr.KIND_LABELS)
+        counted = [number(row[1]) for row in kinds]
+        traced = re.search(r"Checks: counted rays ([0-9,]+) = rays traced ([0-9,]+);", section)
+        assert traced and number(traced[1]) == number(traced[2]) == sum(counted), name
+        assert "counting-face image identical" in section
+        slowest = [line for line in section.splitlines() if line[:3] in ("1. ", "2. ", "3. ")]
+        assert len(slowest) == 3 and all(re.search(r"\((measured|estimate)\)$", line)
+                                         for line in slowest), name
+        shares = [float(re.search(r", ([0-9.]+)% of wall", line)[1]) for line in slowest]
+        assert shares == sorted(shares, reverse=True)
+
+    full = text.split(f"## {names[0]}\n", 1)[1].split("\n## ", 1)[0]
+    loop = table(full, "part of the path loop")
+    assert len(loop) == len(pr.LADDER) + 1
+    assert [row[0] for row in loop[:-1]] == [label for _, label, _ in pr.LADDER]
+    parts = [number(row[2]) for row in loop]
+    assert abs(sum(parts[:-1]) - parts[-1]) <= 0.0005 * len(parts)
+    assert number(loop[1][1]) == 0 and number(loop[0][1]) == 32 * 24 * 4   # -s 64 / 16
+    assert sum(number(row[1]) for row in loop[:-1]) == number(loop[-1][1])
+    kinds = table(full, "ray kind")
+    assert sum(number(row[1]) for row in kinds) == number(loop[-1][1])
+    assert all(number(row[1]) > 0 for row in kinds)
+    normals = text.split(f"## {names[2]}\n", 1)[1].split("\n## ", 1)[0]
+    assert "part of the path loop" not in normals
+    kinds = table(normals, "ray kind")
+    assert number(kinds[0][1]) == 32 * 24 and number(kinds[1][1]) == number(kinds[2][1]) == 0
