@@ -70,7 +70,7 @@ def conductor_fresnel(eta, k, cos_i):
     return 0.5 * (rs + rp)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     if woz <= 0.0 or wiz <= 0.0:
         return 0.0, 0.0, 0.0
@@ -88,7 +88,7 @@ def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
             conductor_fresnel(eta[m, 2], k[m, 2], wiz) * scale)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
     if woz <= 0.0 or wiz <= 0.0:
         return 0.0
@@ -104,7 +104,7 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
 
 # -- the interface ---------------------------------------------------------------------------------
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters."""
     if kind == DIFFUSE:

@@ -18,7 +18,7 @@ def light_is_delta(kind):
     return kind == POINT or kind == DIRECTIONAL
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def sample_light(kind, radiance, position, direction, edge_x, edge_y, area, i,
                  px, py, pz, u1, u2):
     """Sample light i as seen from point p.

@@ -29,7 +29,7 @@ def _mix(z):
     return z ^ (z >> _S31)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def uniform(seed, pixel, sample, dimension):
     """A number in [0, 1) determined only by the four counters."""
     key = _mix(np.uint64(seed) * _K_SEED + _mix(np.uint64(pixel) * _K_PIXEL
