@@ -1,150 +1,359 @@
-"""The Embree backend: triangles through embreex (Intel Embree), spheres stay analytic.
+"""The Embree backend: triangles through Embree 4's C API, called from numba; spheres stay analytic.
 
-embreex facts this module works around (DESIGN.md):
-- float32 only: geometry and rays are rounded to float32, so hits can differ from ours in the
-  last bits of t, and a ray grazing an edge can go either way. Float32 keeps about 7 digits of
-  a coordinate, so geometry far from the origin loses its shape (the cow moved 1e4 away
-  disagreed with bvh on about a third of the rays). So the triangles are re-centred in float64
-  before rounding, on the per-axis median of the vertices, and each ray origin is moved by
-  the same offset (t is unchanged by a translation). The median, not the bounding box's
-  centre: a few far outliers move the box's centre away from where the triangles are, which
-  made a dense cluster with outliers 1e6 away disagree on a third or more of the rays (see
-  benchmarks/stability.py, which measures all of this).
-- no tnear: tmin is emulated by starting the ray at origin + tmin * direction and adding tmin
-  back to the hit distance.
-- an array passed as `dists` may be overwritten, so it is always a fresh array.
-- the scene is committed on the first run(), so the constructor runs one ray to commit it
-  before any thread shares the scene.
-- run() releases the GIL, so a batch is split across threads (numba's thread count).
-Spheres use the same analytic kernel as our backends and keep the nearer hit.
+Why the C API. embreex's Python `run()` answers a whole batch per call, on float32 copies of the
+rays made in Python, and those copies plus the call cost more than Embree's traversal itself;
+nor can compiled code reach it. Here numba code calls `rtcIntersect1` / `rtcOccluded1` once per
+ray, inside prange, so Embree is one more compiled face (accel.compiled): the batch face runs it
+over a batch, and the path tracer's one compiled loop calls it directly. The two functions are
+declared as numba ExternalFunctions taking pointers as integers (intp), resolved by name in the
+library loaded with llvmlite's `load_library_permanently`; code calling them stays cacheable
+(`cache=True`), which it would not be through ctypes function pointers (addresses baked in).
+
+The library is the libembree4 shipped inside the embreex wheel (embreex.libs/, found next to the
+installed embreex package); embreex's Python modules are not imported. The scene is built from
+Python through ctypes: the robust scene flag, one triangle geometry over shared float32 vertex
+(padded by 16 bytes, as Embree requires) and uint32 index buffers, kept alive by the accelerator
+and released with it (the record's scene handle is valid only while the accelerator lives).
+
+Float32. Embree computes in float32, and float32 keeps about 7 digits of a coordinate, so
+geometry far from the origin loses its shape (the cow moved far away disagreed with bvh on a large
+share of the rays). So the triangles are re-centred in float64 before rounding, on the per-axis
+median of the vertices, and each ray origin is moved by the same offset in float64 before
+rounding (t is unchanged by a translation). The median, not the bounding box's centre: a few far
+outliers move the box's centre away from where the triangles are, which made a dense cluster with
+far outliers disagree on a large share of the rays (benchmarks/stability.py measures all of this,
+through the `centre` method).
+
+Grazing hits. Embree's t is off by about a float32 ulp of the coordinates divided by the cosine
+between the ray and the triangle: large where a ray grazes a triangle (a surface ray meeting a
+nearby fold). There (cosine below GRAZING_COSINE, judged from Embree's own normal, so the other
+hits pay nothing) t, u, v are computed again in float64 on the triangle Embree found, with the
+other backends' kernel (accel.kernels). Which triangle is hit still carries float32 noise: a ray
+grazing an edge can go either way.
+
+Intervals are inclusive, tmin <= t <= tmax, with Embree's own tnear and tfar (tnear <= t <= tfar,
+inclusive too). Embree's t of a hit exactly at tmin can come out an ulp short, so tnear is tmin
+less about 8 float32 ulps and tfar is tmax rounded down; a reported t always lies inside
+[tmin, tmax]. Embree's segment cannot start behind the origin, so a negative tmin moves the origin
+back by tmin instead. A ray float32 cannot hold (zero direction, an overflowing coordinate)
+misses the triangles.
+
+Spheres are few and stay analytic (accel.kernels): after the triangle query they are folded in
+with tmax cut to the triangle hit, a tie going to the triangle (the lower id); sphere ids follow
+the triangles. A geometry without triangles has no Embree scene at all.
 """
+import ctypes
+import glob
+import importlib.util
+import os
 import time
-from concurrent.futures import ThreadPoolExecutor
+import weakref
+from collections import namedtuple
 
-import numba
 import numpy as np
-from embreex import mesh_construction, rtcore_scene
+from llvmlite import binding as llvm
+from numba import njit, types
 
-from .naive import _intersect_all, _occluded_all
+from . import compiled
+from .kernels import NO_HIT, spheres_any, spheres_closest, triangle_hit
 from .types import Hits
 
-MIN_CHUNK = 8192
+# -- the library ---------------------------------------------------------------------------------
+
+_PATTERNS = ("embreex.libs/libembree4*.so*", "embreex/.dylibs/libembree4*.dylib",
+             "embreex.libs/embree4*.dll")
+
+
+def find_library():
+    """Path of the libembree4 inside the embreex wheel; ImportError naming where it looked."""
+    spec = importlib.util.find_spec("embreex")
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError("accel.embree needs the libembree4 of the embreex wheel, but embreex "
+                          "is not installed (pip install embreex)")
+    places = sorted({os.path.dirname(os.path.abspath(p)) for p in spec.submodule_search_locations})
+    for place in places:
+        for pattern in _PATTERNS:
+            found = sorted(glob.glob(os.path.join(place, pattern)))
+            if found:
+                return found[-1]
+    raise ImportError(f"accel.embree: no libembree4 found in {', '.join(places)} "
+                      f"(looked for {', '.join(_PATTERNS)})")
+
+
+def _load(path):
+    try:
+        lib = ctypes.CDLL(path)
+    except OSError as error:
+        raise ImportError(f"accel.embree: cannot load {path}: {error}") from None
+    llvm.load_library_permanently(path)     # numba kernels resolve rtcIntersect1 etc. by name
+    handle, c_uint, c_size = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
+    prototypes = {
+        "rtcNewDevice": (handle, [ctypes.c_char_p]),
+        "rtcReleaseDevice": (None, [handle]),
+        "rtcGetDeviceError": (ctypes.c_int, [handle]),
+        "rtcNewScene": (handle, [handle]),
+        "rtcSetSceneFlags": (None, [handle, ctypes.c_int]),
+        "rtcCommitScene": (None, [handle]),
+        "rtcReleaseScene": (None, [handle]),
+        "rtcNewGeometry": (handle, [handle, ctypes.c_int]),
+        "rtcSetSharedGeometryBuffer": (None, [handle, ctypes.c_int, c_uint, ctypes.c_int,
+                                              handle, c_size, c_size, c_size]),
+        "rtcCommitGeometry": (None, [handle]),
+        "rtcAttachGeometry": (c_uint, [handle, handle]),
+        "rtcReleaseGeometry": (None, [handle]),
+    }
+    for name, (restype, argtypes) in prototypes.items():
+        function = getattr(lib, name)
+        function.restype, function.argtypes = restype, argtypes
+    if hasattr(lib, "rtcGetDeviceLastErrorMessage"):            # Embree 4.3 and later
+        lib.rtcGetDeviceLastErrorMessage.restype = ctypes.c_char_p
+        lib.rtcGetDeviceLastErrorMessage.argtypes = [handle]
+    return lib
+
+
+LIBRARY_PATH = find_library()
+_LIB = _load(LIBRARY_PATH)
+
+# enum values of embree4/rtcore_*.h
+RTC_GEOMETRY_TYPE_TRIANGLE = 0
+RTC_BUFFER_TYPE_INDEX = 0
+RTC_BUFFER_TYPE_VERTEX = 1
+RTC_FORMAT_UINT3 = 0x5003
+RTC_FORMAT_FLOAT3 = 0x9003
+RTC_SCENE_FLAG_ROBUST = 1 << 2
+RTC_INVALID_GEOMETRY_ID = 0xFFFFFFFF
+_ERRORS = {1: "unknown error", 2: "invalid argument", 3: "invalid operation",
+           4: "out of memory", 5: "unsupported CPU", 6: "cancelled"}
+
+# void rtcIntersect1(RTCScene, RTCRayHit*, RTCIntersectArguments*) and rtcOccluded1(RTCScene,
+# RTCRay*, RTCOccludedArguments*): every pointer passed as an integer (the same on x86-64)
+rtc_intersect1 = types.ExternalFunction("rtcIntersect1",
+                                        types.void(types.intp, types.intp, types.intp))
+rtc_occluded1 = types.ExternalFunction("rtcOccluded1",
+                                       types.void(types.intp, types.intp, types.intp))
+
+# -- the compiled face ---------------------------------------------------------------------------
+
+# scene: RTCScene handle (0: no triangles), valid while the accelerator lives; centre: the
+# re-centring offset; vertices, faces: the float64 triangles (for grazing hits; sphere ids start
+# at the number of faces)
+EmbreeRecord = namedtuple("EmbreeRecord", ["scene", "centre", "vertices", "faces", "centers",
+                                           "radii"])
+
+# RTCRayHit, in 4-byte words from its (16-byte aligned) start. RTCRay: org_x, org_y, org_z,
+# tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags (48 bytes); RTCHit at byte 48: Ng_x,
+# Ng_y, Ng_z, u, v, primID, geomID, instID[1], instPrimID[1] (Embree 4.3+), padded to 48 bytes.
+_TNEAR, _TIME, _TFAR, _MASK, _ID, _FLAGS = 3, 7, 8, 9, 10, 11
+_NG, _U, _V, _PRIM_ID, _GEOM_ID, _INST_ID, _INST_PRIM_ID = 12, 15, 16, 17, 18, 19, 20
+# Embree's t of a hit exactly at tmin can come out an ulp short: tnear sits this fraction (about
+# 8 float32 ulps) below tmin
+TNEAR_SLACK = 2.0 ** -20
+# a hit whose cosine to the triangle's normal is below this is computed again in float64
+GRAZING_COSINE = 0.1
+SCRATCH_FLOATS = 48      # 192 bytes: the 96-byte RTCRayHit at any 4-byte alignment, with room
+
+
+@njit(cache=True)
+def new_scratch(record):
+    """(floats, words, k, address): an RTCRayHit at floats[k:], 16-byte aligned at address."""
+    floats = np.zeros(SCRATCH_FLOATS, dtype=np.float32)
+    base = np.int64(floats.ctypes.data)
+    pad = (16 - base % 16) % 16
+    return floats, floats.view(np.uint32), pad // 4, base + pad
+
+
+@njit(cache=True, inline="always")
+def _round_down(x):
+    f = np.float32(x)
+    if f > x:
+        f = np.nextafter(f, np.float32(-np.inf))
+    return f
+
+
+@njit(cache=True, inline="always")
+def _set_ray(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Write the ray, in the re-centred frame, into the scratch's RTCRay. Returns (usable, shift):
+    shift is what to add to Embree's t (a negative tmin moves the origin back instead)."""
+    floats, words, k, address = scratch
+    shift = min(tmin, 0.0)
+    centre = record.centre
+    x = np.float32((ox - centre[0]) + shift * dx)
+    y = np.float32((oy - centre[1]) + shift * dy)
+    z = np.float32((oz - centre[2]) + shift * dz)
+    fx = np.float32(dx)
+    fy = np.float32(dy)
+    fz = np.float32(dz)
+    tnear = _round_down((tmin - shift) * (1.0 - TNEAR_SLACK))
+    tfar = _round_down(tmax - shift)
+    usable = (tnear <= tfar and np.isfinite(x) and np.isfinite(y) and np.isfinite(z)
+              and np.isfinite(fx) and np.isfinite(fy) and np.isfinite(fz)
+              and (fx != 0.0 or fy != 0.0 or fz != 0.0))
+    floats[k] = x
+    floats[k + 1] = y
+    floats[k + 2] = z
+    floats[k + _TNEAR] = tnear
+    floats[k + 4] = fx
+    floats[k + 5] = fy
+    floats[k + 6] = fz
+    floats[k + _TIME] = 0.0
+    floats[k + _TFAR] = tfar
+    words[k + _MASK] = np.uint32(0xFFFFFFFF)
+    words[k + _ID] = 0
+    words[k + _FLAGS] = 0
+    return usable, shift
+
+
+@njit(cache=True, inline="always")
+def _grazing(floats, k, dx, dy, dz):
+    """True if the ray meets the hit triangle (its normal Ng in the RTCHit) at a cosine below
+    GRAZING_COSINE."""
+    nx = np.float64(floats[k + _NG])
+    ny = np.float64(floats[k + _NG + 1])
+    nz = np.float64(floats[k + _NG + 2])
+    dot = nx * dx + ny * dy + nz * dz
+    return dot * dot < GRAZING_COSINE ** 2 * (nx * nx + ny * ny + nz * nz) * (dx * dx + dy * dy
+                                                                           + dz * dz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    best_t = tmax
+    best_prim = NO_HIT
+    best_u = 0.0
+    best_v = 0.0
+    if record.scene != 0:
+        usable, shift = _set_ray(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+        if usable:
+            floats, words, k, address = scratch
+            words[k + _GEOM_ID] = np.uint32(RTC_INVALID_GEOMETRY_ID)
+            words[k + _INST_ID] = np.uint32(RTC_INVALID_GEOMETRY_ID)
+            words[k + _INST_PRIM_ID] = np.uint32(RTC_INVALID_GEOMETRY_ID)
+            rtc_intersect1(record.scene, address, 0)
+            if words[k + _GEOM_ID] != np.uint32(RTC_INVALID_GEOMETRY_ID):
+                best_prim = np.int64(words[k + _PRIM_ID])
+                best_t = min(max(np.float64(floats[k + _TFAR]) + shift, tmin), tmax)
+                best_u = np.float64(floats[k + _U])
+                best_v = np.float64(floats[k + _V])
+                if _grazing(floats, k, dx, dy, dz):
+                    # float32's error in t is magnified by 1/cos here: t, u, v again in float64
+                    # on the triangle Embree found, if float64 sees that hit inside the interval
+                    t, u, v = triangle_hit(record.vertices, record.faces, best_prim, ox, oy, oz,
+                                           dx, dy, dz)
+                    if tmin <= t <= tmax:
+                        best_t, best_u, best_v = t, u, v
+    best_t, best_prim, best_u, best_v = spheres_closest(
+        record.centers, record.radii, record.faces.shape[0], ox, oy, oz, dx, dy, dz, tmin, best_t,
+        best_prim, best_u, best_v)
+    if best_prim == NO_HIT:
+        best_t = np.inf
+    return best_t, best_prim, best_u, best_v
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    if record.scene != 0:
+        usable, shift = _set_ray(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+        if usable:
+            floats, words, k, address = scratch
+            rtc_occluded1(record.scene, address, 0)
+            if floats[k + _TFAR] == -np.inf:       # Embree's signal for "occluded"
+                return True
+    return spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, tmin, tmax)
+
+
+compiled.register(EmbreeRecord, new_scratch, closest_hit, any_hit)
+
+# -- building ------------------------------------------------------------------------------------
+
+
+def _check(device, step):
+    error = _LIB.rtcGetDeviceError(device)
+    if error:
+        message = ""
+        if hasattr(_LIB, "rtcGetDeviceLastErrorMessage"):
+            message = (_LIB.rtcGetDeviceLastErrorMessage(device) or b"").decode(errors="replace")
+        raise RuntimeError(f"Embree failed at {step}: {_ERRORS.get(error, f'error {error}')}"
+                           + (f" ({message})" if message else ""))
+
+
+def _release(scene, device, *buffers):
+    """Release the Embree scene, then its device; the buffers it shared live until then."""
+    if scene:
+        _LIB.rtcReleaseScene(scene)
+    if device:
+        _LIB.rtcReleaseDevice(device)
+
+
+def _build_scene(vertices, indices):
+    """(device, scene) handles of a committed robust scene over shared float32 vertices (with the
+    16 bytes of padding) and uint32 (F, 3) indices."""
+    device = _LIB.rtcNewDevice(None)
+    if not device:
+        _check(None, "rtcNewDevice")
+        raise RuntimeError("Embree failed at rtcNewDevice")
+    scene = None
+    try:
+        scene = _LIB.rtcNewScene(device)
+        _check(device, "rtcNewScene")
+        _LIB.rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST)
+        geometry = _LIB.rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE)
+        _check(device, "rtcNewGeometry")
+        _LIB.rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                        vertices.ctypes.data, 0, 12, (vertices.size - 4) // 3)
+        _LIB.rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                        indices.ctypes.data, 0, 12, indices.shape[0])
+        _LIB.rtcCommitGeometry(geometry)
+        _LIB.rtcAttachGeometry(scene, geometry)
+        _LIB.rtcReleaseGeometry(geometry)
+        _LIB.rtcCommitScene(scene)
+        _check(device, "building the scene")
+    except BaseException:
+        _release(scene, device)
+        raise
+    return device, scene
 
 
 class EmbreeAccelerator:
     kind = "embree"
+    record_class = EmbreeRecord
 
     def __init__(self, geometry):
         self.geometry = geometry
         start = time.perf_counter()
-        self._scene = None
-        self._centre = np.zeros(3)
+        centre = np.asarray(self.centre(geometry), dtype=np.float64).reshape(3)
+        scene = 0
         if geometry.triangle_count:
-            self._centre = np.median(geometry.vertices, axis=0)
-            self._scene = rtcore_scene.EmbreeScene(robust=True)
-            mesh_construction.TriangleMesh(
-                self._scene, (geometry.vertices - self._centre).astype(np.float32),
-                geometry.faces.astype(np.int32))
-            one = np.zeros((1, 3), dtype=np.float32)
-            self._scene.run(one, one + np.float32(1.0), output=1)   # commit the scene now
-        self._no_faces = np.zeros((0, 3), dtype=np.int64)
-        self._pool, self._pool_size = None, 0
+            if geometry.vertices.shape[0] >= 2 ** 32:
+                raise ValueError("Embree's index buffer holds at most 2**32 - 1 vertices")
+            vertices = np.zeros(geometry.vertices.size + 4, dtype=np.float32)  # + 16 bytes
+            vertices[:-4] = (geometry.vertices - centre).reshape(-1)
+            indices = np.ascontiguousarray(geometry.faces, dtype=np.uint32)
+            device, scene = _build_scene(vertices, indices)
+            # the shared buffers are owned here and by the finalizer, which lets them go last
+            self._vertex_buffer, self._index_buffer = vertices, indices
+            self._finalizer = weakref.finalize(self, _release, scene, device, vertices, indices)
+        self.compiled = EmbreeRecord(np.int64(scene), centre, geometry.vertices, geometry.faces,
+                                     geometry.centers, geometry.radii)
         self._build_seconds = time.perf_counter() - start
 
-    # -- embree part ---------------------------------------------------------------------------
-    def _chunks(self, n):
-        threads = max(1, numba.get_num_threads())
-        count = max(1, min(threads, n // MIN_CHUNK))
-        bounds = np.linspace(0, n, count + 1).astype(np.int64)
-        return [(bounds[i], bounds[i + 1]) for i in range(count)]
+    def centre(self, geometry):
+        """The offset the triangles and ray origins are moved by before rounding to float32:
+        the per-axis median of the vertices (see the module docstring)."""
+        if geometry.vertices.shape[0] == 0:
+            return np.zeros(3)
+        return np.median(geometry.vertices, axis=0)
 
-    def _map(self, function, n):
-        chunks = self._chunks(n)
-        if len(chunks) == 1:
-            return [function(*chunks[0])]
-        # one pool per accelerator, not per call: this runs once per wave of rays
-        if self._pool is None or self._pool_size < len(chunks):
-            if self._pool is not None:
-                self._pool.shutdown()
-            self._pool, self._pool_size = ThreadPoolExecutor(len(chunks)), len(chunks)
-        return list(self._pool.map(lambda c: function(*c), chunks))
+    def __reduce__(self):
+        # Embree handles mean nothing in another process: a copy is rebuilt from the geometry
+        return type(self), (self.geometry,)
 
-    def _embree_rays(self, rays, a, b):
-        tmin = rays.tmin[a:b]
-        # in the re-centred frame of the triangles handed to Embree (see the module docstring)
-        origins = ((rays.origins[a:b] - self._centre)
-                   + tmin[:, None] * rays.directions[a:b]).astype(np.float32)
-        directions = rays.directions[a:b].astype(np.float32)
-        dists = (rays.tmax[a:b] - tmin).astype(np.float32)   # a fresh array each call
-        return origins, directions, dists
-
-    def _triangles_intersect(self, rays):
-        n = len(rays)
-        t = np.full(n, np.inf)
-        prim = np.full(n, -1, dtype=np.int64)
-        u = np.zeros(n)
-        v = np.zeros(n)
-        if self._scene is None or n == 0:
-            return t, prim, u, v
-
-        def run(a, b):
-            origins, directions, dists = self._embree_rays(rays, a, b)
-            out = self._scene.run(origins, directions, dists=dists, output=1)
-            hit = out["primID"] >= 0
-            t[a:b] = np.where(hit, out["tfar"].astype(np.float64) + rays.tmin[a:b], np.inf)
-            prim[a:b] = np.where(hit, out["primID"], -1)
-            u[a:b] = np.where(hit, out["u"], 0.0)
-            v[a:b] = np.where(hit, out["v"], 0.0)
-
-        self._map(run, n)
-        return t, prim, u, v
-
-    def _triangles_occluded(self, rays):
-        n = len(rays)
-        out = np.zeros(n, dtype=np.bool_)
-        if self._scene is None or n == 0:
-            return out
-
-        def run(a, b):
-            origins, directions, dists = self._embree_rays(rays, a, b)
-            answer = self._scene.run(origins, directions, dists=dists, query="OCCLUDED")
-            out[a:b] = answer == 0       # embreex: 0 occluded, -1 clear
-
-        self._map(run, n)
-        return out
-
-    # -- the interface -------------------------------------------------------------------------
     def intersect(self, rays):
         rays.validate()
-        t, prim, u, v = self._triangles_intersect(rays)
-        g = self.geometry
-        if g.sphere_count:
-            n = len(rays)
-            s_t = np.empty(n)
-            s_prim = np.empty(n, dtype=np.int64)
-            s_u = np.empty(n)
-            s_v = np.empty(n)
-            # spheres only, with tmax cut to the triangle hit; a tie goes to the triangle (lower id)
-            _intersect_all(g.vertices, self._no_faces, g.centers, g.radii, rays.origins,
-                           rays.directions, rays.tmin, np.minimum(rays.tmax, t),
-                           s_t, s_prim, s_u, s_v)
-            nearer = (s_prim >= 0) & (s_t < t)
-            t = np.where(nearer, s_t, t)
-            prim = np.where(nearer, s_prim + g.triangle_count, prim)
-            u = np.where(nearer, 0.0, u)
-            v = np.where(nearer, 0.0, v)
-        return Hits(t, prim, u, v)
+        return compiled.run_intersect(self.compiled, rays, Hits)
 
     def occluded(self, rays):
         rays.validate()
-        out = self._triangles_occluded(rays)
-        g = self.geometry
-        if g.sphere_count:
-            spheres = np.empty(len(rays), dtype=np.bool_)
-            _occluded_all(g.vertices, self._no_faces, g.centers, g.radii, rays.origins,
-                          rays.directions, rays.tmin, rays.tmax, spheres)
-            out |= spheres
-        return out
+        return compiled.run_occluded(self.compiled, rays)
 
     def stats(self):
         return {"kind": self.kind, "primitives": self.geometry.primitive_count,
