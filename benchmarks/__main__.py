@@ -31,7 +31,8 @@ from . import report
 
 ORDER = ["accel_rays", "first_images", "seed_commands", "mitsuba_reference", "stability"]
 NOT_BENCHMARKS = {"__main__", "report", "synthetic",
-                  "stability_light"}   # part of stability's report
+                  "stability_light",   # part of stability's report
+                  "side_by_side"}      # needs an older checkout to compare with
 
 
 def names():

@@ -1,9 +1,9 @@
 """What numba's on-disk cache holds, so a cold first run can say that it is compiling."""
 from .integrator import render_pixels
 
-# Measured on the 2-core development machine with an empty cache (benchmarks/first_images.py):
-# the README's render compiled for about this long before its first pass.
-COLD_COMPILE_SECONDS = 10
+# The README's render with an empty cache on the 2-core development machine spent about this long
+# compiling (benchmarks/results/first_images.md: cold wall minus warm wall).
+COLD_COMPILE_SECONDS = 35
 
 
 def is_cold(record_class, dispatcher=render_pixels):

@@ -15,7 +15,6 @@ import numpy as np
 from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
 from .errors import PtraceError
 from .executors import render_in_process
-from .integrator import LUMINANCE  # noqa: F401  (the luminance weights, for callers)
 from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums

@@ -16,7 +16,7 @@ from accel.compiled import new_scratch
 from .integrator import camera_record, render_pixels, scene_records
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
-BLOCK_PATHS = 1024       # (pixel, sample) pairs per kernel call (at least one pixel): Ctrl-C
+BLOCK_PATHS = 4096       # (pixel, sample) pairs per kernel call (at least one pixel): Ctrl-C
                          # and the progress bar act between calls; a call holds no memory that
                          # depends on -s, -l or -m (a path keeps its state in registers)
 

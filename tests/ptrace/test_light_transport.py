@@ -159,3 +159,33 @@ def test_non_finite_samples_are_counted_not_written():
     assert np.isfinite(image).all()
     assert stats["nonfinite"] == 8 * 8 * 2
     assert (stats["samples"] == 0).all()
+
+
+PEAK_MEMORY = """
+import resource, sys, ptrace
+scene = ptrace.load(sys.argv[1])
+before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+ptrace.render(scene, resolution=(32, 24), spp=int(sys.argv[2]), light_samples=int(sys.argv[3]),
+              max_depth=int(sys.argv[4]), roulette=False, threads=2)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)
+"""
+
+
+def test_memory_does_not_grow_with_samples_light_samples_or_depth():
+    """The README's memory promise: a path keeps its state in the compiled loop's locals, so
+    the peak memory of a render (beyond the scene, the accelerator and the per-pixel sums) does
+    not grow with -s, -l or -m. Measured as the growth of the process's peak RSS during a
+    render in a fresh process (the kernels come from numba's cache), small against large."""
+    import subprocess
+    import sys
+
+    def growth_kb(spp, light_samples, max_depth):
+        result = subprocess.run([sys.executable, "-c", PEAK_MEMORY, str(SHIPPED), str(spp),
+                                 str(light_samples), str(max_depth)], capture_output=True,
+                                text=True, timeout=600, check=True)
+        return int(result.stdout.split()[-1])
+
+    ptrace.render(ptrace.load(SHIPPED), resolution=(4, 3), max_depth=2)   # compile once, here
+    small = growth_kb(1, 1, 1)
+    large = growth_kb(8, 256, 6)   # up to 8 x 256 x 6 shadow rays per pixel
+    assert large - small < 16 * 1024, (small, large)
