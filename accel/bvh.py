@@ -35,8 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from . import compiled
-from .kernels import (NO_HIT, better, inverse_direction, near_columns, sphere_hit,
-                      stored_triangle_hit, triangle_edges)
+from .kernels import (NO_HIT, better, slab_setup, sphere_hit, stored_triangle_hit,
+                      triangle_edges)
 from .types import Hits
 
 STACK_SIZE = 128
@@ -337,10 +337,7 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
     centers, radii = record.centers, record.radii
     stack, counts, entry, entries = scratch
-    ix = inverse_direction(dx)
-    iy = inverse_direction(dy)
-    iz = inverse_direction(dz)
-    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
     best_t = hi
     best_prim = NO_HIT
     best_u = 0.0
@@ -406,10 +403,7 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
     centers, radii = record.centers, record.radii
     stack, counts, _, entries = scratch
-    ix = inverse_direction(dx)
-    iy = inverse_direction(dy)
-    iz = inverse_direction(dz)
-    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
     top = 0
     if nodes.shape[0] > 0:
         stack[0], counts[0] = 0, 0

@@ -137,6 +137,17 @@ def near_columns(ix, iy, iz):
 
 
 @njit(cache=True, inline="always")
+def slab_setup(dx, dy, dz):
+    """What a BVH traversal needs of a ray's direction: its inverse_direction() and the near and
+    far planes (near_columns)."""
+    ix = inverse_direction(dx)
+    iy = inverse_direction(dy)
+    iz = inverse_direction(dz)
+    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
+    return ix, iy, iz, nx, ny, nz, fx, fy, fz
+
+
+@njit(cache=True, inline="always")
 def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
     """triangle_hit_edges on row i of an array of triangle_edges rows."""
     return triangle_hit_edges(tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
