@@ -439,11 +439,13 @@ def false_convergence(mean, samples, spp, reference, tolerance):
 def adaptive_case(name, size, spp, seed=0):
     """(snapshots every 8 samples, reference per pixel, options) of one study scene."""
     camera = floor_camera(*size)
+    # the course's estimator and random numbers: the study is of the course's adaptive rule
+    course = dict(direct="light", sampler="independent")
     if name == "reflector":
-        options = dict(max_depth=2)
+        options = dict(max_depth=2, **course)
         scene, reference = reflector_scene(), reflector_reference(camera)
     else:   # "hemisphere" (-H) or "direct" (light sampling) under the 0.5-wide light
-        options = dict(max_depth=1, hemisphere=name == "hemisphere")
+        options = dict(max_depth=1, hemisphere=name == "hemisphere", **course)
         scene, reference = area_light_scene(0.5), direct_reference(camera, 0.5)
     snapshots, _ = batch_sums(scene, camera, spp, 8, seed, **options)
     return snapshots, reference, options

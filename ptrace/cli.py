@@ -57,7 +57,7 @@ def _positive_float(name):
 
 def build_parser():
     import accel
-    from .settings import INTEGRATORS
+    from .settings import DIRECT, INTEGRATORS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
     add = parser.add_argument
@@ -75,6 +75,12 @@ def build_parser():
         help="adaptive sampling: samples per batch and tolerance")
     add("-H", "--hemisphere", action="store_true",
         help="direct light by uniform hemisphere sampling instead of light sampling")
+    add("--direct", choices=DIRECT, default="mis",
+        help="direct light: mis (light samples and BSDF samples combined by multiple importance "
+             "sampling; default) or light (the course's light sampling alone)")
+    add("--sampler", choices=SAMPLERS, default="sobol",
+        help="random numbers: sobol (Owen-scrambled Sobol', stratified; default) or "
+             "independent (uniform, like the course)")
     add("-r", "--resolution", nargs=2, type=_positive_int("resolution"), metavar=("W", "H"),
         default=(800, 600), help="image size; keeps the focal length, so it crops (default 800 600)")
     add("-f", "--output", default=None, metavar="FILE",
@@ -193,7 +199,8 @@ def run(argv):
                        progress=not args.quiet and sys.stderr.isatty(), stats=stats,
                        client=client, light_samples=args.light_samples,
                        max_depth=args.max_depth, adaptive=args.adaptive,
-                       hemisphere=args.hemisphere, notice=None if args.quiet else _notice)
+                       hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
+                       notice=None if args.quiet else _notice)
         write_image(output, image)
         write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     finally:

@@ -3,11 +3,19 @@
 `render_pixels` runs on many small blocks of pixels at once; for every (pixel, sample) it
 makes the camera ray, intersects it through the accelerator's compiled face (accel.compiled:
 naive, bvh or embree, one specialisation of this kernel each), adds the emission it sees, and at
-each of up to max_depth vertices samples direct light (light sampling with shadow rays, or
-uniform hemisphere sampling with -H) unless the BSDF is delta, samples the BSDF, applies Russian
-roulette from the second bounce on, and traces the bounce ray; emission seen through a delta
-bounce is added too. No Python, no array and no kernel launch between bounces. The estimator is
-the course's (CS184.md 4.5-4.6) with the departures listed in the README.
+each of up to max_depth vertices samples direct light unless the BSDF is delta, samples the
+BSDF, applies Russian roulette from vertex rr_depth on, and traces the bounce ray. No Python, no
+array and no kernel launch between bounces.
+
+Direct light is estimated by multiple importance sampling (the default; pbrt-v4's and
+Mitsuba's path integrators do the same): -l samples of each light, and the BSDF sample that
+continues the path, each weighted by the power heuristic, so that emission a BSDF-sampled ray
+finds counts too (emission_found). With --direct light it is the course's estimator (CS184.md
+4.5-4.6): light samples alone, and a bounce ray's emission counts only after a delta bounce.
+-H is the course's uniform hemisphere sampling. The lights are the file's lights plus, as one
+more light, the emissive primitives that are not a file light's face (ptrace.lights). Random
+numbers come from the Sobol' sampler (stratified) or the independent one (ptrace.sampling).
+Departures from the course are listed in the README.
 
 Kernel state travels as a few named records (namedtuples of flat arrays and scalars, built once
 per scene by `scene_records`). Random numbers are keyed by (seed, pixel, sample, dimension), and
@@ -22,17 +30,21 @@ from numba import njit
 
 from accel.compiled import any_hit, closest_hit
 
-from .bsdf import bsdf_eval, bsdf_sample, is_delta, uniform_hemisphere
-from .lights import light_is_delta, sample_light
-from .sampling import uniform
-from .scene import EMISSION, GLASS, REFRACTION
+from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
+from .lights import EMITTER, area_light_hit, emitter_arrays, light_is_delta, sample_emitter, \
+    sample_light
+from .sampling import sobol_1d, sobol_2d, uniform
+from .scene import AMBIENT, AREA, EMISSION, GLASS, REFRACTION
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
+RR_DEPTH = 2            # default first vertex after whose BSDF sample roulette may end a path
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
+DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
+INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
@@ -40,11 +52,13 @@ SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii"
 MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance", "emission",
                                                "ior", "alpha", "eta", "k"])
 LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
-                                         "edge_y", "area"])
+                                         "edge_y", "area", "faced", "emitter_prims",
+                                         "emitter_cdf", "prim_pdf", "findable"])
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width"])
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
-                                 "hemisphere", "roulette", "rr_cap"])
+                                 "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
+                                 "sampler"])
 
 
 def _f64(array, shape_tail=None):
@@ -69,10 +83,16 @@ def scene_records(scene):
     materials = MaterialArrays(np.ascontiguousarray(m.kind, dtype=np.int64), _f64(m.albedo, (3,)),
                                _f64(m.transmittance, (3,)), _f64(m.emission, (3,)), _f64(m.ior),
                                _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)))
-    light_arrays = LightArrays(np.ascontiguousarray(lights.kind, dtype=np.int64),
-                               _f64(lights.radiance, (3,)), _f64(lights.position, (3,)),
-                               _f64(lights.direction, (3,)), _f64(lights.edge_x, (3,)),
-                               _f64(lights.edge_y, (3,)), _f64(lights.area))
+    faced, prims, cdf, prim_pdf = emitter_arrays(scene)
+    extra = 1 if prims.shape[0] else 0     # one more light: the emissive primitives
+    pad = lambda array: np.concatenate([_f64(array, array.shape[1:]),
+                                        np.zeros((extra,) + array.shape[1:])])
+    light_arrays = LightArrays(
+        np.concatenate([np.asarray(lights.kind, dtype=np.int64),
+                        np.full(extra, EMITTER, dtype=np.int64)]),
+        pad(lights.radiance), pad(lights.position), pad(lights.direction), pad(lights.edge_x),
+        pad(lights.edge_y), pad(lights.area), np.concatenate([faced, np.zeros(extra, np.int64)]),
+        prims, cdf, prim_pdf, bool(extra or np.isin(lights.kind, [AREA, AMBIENT]).any()))
     return shapes, materials, light_arrays
 
 
@@ -165,25 +185,56 @@ def spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def sample_1d(options, pixel, sample, index, key, dim):
+    """One number for (pixel, sample): the Sobol sampler's point `index` of dimension `key`, or
+    the independent sampler's hash of dimension `dim` (its numbers, bit for bit, are those of
+    the releases before the Sobol sampler)."""
+    if options.sampler == SOBOL:
+        return sobol_1d(options.seed, pixel, index, key)
+    return uniform(options.seed, pixel, sample, dim)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sample_2d(options, pixel, sample, index, key, dim):
+    """Two numbers for (pixel, sample), as sample_1d: a 2D Sobol point, or dims dim and dim + 1."""
+    if options.sampler == SOBOL:
+        return sobol_2d(options.seed, pixel, index, key)
+    return uniform(options.seed, pixel, sample, dim), uniform(options.seed, pixel, sample, dim + 1)
+
+
+@njit(cache=True, inline="always")
+def power_heuristic(pdf, other):
+    """The power heuristic's weight (beta 2) of a technique of density pdf against one of
+    density other, each density already multiplied by its number of samples."""
+    a, b = pdf * pdf, other * other
+    return a / (a + b) if a > 0.0 else 0.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
                  px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
                  woz, tr, tg, tb):
     """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
-    Light sampling: -l samples of each area or ambient light and one of each delta light, each
-    weighted L f cos / (n pdf) and kept if its shadow ray is clear (CS184.md 4.5). With -H:
-    -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the emission its
-    ray finds."""
-    seed = options.seed
+    Light sampling: -l samples of each area, ambient or emissive-geometry light and one of each
+    delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear (CS184.md
+    4.5); with multiple importance sampling each non-delta sample also carries its power
+    heuristic weight against the BSDF sample that trace_path takes next. With -H: -l uniform
+    hemisphere samples per light, each weighted f cos / (pdf n) times the emission its ray
+    finds."""
     kind = materials.kind[m]
+    base = vertex * DIMS_PER_VERTEX
     r = g = b = 0.0
     rays = 0
     if options.hemisphere:
-        count = lights.kind.shape[0] * options.light_samples
+        count = 0
+        for light in range(lights.kind.shape[0]):
+            count += lights.kind[light] != EMITTER
+        count = max(count, 1) * options.light_samples
         for j in range(count):
-            dim = vertex * DIMS_PER_VERTEX + DIM_LIGHT + 2 * j
-            lx, ly, lz = uniform_hemisphere(uniform(seed, pixel, sample, dim),
-                                            uniform(seed, pixel, sample, dim + 1))
+            u1, u2 = sample_2d(options, pixel, sample, sample * count + j, base + DIM_LIGHT,
+                               base + DIM_LIGHT + 2 * j)
+            lx, ly, lz = uniform_hemisphere(u1, u2)
             fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
                                    materials.k, m, wox, woy, woz, lx, ly, lz)
             scale = lz * 2.0 * math.pi / count
@@ -205,14 +256,25 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
         return r, g, b, rays
     j = 0
     for light in range(lights.kind.shape[0]):
-        count = 1 if light_is_delta(lights.kind[light]) else options.light_samples
+        light_kind = lights.kind[light]
+        delta = light_is_delta(light_kind)
+        count = 1 if delta else options.light_samples
         for s in range(count):
-            dim = vertex * DIMS_PER_VERTEX + DIM_LIGHT + 2 * j
+            index = sample * count + s
+            u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
+                               base + DIM_LIGHT + 2 * j)
+            if light_kind == EMITTER:
+                u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
+                               base + DIM_SELECT + j)
+                lr, lg, lb, wx, wy, wz, dist, pdf = sample_emitter(
+                    shapes.vertices, shapes.faces, shapes.centers, shapes.radii,
+                    materials.emission, shapes.material_index, lights.emitter_prims,
+                    lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
+            else:
+                lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
+                    light_kind, lights.radiance, lights.position, lights.direction,
+                    lights.edge_x, lights.edge_y, lights.area, light, px, py, pz, u1, u2)
             j += 1
-            lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
-                lights.kind[light], lights.radiance, lights.position, lights.direction,
-                lights.edge_x, lights.edge_y, lights.area, light, px, py, pz,
-                uniform(seed, pixel, sample, dim), uniform(seed, pixel, sample, dim + 1))
             if pdf < 1e-11:
                 continue
             wiz = wx * nx + wy * ny + wz * nz
@@ -223,8 +285,11 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
                                    materials.k, m, wox, woy, woz, wix, wiy, wiz)
             scale = wiz / (count * pdf)
+            if options.mis and not delta:
+                scale *= power_heuristic(count * pdf, bsdf_pdf(kind, materials.alpha, m, wox, woy,
+                                                               woz, wix, wiy, wiz))
             ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-            sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional light
+            sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional or ambient light
             if dist != math.inf:
                 # aim from the spawned origin at the light's point and stop just short of it:
                 # measured from the shading point instead, the spawn offset could carry the
@@ -246,10 +311,68 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, ox, oy, oz,
+                   dx, dy, dz, t, prim, m, gx, gy, gz):
+    """Emission a bounce ray from q (spawned at o, unit direction d, closest hit at t on prim,
+    material m) finds, as (r, g, b), before the throughput.
+
+    After a delta bounce (mirror, glass), which light sampling cannot follow, everything it
+    sees counts whole: emissive geometry (a light's face included), area lights without a face,
+    and the ambient light if it escapes. After a non-delta bounce, only with multiple importance
+    sampling: the area lights (faced or not; the face itself then does not count again), the
+    ambient light and the emissive primitives that are lights, each with its power heuristic
+    weight against the light sampling that direct_light did at q (bsdf_pdf_ is this ray's
+    density). Area lights are transparent, as in the course: a ray passes on through them."""
+    r = g = b = 0.0
+    kinds = lights.kind
+    n = options.light_samples
+    for light in range(kinds.shape[0]):
+        kind = kinds[light]
+        if kind == AREA:
+            if delta and lights.faced[light]:
+                continue
+            t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
+                                     lights.edge_y, light, ox, oy, oz, dx, dy, dz)
+            if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
+                continue
+            weight = 1.0
+            if not delta:
+                hx, hy, hz = ox + t_light * dx - qx, oy + t_light * dy - qy, oz + t_light * dz - qz
+                dist2 = hx * hx + hy * hy + hz * hz
+                cos_light = -(dx * lights.direction[light, 0] + dy * lights.direction[light, 1]
+                              + dz * lights.direction[light, 2])
+                weight = power_heuristic(bsdf_pdf_, n * dist2 / (lights.area[light] * cos_light))
+            r += weight * lights.radiance[light, 0]
+            g += weight * lights.radiance[light, 1]
+            b += weight * lights.radiance[light, 2]
+        elif kind == AMBIENT and prim < 0 and dy > 0.0:
+            weight = 1.0 if delta else power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
+            r += weight * lights.radiance[light, 0]
+            g += weight * lights.radiance[light, 1]
+            b += weight * lights.radiance[light, 2]
+    if m >= 0 and materials.kind[m] == EMISSION:
+        weight = 1.0
+        if not delta:
+            area_pdf = lights.prim_pdf[prim]
+            if area_pdf == 0.0:
+                return r, g, b       # a light's face: its light was counted above
+            hx, hy, hz = ox + t * dx - qx, oy + t * dy - qy, oz + t * dz - qz
+            cos_light = abs(dx * gx + dy * gy + dz * gz)
+            if cos_light == 0.0:
+                return r, g, b
+            weight = power_heuristic(
+                bsdf_pdf_, n * area_pdf * (hx * hx + hy * hy + hz * hz) / cos_light)
+        r += weight * materials.emission[m, 0]
+        g += weight * materials.emission[m, 1]
+        b += weight * materials.emission[m, 2]
+    return r, g, b
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def trace_path(shapes, materials, lights, options, record, scratch, pixel, sample, ox, oy, oz,
                dx, dy, dz, tmin, tmax):
     """Radiance of one camera path and the number of rays it traced."""
-    kinds, seed = materials.kind, options.seed
+    kinds = materials.kind
     rays = 1
     t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
     m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx, dy, dz,
@@ -261,6 +384,9 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         r, g, b = materials.emission[m, 0], materials.emission[m, 1], materials.emission[m, 2]
     tr = tg = tb = 1.0
     lit = lights.kind.shape[0] > 0
+    # multiple importance sampling needs a light that BSDF-sampled rays can find (not only
+    # point and directional lights)
+    mis = options.mis and not options.hemisphere and lights.findable
     for vertex in range(1, options.max_depth + 1):
         # the shading frame (x, y, n) and wo in it; every variable is assigned on every path
         # (in an earlier wavefront kernel a frame set only under an `if` was undefined when
@@ -270,7 +396,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         woy = -dx * yx - dy * yy - dz * yz
         woz = -dx * nx - dy * ny - dz * nz
         kind = kinds[m]
-        if lit and kind != EMISSION and not is_delta(kind):
+        delta = is_delta(kind)
+        if lit and kind != EMISSION and not delta:
             lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
                                          pixel, sample, vertex, m, px, py, pz, gx, gy, gz,
                                          offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
@@ -279,23 +406,25 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
             g += lg
             b += lb
             rays += n
-        if vertex == options.max_depth:
+        # at the last vertex only multiple importance sampling traces the BSDF's ray: for the
+        # light it finds, the other half of the direct light just sampled
+        if vertex == options.max_depth and (delta or not mis):
             break
         base = vertex * DIMS_PER_VERTEX
+        u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
+        u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
         wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
             kind, materials.albedo, materials.transmittance, materials.ior, materials.alpha,
-            materials.eta, materials.k, m, wox, woy, woz, uniform(seed, pixel, sample, base + DIM_BSDF),
-            uniform(seed, pixel, sample, base + DIM_BSDF + 1),
-            uniform(seed, pixel, sample, base + DIM_GLASS))
+            materials.eta, materials.k, m, wox, woy, woz, u1, u2, u3)
         if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
             break
         weight = abs(wiz) / pdf
         tr *= fr * weight
         tg *= fg * weight
         tb *= fb * weight
-        if options.roulette and vertex >= 2:
+        if options.roulette and vertex >= options.rr_depth:
             q = min(options.rr_cap, max(tr, tg, tb))
-            if not uniform(seed, pixel, sample, base + DIM_RR) < q:
+            if not sample_1d(options, pixel, sample, sample, base + DIM_RR, base + DIM_RR) < q:
                 break
             tr /= q
             tg /= q
@@ -305,17 +434,20 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         wz = wix * xz + wiy * yz + wiz * nz
         length = math.sqrt(wx * wx + wy * wy + wz * wz)
         dx, dy, dz = wx / length, wy / length, wz / length
+        qx, qy, qz = px, py, pz
         ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
         rays += 1
         t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
         m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
                                                                 dy, dz, t, prim, u, v)
-        if m < 0:
+        if delta or mis:
+            er, eg, eb = emission_found(shapes, materials, lights, options, delta, pdf, qx, qy,
+                                        qz, ox, oy, oz, dx, dy, dz, t, prim, m, gx, gy, gz)
+            r += tr * er
+            g += tg * eg
+            b += tb * eb
+        if m < 0 or vertex == options.max_depth:
             break
-        if kinds[m] == EMISSION and is_delta(kind):   # light sampling cannot see it
-            r += tr * materials.emission[m, 0]
-            g += tg * materials.emission[m, 1]
-            b += tb * materials.emission[m, 2]
     return r, g, b, rays
 
 
@@ -342,16 +474,17 @@ def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
 
 
-@njit(cache=True)
-def camera_ray(camera, seed, spp, pixel_x, pixel_y, pixel, sample):
+@njit(cache=True, _nrt=False, forceinline=True)
+def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
     """Direction (unit) of a camera ray through the pixel: its centre when spp is 1, else a
-    uniform jitter (CS184.md 4.1). (x - W/2) / screen_dist rather than (2u - 1) tan(hfov/2):
+    jitter uniform over the pixel (CS184.md 4.1; stratified over the pixel's samples by the
+    Sobol sampler). (x - W/2) / screen_dist rather than (2u - 1) tan(hfov/2):
     a pixel of a W x H window gets bit-identical rays to the same pixel of the 800 x 600 view."""
-    if spp == 1:
+    if options.spp == 1:
         sx, sy = pixel_x + 0.5, pixel_y + 0.5
     else:
-        sx = pixel_x + uniform(seed, pixel, sample, 0)
-        sy = pixel_y + uniform(seed, pixel, sample, 1)
+        jx, jy = sample_2d(options, pixel, sample, sample, 0, 0)
+        sx, sy = pixel_x + jx, pixel_y + jy
     sx = (sx - camera.half_width) / camera.screen_dist
     sy = (sy - camera.half_height) / camera.screen_dist
     m = camera.to_world
@@ -377,7 +510,7 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
     each call between them increfs and decrefs the ~30 arrays of the records, atomically, once
     per path and per vertex."""
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
-    seed, width = options.seed, camera.width
+    width = camera.width
     cx, cy, cz = camera.position[0], camera.position[1], camera.position[2]
     dropped = 0
     rays = 0
@@ -386,8 +519,7 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
         r = g = b = lum = lum2 = 0.0
         n = 0
         for sample in range(first_sample, first_sample + pass_n):
-            dx, dy, dz = camera_ray(camera, seed, options.spp, pixel_x[k], pixel_y[k], pixel,
-                                    sample)
+            dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel, sample)
             if options.mode == NORMALS:
                 x, y, z = normal_colour(shapes, record, scratch, cx, cy, cz, dx, dy, dz,
                                         camera.znear, camera.zfar)

@@ -1,11 +1,16 @@
-"""Light sampling, sample_L of CS184.md 4.4, as a numba function of one light index.
+"""Lights: the file's lights (sample_light, sample_L of CS184.md 4.4, as a numba function of one
+light index) and emissive geometry as one more light (emitter_arrays, sample_emitter).
 
 The course applies no distance falloff to point and directional lights (their colour is used as
 the radiance reaching every point): ptrace keeps that so course scenes look as the course made
 them. Spot lights are parsed and, like the course's Sp19 stub, contribute nothing.
+Emissive primitives are a light of their own unless they are a file light's visible face
+(_face_of); the course samples only its <light>s, so a scene lit by emissive geometry alone
+is black there.
 """
 import math
 
+import numpy as np
 from numba import njit
 
 from .scene import AMBIENT, AREA, DIRECTIONAL, POINT
@@ -61,3 +66,176 @@ def sample_light(kind, radiance, position, direction, edge_x, edge_y, area, i,
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], r * math.cos(phi), y, \
             r * math.sin(phi), INF, 1.0 / (2.0 * math.pi)
     return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0   # spot: nothing, like the course
+
+
+# -- emissive geometry as a light ------------------------------------------------------------------
+
+EMITTER = 5      # not a file's light kind: the integrator's one light over emissive primitives
+PAIR_TOLERANCE = 1e-4   # relative to the emitter group's size: "lies on the light"
+
+
+def _emitter_groups(scene):
+    """{material: primitive ids} of the emissive materials that primitives use."""
+    from .scene import EMISSION
+    index = np.asarray(scene.material_index)
+    return {int(m): np.nonzero(index == m)[0]
+            for m in np.unique(index) if scene.materials.kind[m] == EMISSION}
+
+
+def _face_of(scene, prims, lights):
+    """The file light whose visible face these emissive primitives are, or -1.
+
+    The course's Cornell-box files lay an emissive quad exactly in the plane of their area light
+    (CS184.md 1.6; in CBempty on the point light): the quad is what the camera and mirrors see of
+    the light, not a second light. A group of emissive triangles is a light's face when it is
+    planar, the light's centre (or point) lies in its plane and inside its bounding box, and an
+    area light faces along the group's normal."""
+    from .scene import AREA, POINT
+    g = scene.geometry
+    if prims.size == 0 or prims.max() >= g.triangle_count:
+        return -1          # spheres are never a face
+    corners = g.vertices[g.faces[prims]].reshape(-1, 3)
+    lower, upper = corners.min(axis=0), corners.max(axis=0)
+    tolerance = PAIR_TOLERANCE * max(float(np.linalg.norm(upper - lower)), 1e-300)
+    a, b, c = (g.vertices[g.faces[prims[0], k]] for k in range(3))
+    normal = np.cross(b - a, c - a)
+    length = np.linalg.norm(normal)
+    if length == 0.0:
+        return -1
+    normal = normal / length
+    if np.abs((corners - a) @ normal).max() > tolerance:
+        return -1          # not planar
+    for i in range(len(lights)):
+        if lights.kind[i] not in (AREA, POINT):
+            continue
+        p = lights.position[i]
+        if abs(float((p - a) @ normal)) > tolerance:
+            continue
+        if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):
+            continue
+        if lights.kind[i] == AREA and abs(float(lights.direction[i] @ normal)) < 0.99:
+            continue
+        return i
+    return -1
+
+
+def emitter_arrays(scene):
+    """What the integrator needs to treat emissive geometry as a light.
+
+    Returns (faced (L,) int64: 1 where a file light has an emissive face, prims (E,) int64: the
+    emissive primitives that are no light's face, cdf (E,) float64: their cumulative selection
+    probability (by power, area times mean emission), prim_pdf (F + S,) float64: selection
+    probability over area for those primitives, 0 elsewhere: the area density of sampling a
+    point there)."""
+    g, lights = scene.geometry, scene.lights
+    faced = np.zeros(len(lights), dtype=np.int64)
+    sampled = []
+    for m, prims in _emitter_groups(scene).items():
+        face = _face_of(scene, prims, lights)
+        if face >= 0:
+            faced[face] = 1
+        else:
+            sampled.append(prims)
+    prim_pdf = np.zeros(g.triangle_count + g.sphere_count)
+    if not sampled:
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf
+    prims = np.sort(np.concatenate(sampled)).astype(np.int64)
+    areas = np.empty(prims.shape[0])
+    triangles = prims < g.triangle_count
+    corners = g.vertices[g.faces[prims[triangles]]]
+    areas[triangles] = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    radii = g.radii[prims[~triangles] - g.triangle_count]
+    areas[~triangles] = 4.0 * np.pi * radii ** 2
+    emission = scene.materials.emission[scene.material_index[prims]].mean(axis=1)
+    power = areas * np.maximum(emission, 0.0)
+    total = power.sum()
+    if not total > 0.0:
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf
+    probability = power / total
+    cdf = np.cumsum(probability)
+    cdf[-1] = 1.0
+    nonzero = areas > 0.0
+    prim_pdf[prims[nonzero]] = probability[nonzero] / areas[nonzero]
+    return faced, prims, cdf, prim_pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sample_emitter(vertices, faces, centers, radii, emission, material_index, prims, cdf,
+                   prim_pdf, px, py, pz, u0, u1, u2):
+    """A point on the emissive primitives, chosen by power (u0) and uniformly by area (u1, u2),
+    as seen from p: (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per unit solid angle). Emission is
+    two-sided, like the course's."""
+    lo, hi = 0, prims.shape[0] - 1
+    while lo < hi:        # the first k with u0 < cdf[k]
+        mid = (lo + hi) // 2
+        if u0 < cdf[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    prim = prims[lo]
+    n_tri = faces.shape[0]
+    if prim < n_tri:
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        root = math.sqrt(u1)
+        wa, wb, wc = 1.0 - root, root * (1.0 - u2), root * u2
+        qx = wa * vertices[a, 0] + wb * vertices[b, 0] + wc * vertices[c, 0]
+        qy = wa * vertices[a, 1] + wb * vertices[b, 1] + wc * vertices[c, 1]
+        qz = wa * vertices[a, 2] + wb * vertices[b, 2] + wc * vertices[c, 2]
+        e1x, e1y, e1z = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1],
+                         vertices[b, 2] - vertices[a, 2])
+        e2x, e2y, e2z = (vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1],
+                         vertices[c, 2] - vertices[a, 2])
+        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        length = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if length == 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        nx, ny, nz = nx / length, ny / length, nz / length
+    else:
+        s = prim - n_tri
+        nz = 1.0 - 2.0 * u1
+        ring = math.sqrt(max(0.0, 1.0 - nz * nz))
+        phi = 2.0 * math.pi * u2
+        nx, ny = ring * math.cos(phi), ring * math.sin(phi)
+        qx = centers[s, 0] + radii[s] * nx
+        qy = centers[s, 1] + radii[s] * ny
+        qz = centers[s, 2] + radii[s] * nz
+    dx, dy, dz = qx - px, qy - py, qz - pz
+    dist2 = dx * dx + dy * dy + dz * dz
+    dist = math.sqrt(dist2)
+    if dist == 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    wx, wy, wz = dx / dist, dy / dist, dz / dist
+    cos_light = abs(wx * nx + wy * ny + wz * nz)
+    if cos_light == 0.0:
+        return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
+    m = material_index[prim]
+    return emission[m, 0], emission[m, 1], emission[m, 2], wx, wy, wz, dist, \
+        prim_pdf[prim] * dist2 / cos_light
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def area_light_hit(position, direction, edge_x, edge_y, i, ox, oy, oz, dx, dy, dz):
+    """Distance along the ray to area light i's front face (inf if the ray misses it): the
+    rectangle position + s E_x + t E_y, |s|, |t| <= 1/2, that sample_light draws from."""
+    nx, ny, nz = direction[i, 0], direction[i, 1], direction[i, 2]
+    facing = dx * nx + dy * ny + dz * nz
+    if facing >= 0.0:          # behind the one-sided light, or along it
+        return INF
+    cx, cy, cz = position[i, 0] - ox, position[i, 1] - oy, position[i, 2] - oz
+    t = (cx * nx + cy * ny + cz * nz) / facing
+    if not t > 0.0:
+        return INF
+    qx, qy, qz = t * dx - cx, t * dy - cy, t * dz - cz     # the hit point, from the centre
+    ax, ay, az = edge_x[i, 0], edge_x[i, 1], edge_x[i, 2]
+    bx, by, bz = edge_y[i, 0], edge_y[i, 1], edge_y[i, 2]
+    aa, ab, bb = ax * ax + ay * ay + az * az, ax * bx + ay * by + az * bz, bx * bx + by * by + bz * bz
+    qa, qb = qx * ax + qy * ay + qz * az, qx * bx + qy * by + qz * bz
+    det = aa * bb - ab * ab
+    if det <= 0.0:
+        return INF
+    s = (qa * bb - qb * ab) / det
+    r = (qb * aa - qa * ab) / det
+    if abs(s) <= 0.5 and abs(r) <= 0.5:
+        return t
+    return INF

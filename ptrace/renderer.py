@@ -33,9 +33,11 @@ def _check_frame(width, height, crop):
 def scene_warnings(scene, settings):
     """What a user should hear about this scene and these settings before a render."""
     out = []
-    if settings.integrator == "path" and settings.hemisphere and settings.max_depth >= 1:
-        emitters = np.isin(scene.material_index,
-                           np.nonzero(scene.materials.kind == EMISSION)[0]).any()
+    emitters = np.isin(scene.material_index,
+                       np.nonzero(scene.materials.kind == EMISSION)[0]).any()
+    if settings.integrator == "path" and not emitters and len(scene.lights) == 0:
+        out.append("the scene has no light and no emissive surface: the image will be black")
+    elif settings.integrator == "path" and settings.hemisphere and settings.max_depth >= 1:
         if not emitters:
             out.append("hemisphere sampling (-H) sees only emissive geometry and this scene has "
                        "none (its lights are point, directional, ambient or area lights without "

@@ -7,10 +7,13 @@ import numpy as np
 import accel
 
 from .errors import PtraceError
-from .integrator import NORMALS, PATH, RR_CAP, Options
+from .lights import emitter_arrays
+from .integrator import INDEPENDENT, NORMALS, PATH, RR_CAP, RR_DEPTH, SOBOL, Options
 from .scene import DIRECTIONAL, POINT
 
 INTEGRATORS = ("path", "normals")
+DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
+SAMPLERS = ("sobol", "independent")   # --sampler
 
 
 def _is_int(value):
@@ -24,9 +27,12 @@ class Settings:
     spp: samples per pixel (-s); accel: the backend (naive, bvh, embree); integrator: path or
     normals; seed; light_samples (-l): samples per area or ambient light per shading point;
     max_depth (-m); hemisphere (-H): direct light by uniform hemisphere sampling; roulette:
-    Russian roulette from the second bounce (False runs every path to max_depth; the course has
-    no such flag); rr_cap: roulette continues with probability min(rr_cap, max throughput);
-    adaptive (-a): None or (samples per batch, tolerance).
+    Russian roulette (False runs every path to max_depth; the course has no such flag); rr_cap:
+    roulette continues with probability min(rr_cap, max throughput); rr_depth: the first vertex
+    at which it may end a path (2: from the second bounce); adaptive (-a): None or (samples per
+    batch, tolerance); direct: "mis" (light samples and the BSDF's sample combined by multiple
+    importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
+    (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers).
     """
     spp: int = 1
     accel: str = "bvh"
@@ -37,7 +43,10 @@ class Settings:
     hemisphere: bool = False
     roulette: bool = True
     rr_cap: float = RR_CAP
+    rr_depth: int = RR_DEPTH
     adaptive: tuple = None
+    direct: str = "mis"
+    sampler: str = "sobol"
 
     def __post_init__(self):
         if not (_is_int(self.spp) and self.spp >= 1):
@@ -54,10 +63,19 @@ class Settings:
             raise PtraceError("light samples must be at least 1")
         if not (_is_int(self.max_depth) and self.max_depth >= 0):
             raise PtraceError("max depth must not be negative")
+        if not (_is_int(self.rr_depth) and self.rr_depth >= 1):
+            raise PtraceError(f"the roulette depth must be a positive integer, got "
+                              f"{self.rr_depth!r}")
+        if self.direct not in DIRECT:
+            raise PtraceError(f"unknown direct-light estimator {self.direct!r}; choose one of "
+                              f"{', '.join(DIRECT)}")
+        if self.sampler not in SAMPLERS:
+            raise PtraceError(f"unknown sampler {self.sampler!r}; choose one of "
+                              f"{', '.join(SAMPLERS)}")
         if not 0.0 < self.rr_cap <= 1.0:
             raise PtraceError(f"the roulette cap must be in (0, 1], got {self.rr_cap!r}")
         set_ = object.__setattr__
-        for name in ("spp", "seed", "light_samples", "max_depth"):
+        for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
             set_(self, name, int(getattr(self, name)))
         set_(self, "hemisphere", bool(self.hemisphere))
         set_(self, "roulette", bool(self.roulette))
@@ -76,7 +94,8 @@ class Settings:
     @classmethod
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
-        known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap"}
+        known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
+                 "rr_depth", "direct", "sampler"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
@@ -86,7 +105,8 @@ class Settings:
         """The integrator's Options record."""
         mode = NORMALS if self.integrator == "normals" else PATH
         return Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
-                       self.hemisphere, self.roulette, self.rr_cap)
+                       self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
+                       self.direct == "mis", SOBOL if self.sampler == "sobol" else INDEPENDENT)
 
     def rays_per_path(self, scene):
         """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the
@@ -95,7 +115,9 @@ class Settings:
             return 1
         lights = scene.lights
         if self.hemisphere:
-            return 1 + len(lights) * self.light_samples
+            return 1 + max(len(lights), 1) * self.light_samples
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
-        return 1 + delta + self.light_samples * (len(lights) - delta)
+        emitters = int(emitter_arrays(scene)[1].shape[0] > 0)
+        bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
+        return 1 + delta + self.light_samples * (len(lights) - delta + emitters) + bsdf_ray
 
