@@ -30,9 +30,10 @@ from pathlib import Path
 from . import report
 
 ORDER = ["accel_rays", "first_images", "seed_commands", "mitsuba_reference", "stability"]
-NOT_BENCHMARKS = {"__main__", "report", "synthetic",
-                  "stability_light",   # part of stability's report
+NOT_BENCHMARKS = {"__main__", "report", "synthetic", "templating",
+                  "stability_light",   # part of stability's report (runs alone by name)
                   "side_by_side"}      # needs an older checkout to compare with
+RUN_BY_NAME_ONLY = {"stability_light", "side_by_side"}   # not in `all`, but `NAME` runs them
 
 
 def names():
@@ -127,7 +128,8 @@ def main(argv=None):
     name, rest = argv[0], argv[1:]
     if name == "all":
         return run_all(rest)
-    if name in NOT_BENCHMARKS or importlib.util.find_spec(f"benchmarks.{name}") is None:
+    if (name in NOT_BENCHMARKS and name not in RUN_BY_NAME_ONLY) \
+            or importlib.util.find_spec(f"benchmarks.{name}") is None:
         print(f"unknown benchmark {name!r}; choose all or one of {', '.join(names())}")
         return 2
     result = importlib.import_module(f"benchmarks.{name}").main(rest)

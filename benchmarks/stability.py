@@ -2,9 +2,18 @@
 
     python -m benchmarks.stability [--quick] [--threads 2] [--output stability.md]
 
-Writes benchmarks/results/stability.md (or --output) and its PNG charts beside it. The report is
-a list of sections (SECTIONS), each a function of the parsed arguments returning Markdown; a
-new study is one more function in that list. The geometry sections (geometry_*):
+Writes benchmarks/results/stability.md (or --output, relative to benchmarks/results/), its PNG
+charts beside it and the measured data as stability.json beside it; a --quick run without
+--output goes to a new temporary directory (printed), never over the full report. The report
+has the geometry sections below, the light-transport sections of benchmarks/stability_light.py
+and the failure regimes studied in the tests themselves.
+
+Measuring and writing are apart. measure(quick) runs every study of SECTIONS and returns plain
+data (dicts, lists, numbers, strings: what stability.json holds); write_report(data) writes the
+report from that data alone, filling the named blocks of benchmarks/templates/stability.md (the
+prose, with str.format fields) from the fields that each write_* function computes. A new study
+is one more (name, measure, write) entry of SECTIONS. The tests a section quotes are PINS
+entries, checked to exist in their files when the report is written. The geometry sections:
 
 1. BVH-defeating primitive distributions: build figures, nodes visited and rays per second of
    bvh (mean split), bvh (split="sah"), embree and naive on the same rays.
@@ -16,6 +25,7 @@ new study is one more function in that list. The geometry sections (geometry_*):
 tests/accel/test_stability_geometry.py pins the claims of the report with the helpers below.
 """
 import argparse
+import inspect
 import math
 import os
 import time
@@ -27,13 +37,43 @@ import numpy as np
 
 import accel
 from accel import raygen
-from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE
+from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, BVHAccelerator
 from accel.embree import EmbreeAccelerator
+from ptrace.integrator import OFFSET
 
 from . import report
+from .templating import blocks, fill, join, pinned_ids, output_path, plain, save_json
 
 REPRODUCE = "python -m benchmarks.stability"
 AXIS = np.array([1.0, 0.7, 0.3]) / np.linalg.norm([1.0, 0.7, 0.3])   # direction of every offset
+RAY_SEED = 1        # section 1's rays
+COW_SEED = 3        # section 3's rays
+TEMPLATE = "stability.md"
+GEOMETRY_TESTS = "tests/accel/test_stability_geometry.py"
+STABILITY_TESTS = "tests/ptrace/test_stability.py"
+# claim -> (test file, test function): the tests the report quotes, by the field names of the
+# template (`{test[claim]}` prints file::function, `{short[claim]}` ::function)
+PINS = {
+    "bounded": (GEOMETRY_TESTS, "test_bvh_build_is_bounded_and_exact"),
+    "coincident": (GEOMETRY_TESTS, "test_coincident_centroids_give_a_balanced_count_split_tree"),
+    "few_visits": (GEOMETRY_TESTS, "test_bvh_visits_few_nodes_where_the_split_still_works"),
+    "overlap": (GEOMETRY_TESTS, "test_bvh_gains_nothing_when_all_boxes_overlap"),
+    "crack_bound": (GEOMETRY_TESTS, "test_float64_crack_leaks_stay_bounded"),
+    "embree_closed": (GEOMETRY_TESTS, "test_embree_never_leaks_on_closed_meshes"),
+    "random": (GEOMETRY_TESTS, "test_random_rays_do_not_leak"),
+    "not_watertight": (GEOMETRY_TESTS, "test_moller_trumbore_is_not_watertight"),
+    "far": (GEOMETRY_TESTS, "test_embree_agrees_with_bvh_far_from_origin"),
+    "outliers": (GEOMETRY_TESTS, "test_embree_recentring_survives_far_outliers"),
+    "self_hit": (STABILITY_TESTS, "test_spawned_rays_never_rehit_their_own_triangle"),
+    "spheres": (STABILITY_TESTS, "test_spawned_rays_leave_spheres"),
+    "quad_shadow": ("tests/ptrace/test_light_transport.py",
+                    "test_the_quad_on_the_area_light_does_not_shadow_it"),
+    "wide_floor": ("tests/ptrace/test_stability_light.py",
+                   "test_emitter_on_the_light_does_not_shadow_a_wide_floor"),
+    "non_finite": (STABILITY_TESTS, "test_no_non_finite_pixel_in_any_course_scene"),
+    "malformed": ("tests/ptrace/test_malformed_corpus.py",
+                  "test_every_malformed_file_fails_cleanly"),
+}
 
 
 # -- shared helpers ----------------------------------------------------------------------------
@@ -79,15 +119,24 @@ def triangle_soup(corners):
     return accel.Geometry(corners.reshape(-1, 3), np.arange(3 * n).reshape(n, 3))
 
 
-def chart_path(args, name):
-    return (report.RESULTS / args.output).parent / name
-
-
 def pyplot():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def save_chart(plt, figure, chart_dir, name):
+    """Lay out, save into chart_dir and close a chart; return its file name for the report."""
+    figure.tight_layout()
+    figure.savefig(Path(chart_dir) / name, dpi=100)
+    plt.close(figure)
+    return name
+
+
+def exponent(x):
+    """The power of ten x is (1e-3 -> -3)."""
+    return int(round(math.log10(x)))
 
 
 # -- 1. distributions that defeat a BVH ----------------------------------------------------------
@@ -187,7 +236,7 @@ def distribution(name, n):
     return geometry, target
 
 
-def study_rays(name, n, rays, seed=1):
+def study_rays(name, n, rays, seed=RAY_SEED):
     geometry, target = distribution(name, n)
     return geometry, raygen.sphere_rays(target, rays, seed=seed)
 
@@ -224,7 +273,8 @@ def measure_distribution(name, n, rays_count, min_seconds=0.2):
         bvh.intersect(rays)
         rows[f"bvh-{split}"] = {
             "build_seconds": build_seconds, "nodes": stats["nodes"],
-            "depth": stats["max_depth"], "largest_leaf": stats["largest_leaf"],
+            "wide_nodes": stats["wide_nodes"], "depth": stats["max_depth"],
+            "largest_leaf": stats["largest_leaf"],
             "mean_leaf": float(leaves.mean()), "bytes": stats["bytes"],
             "allocated_bytes": allocated_node_bytes(geometry.primitive_count),
             "python_peak_bytes": python_peak, "rays_per_second": rate,
@@ -245,111 +295,67 @@ def depth_bound(primitives):
     return MEAN_SPLIT_DEPTH + math.ceil(math.log2(max(primitives, 2)))
 
 
-def geometry_bvh_distributions(args):
-    n, rays_count = (4000, 1000) if args.quick else (20000, 4000)
+MAX_LEAF_SIZE = inspect.signature(BVHAccelerator).parameters["max_leaf_size"].default
+BVH_METHODS = ("bvh-mean", "bvh-sah")
+
+
+def measure_distributions(quick):
+    """Section 1's data: every distribution's figures (measure_distribution) at the report's
+    size, and the bounds the build promises at that size."""
+    n, rays_count = (4000, 1000) if quick else (20000, 4000)
     results = {}
     for name in DISTRIBUTIONS:
-        results[name] = measure_distribution(name, n, rays_count, 0.05 if args.quick else 0.3)
+        results[name] = measure_distribution(name, n, rays_count, 0.05 if quick else 0.3)
         print(f"distribution {name}: done", flush=True)
-    bound = depth_bound(n)
-    lines = [
-        "## 1. Distributions that defeat a BVH", "",
-        (f"{n:,} triangles each; {rays_count:,} rays from `accel.raygen.sphere_rays(target, n, "
-        "seed=1)` toward the target named below; the same rays for every method. bvh-mean is "
-        "the default (mean-centroid) split, bvh-sah `split=\"sah\"`. Build seconds exclude "
-        "compiling; rays/s is the best of repeated runs. *bytes* is `stats()['bytes']` (the "
-        "nodes used); *allocated* is what the build allocates, from its code (2P-1 nodes, kept "
-        "alive because the stored arrays are views of it); *py peak* is tracemalloc's peak during the build "
-        "(numpy temporaries: primitive boxes, centroids; numba's arrays are not traced). "
-        "*visits*/*tests*: nodes and triangle tests per ray. *exact*: bvh returned the same t, "
-        "primitive and barycentrics as naive for every ray."), "",
-        ("| distribution | rays aim at | hit | method | build s | nodes | depth | leaf max / mean "
-        "| bytes | allocated | py peak | visits | tests | rays/s | vs naive | exact |"),
-        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
-    for name, rows in results.items():
-        naive_rate = rows["naive"]["rays_per_second"]
-        target = DISTRIBUTIONS[name][2]
-        for method in ("bvh-mean", "bvh-sah"):
-            r = rows[method]
-            tests = "" if r["mean_tests"] is None else f"{r['mean_tests']:,.0f}"
-            lines.append(
-                f"| {name} | {target} | {rows['hit_fraction']:.0%} | {method} | "
-                f"{r['build_seconds']:.3f} | {r['nodes']:,} | {r['depth']} | "
-                f"{r['largest_leaf']} / {r['mean_leaf']:.1f} | {r['bytes'] / 1e6:.2f} MB | "
-                f"{r['allocated_bytes'] / 1e6:.2f} MB | {r['python_peak_bytes'] / 1e6:.2f} MB | "
-                f"{r['mean_visits']:,.1f} | {tests} | {r['rays_per_second']:,.0f} | "
-                f"{r['rays_per_second'] / naive_rate:.1f}x | {'yes' if r['exact'] else 'NO'} |")
-        e = rows["embree"]
-        lines.append(f"| {name} | {target} | | embree | {e['build_seconds']:.3f} | | | | | | | | "
-                     f"| {e['rays_per_second']:,.0f} | {e['rays_per_second'] / naive_rate:.1f}x "
-                     f"| same prim {e['same_prim']:.1%} |")
-        lines.append(f"| {name} | {target} | | naive | | | | | | | | | {n:,} | "
-                     f"{naive_rate:,.0f} | 1.0x | |")
-    worst_depth = max(rows[m]["depth"] for rows in results.values() for m in ("bvh-mean", "bvh-sah"))
-    worst_leaf = max(rows[m]["largest_leaf"] for rows in results.values()
-                     for m in ("bvh-mean", "bvh-sah"))
-    worst_build = max(rows[m]["build_seconds"] for rows in results.values()
-                      for m in ("bvh-mean", "bvh-sah"))
-    all_exact = all(rows[m]["exact"] for rows in results.values() for m in ("bvh-mean", "bvh-sah"))
-
-    def ratio(name, method="bvh-mean"):
-        rows = results[name]
-        return rows[method]["rays_per_second"] / rows["naive"]["rays_per_second"]
-
-    def visits(name):
-        return results[name]["bvh-mean"]["mean_visits"]
-
-    lines += [
-        "", f"![rays per second by distribution]({chart_distributions(args, results).name})", "",
-        ("**Where it fails.** When the primitives' boxes all overlap, no split of the centroids can "
-        "separate them. *identical* and *concentric*: every centroid is the same point, so "
-        "neither the mean split nor SAH finds a plane (the centroid extent is 0); the build falls "
-        "back to count splits and makes a balanced tree, but all its boxes contain the same point "
-        "(on *identical* they are all the same box), so a ray visits most nodes (all of them on "
-        f"*identical*): the mean split ran at {ratio('identical'):.1f}x "
-        f"and {ratio('concentric'):.1f}x naive's speed on them. *slivers*: every triangle's box "
-        "spans the scene, so boxes overlap whatever the split: "
-        f"{ratio('slivers'):.1f}x (mean) and {ratio('slivers', 'bvh-sah'):.1f}x (SAH) naive's "
-        "speed. Embree collapses toward brute force on the same three: "
-        f"{ratio('identical', 'embree'):.1f}x, {ratio('concentric', 'embree'):.1f}x and "
-        f"{ratio('slivers', 'embree'):.1f}x naive, against {ratio('uniform', 'embree'):.0f}x on "
-        "*uniform* (on *identical* it also returns another of the equal primitives than naive's "
-        "lowest id: ties are not ordered in Embree). *cluster+outliers* and *huge+small* are not "
-        "failures for the BVH: the mean split separates the outliers within a few levels and the "
-        "huge triangle only widens the boxes on its path from the root (nodes visited per ray "
-        f"with the mean split: {visits('cluster+outliers'):.0f} and {visits('huge+small'):.0f}, "
-        f"against {visits('uniform'):.0f} on *uniform* and {visits('identical'):,.0f} on "
-        f"*identical*; {ratio('cluster+outliers'):.0f}x and {ratio('huge+small'):.0f}x naive's "
-        f"speed, against {ratio('uniform'):.0f}x on *uniform*). cluster+outliers did break "
-        "Embree's float32 "
-        "once it was re-centred on the bounding box's centre (section 3)."),
-        "",
-        ("**What ptrace does.** Whatever the distribution the build stays bounded: where a mean or "
-        "SAH split leaves a side empty, or below depth MEAN_SPLIT_DEPTH = "
-        f"{MEAN_SPLIT_DEPTH}, it splits by count, so no leaf exceeds max_leaf_size (4 here; "
-        f"largest measured {worst_leaf}), the depth stays under {MEAN_SPLIT_DEPTH} + "
-        f"log2(P) (bound {bound} for {n:,} triangles, traversal stack {STACK_SIZE}; deepest "
-        f"measured {worst_depth}), the longest build took {worst_build:.2f} s, and the node "
-        f"arrays stay within 2P-1 nodes ({allocated_node_bytes(n) / 1e6:.2f} MB for P = {n:,}). "
-        "Answers never depend on the tree: bvh matched naive bit for bit on every distribution "
-        f"and split ({'all exact' if all_exact else 'NOT all exact'}). Pinned by "
-        "`tests/accel/test_stability_geometry.py::test_bvh_build_is_bounded_and_exact` "
-        "(depth, leaf size, nodes, memory, build under 2 s, exact answers, for both splits on "
-        "every distribution at 4,000 triangles), "
-        "`::test_coincident_centroids_give_a_balanced_count_split_tree` (depth at most "
-        "log2(P/4) on identical and concentric), "
-        "`::test_bvh_visits_few_nodes_where_the_split_still_works` (at most 100 nodes per ray "
-        "on uniform, cluster+outliers and huge+small) and "
-        "`::test_bvh_gains_nothing_when_all_boxes_overlap` (the failure itself: every node "
-        "visited on identical, over a quarter of them on concentric and slivers; it fails, "
-        "asking for this report to change, if the BVH ever does better there)."), ""]
-    return "\n".join(lines)
+    return plain(dict(triangles=n, rays=rays_count, ray_seed=RAY_SEED,
+                      depth_bound=depth_bound(n), mean_split_depth=MEAN_SPLIT_DEPTH,
+                      stack_size=STACK_SIZE, max_leaf_size=MAX_LEAF_SIZE,
+                      allocated_bytes=allocated_node_bytes(n), results=results))
 
 
-def chart_distributions(args, results):
+def distribution_rows(data):
+    """The table rows of section 1, as fields of the row blocks."""
+    rows = []
+    for name, r in data["results"].items():
+        naive = r["naive"]["rays_per_second"]
+        common = dict(name=name, target=DISTRIBUTIONS[name][2], naive=naive)
+        for method in BVH_METHODS:
+            m = r[method]
+            rows.append(("distributions_row_bvh", {
+                **common, **m, "method": method, "hit": r["hit_fraction"],
+                "mb": m["bytes"] / 1e6, "allocated_mb": m["allocated_bytes"] / 1e6,
+                "peak_mb": m["python_peak_bytes"] / 1e6,
+                "tests": "" if m["mean_tests"] is None else format(m["mean_tests"], ",.0f"),
+                "speedup": m["rays_per_second"] / naive, "exact": "yes" if m["exact"] else "NO"}))
+        e = r["embree"]
+        rows.append(("distributions_row_embree",
+                     {**common, **e, "speedup": e["rays_per_second"] / naive}))
+        rows.append(("distributions_row_naive", {**common, "tests": data["triangles"]}))
+    return rows
+
+
+def write_distributions(data, chart_dir):
+    text = blocks(TEMPLATE)
+    results = data["results"]
+    bvh = [r[m] for r in results.values() for m in BVH_METHODS]
+    ratio = {name: {m: r[m]["rays_per_second"] / r["naive"]["rays_per_second"]
+                    for m in (*BVH_METHODS, "embree")} for name, r in results.items()}
+    return fill(
+        text["distributions"], data, pinned_ids(PINS),
+        rows="\n".join(fill(text[block], row) for block, row in distribution_rows(data)),
+        chart=chart_distributions(chart_dir, data), ratio=ratio,
+        visits={name: r["bvh-mean"]["mean_visits"] for name, r in results.items()},
+        worst_depth=max(r["depth"] for r in bvh), worst_leaf=max(r["largest_leaf"] for r in bvh),
+        worst_build=max(r["build_seconds"] for r in bvh),
+        allocated_mb=data["allocated_bytes"] / 1e6,
+        exact="all exact" if all(r["exact"] for r in bvh) else "NOT all exact")
+
+
+def chart_distributions(chart_dir, data):
     plt = pyplot()
+    results = data["results"]
     names = list(results)
-    methods = ["naive", "bvh-mean", "bvh-sah", "embree"]
+    methods = ["naive", *BVH_METHODS, "embree"]
     figure, axes = plt.subplots(figsize=(9, 4))
     width = 0.2
     for i, method in enumerate(methods):
@@ -360,14 +366,10 @@ def chart_distributions(args, results):
     axes.set_ylabel("rays per second")
     axes.set_title("Rays per second on BVH-defeating distributions")
     axes.legend()
-    figure.tight_layout()
-    path = chart_path(args, "stability_distributions.png")
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_chart(plt, figure, chart_dir, "stability_distributions.png")
 
 
-# -- 2. Möller–Trumbore cracks ----------------------------------------------------------------------
+# -- 2. Möller–Trumbore cracks ----------------------------------------------------------------
 SCALES = [10.0 ** k for k in range(-3, 7)]
 OFFSETS = [0.0] + [10.0 ** k for k in range(-3, 7)]
 
@@ -379,24 +381,14 @@ class NotRecentredEmbree(EmbreeAccelerator):
     def centre(self, geometry):
         return np.zeros(3)
 
-    def __init__(self, geometry):
-        super().__init__(geometry)
-        from embreex import mesh_construction, rtcore_scene
-        self._centre = self.centre(geometry)
-        if geometry.triangle_count:
-            self._scene = rtcore_scene.EmbreeScene(robust=True)
-            mesh_construction.TriangleMesh(
-                self._scene, (geometry.vertices - self._centre).astype(np.float32),
-                geometry.faces.astype(np.int32))
-            one = np.zeros((1, 3), dtype=np.float32)
-            self._scene.run(one, one + np.float32(1.0), output=1)
 
-
-class BoxCentredEmbree(NotRecentredEmbree):
+class BoxCentredEmbree(EmbreeAccelerator):
     """Re-centred on the centre of the triangles' bounding box instead of ptrace's median of the
     vertices."""
 
     def centre(self, geometry):
+        if geometry.triangle_count == 0:
+            return np.zeros(3)
         corners = geometry.vertices[geometry.faces.reshape(-1)]
         return 0.5 * (corners.min(axis=0) + corners.max(axis=0))
 
@@ -477,114 +469,98 @@ def random_leaks(kind, vertices, faces, scale, offset, n, seed=0):
 
 
 CRACK_KINDS = ["naive", "bvh", "embree", "embree-not-recentred"]
+RANDOM_CASES = [(1.0, 0.0), (1e-3, 1e3), (1e3, 1e6), (1e-3, 1e6)]   # (s, |d|) of the control
+LABELS = ("outside edge", "outside vertex", "inside edge", "inside vertex")
 
 
-def geometry_cracks(args):
+def measure_cracks(quick):
+    """Section 2's data: leaked rays per (s, |d|) cell of every mesh and method, the random-ray
+    control and the kinds of leaked rays at s = 1, d = 0."""
     meshes = closed_meshes()
     grids = {}
     for mesh, (vertices, faces) in meshes.items():
+        grids[mesh] = {}
         for kind in CRACK_KINDS:
-            grids[mesh, kind] = leak_grid(kind, vertices, faces)
+            grid, per_cell = leak_grid(kind, vertices, faces)
+            grids[mesh][kind] = dict(leaked=grid, rays_per_cell=per_cell)
     print("cracks: grid done", flush=True)
-    random_n = 50_000 if args.quick else 200_000
-    random_cases = [(1.0, 0.0), (1e-3, 1e3), (1e3, 1e6), (1e-3, 1e6)]
-    randoms = {(mesh, kind): sum(random_leaks(kind, v, f, s, d, random_n) for s, d in random_cases)
-               for mesh, (v, f) in meshes.items() for kind in ("naive", "embree")}
+    random_n = 50_000 if quick else 200_000
+    randoms = {mesh: {kind: sum(random_leaks(kind, v, f, s, d, random_n) for s, d in RANDOM_CASES)
+                      for kind in ("naive", "embree")} for mesh, (v, f) in meshes.items()}
     breakdown = {}
     for mesh, (vertices, faces) in meshes.items():
         geometry, rays, labels = crack_rays(vertices, faces, 1.0, 0.0)
         missed = accel.build("naive", geometry).intersect(rays).prim < 0
-        breakdown[mesh] = {label: (int(missed[labels == label].sum()), int((labels == label).sum()))
-                           for label in ("outside edge", "outside vertex", "inside edge",
-                                         "inside vertex")}
-    chart = chart_cracks(args, grids)
-    cells = len(SCALES) * len(OFFSETS)
-    lines = [
-        "## 2. Möller–Trumbore cracks on closed meshes", "",
-        ("Closed meshes centred on the origin (trimesh: an icosphere of 320 triangles and a cube "
-        "subdivided to 192), scaled by s in 1e-3..1e6 and moved by d = |d| (1, 0.7, 0.3)/|.| with "
-        f"|d| in 0, 1e-3..1e6 ({cells} (s, |d|) cells). Rays aim exactly at every edge midpoint "
-        "and every vertex, computed in float64 from the moved vertices: from outside, twice as far "
-        "from the centre as the target, through it toward the centre; and from the centre out "
-        "through it. Every one of them must hit. *Leak rate* = missed / traced. "
-        "embree-not-recentred is the embree backend before this study (float32 of the raw "
-        "coordinates; section 3)."), "",
-        ("| mesh | method | rays per cell | rays leaked (all cells) | leak rate | cells with a leak "
-        "| worst cell |"), "|---|---|---:|---:|---:|---:|---:|"]
-    for (mesh, kind), (grid, per_cell) in grids.items():
-        worst = np.unravel_index(np.argmax(grid), grid.shape)
-        worst_text = (f"{grid[worst] / per_cell:.1%} (s={SCALES[worst[0]]:g}, "
-                      f"|d|={OFFSETS[worst[1]]:g})" if grid.max() else "0")
-        lines.append(f"| {mesh} | {kind} | {per_cell:,} | {grid.sum():,} | "
-                     f"{grid.sum() / (per_cell * cells):.2%} | {(grid > 0).sum()} / {cells} | "
-                     f"{worst_text} |")
-    float64_same = all(np.array_equal(grids[m, "naive"][0], grids[m, "bvh"][0]) for m in meshes)
-    ico, ico_n = grids["icosphere", "naive"]
-    cube, cube_n = grids["cube", "naive"]
-    before_ico, _ = grids["icosphere", "embree-not-recentred"]
-    before_cube, _ = grids["cube", "embree-not-recentred"]
-    relative = [(OFFSETS[j] / SCALES[i]) for i, j in zip(*np.nonzero(before_ico + before_cube))]
-    b = breakdown["icosphere"]
-    lines += [
-        "", f"![leak rate vs magnitude]({chart.name})", "",
-        "Leaked rays of naive on the icosphere at s = 1, d = 0 by kind: " + ", ".join(
-            f"{label} {missed} of {count}" for label, (missed, count) in b.items()) + "; on the "
-        "cube: " + ", ".join(f"{label} {missed} of {count}"
-                             for label, (missed, count) in breakdown["cube"].items()) + ".", "",
-        f"Control: {random_n:,} random rays from outside toward random points near the centre "
-        f"plus {random_n:,} from the centre in random directions, at (s, |d|) = "
-        + ", ".join(f"({s:g}, {d:g})" for s, d in random_cases) + ": "
-        + ", ".join(f"{kind} on the {mesh} leaked {count}" for (mesh, kind), count in randoms.items())
-        + ".", "",
-        "**Where it fails.** ptrace's Möller–Trumbore test (accel/kernels.py, float64, inclusive "
-        "edges, no epsilon) is not watertight: two triangles sharing an edge compute their "
-        "barycentrics with different rounding, and a ray through the exact edge can be rejected "
-        f"by both. naive and bvh (the same kernel{'; identical grids' if float64_same else ''}) "
-        f"leaked {ico.sum() / (ico_n * cells):.2%} of the rays aimed at the icosphere's edges and "
-        f"vertices (at most {ico.max() / ico_n:.1%} in one cell, {(ico > 0).sum()} of {cells} "
-        f"cells) and {cube.sum() / (cube_n * cells):.2%} on the cube (at most "
-        f"{cube.max() / cube_n:.1%}), at every magnitude alike: the error is relative, so scale "
-        "and offset do not make it worse in float64. Random rays essentially never land exactly on "
-        "an edge, hence no leak in the control; rays that do land on one, as these are aimed "
-        "to, can pass through a closed mesh (a light path escaping a closed object, a camera "
-        "ray seeing through a seam). Embree "
-        "(robust mode, which its manual says avoids rays shooting through the edges of "
-        "neighbouring primitives; not a guarantee, see embree/embree issue 387) leaked "
-        f"{sum(grids[m, 'embree'][0].sum() for m in meshes)} rays in the whole grid. "
-        + (f"Before re-centring it leaked {before_ico.sum() + before_cube.sum():,} rays, all in "
-           f"cells where |d|/s >= {min(relative):.0e} (float32 keeps 24 bits: the mesh collapses "
-           "onto a few float32 values and even the centre can round outside it)."
-           if relative else "Before re-centring it did not leak either."),
-        "",
-        ("**What ptrace does.** Nothing yet for float64: the kernel stays Möller–Trumbore (a "
-        "watertight test, Woop et al. 2013, would be the fix, in accel/kernels.py). The leak is "
-        "bounded and measured; embree is re-centred (section 3). Pinned by "
-        "`tests/accel/test_stability_geometry.py::test_float64_crack_leaks_stay_bounded` (naive "
-        "= bvh ray for ray, at most 6% of aimed rays per cell on the icosphere and 5% on the "
-        "cube at every (s, |d|)), `::test_embree_never_leaks_on_closed_meshes` (0 leaks in the "
-        "whole grid; not re-centred, leaks only where |d|/s >= 1e7 and loses over 90% at 1e9), "
-        "`::test_random_rays_do_not_leak` (the control) and "
-        "`::test_moller_trumbore_is_not_watertight` (asserts that aimed rays still leak: it "
-        "fails, asking for this report to change, the day the float64 kernel stops "
-        "leaking)."), ""]
-    return "\n".join(lines)
+        breakdown[mesh] = {label: dict(missed=int(missed[labels == label].sum()),
+                                       rays=int((labels == label).sum())) for label in LABELS}
+    return plain(dict(scales=SCALES, offsets=OFFSETS,
+                      triangles={mesh: len(f) for mesh, (_, f) in meshes.items()},
+                      grids=grids, random_rays=random_n, random_cases=RANDOM_CASES,
+                      random_leaks=randoms, breakdown=breakdown))
 
 
-def chart_cracks(args, grids):
+def crack_summary(data, mesh, kind):
+    """Leak figures of one grid: leaked, rate, worst cell's rate and where, cells with a leak."""
+    g = data["grids"][mesh][kind]
+    grid, per_cell = np.array(g["leaked"]), g["rays_per_cell"]
+    worst = np.unravel_index(np.argmax(grid), grid.shape)
+    return dict(mesh=mesh, kind=kind, per_cell=per_cell, leaked=int(grid.sum()),
+                rate=grid.sum() / (per_cell * grid.size), worst=grid.max() / per_cell,
+                worst_scale=data["scales"][worst[0]], worst_offset=data["offsets"][worst[1]],
+                leaky_cells=int((grid > 0).sum()), cells=grid.size)
+
+
+def write_cracks(data, chart_dir):
+    text = blocks(TEMPLATE)
+    meshes = list(data["grids"])
+    grids = {(m, k): np.array(g["leaked"]) for m in meshes for k, g in data["grids"][m].items()}
+    rows = []
+    for mesh in meshes:
+        for kind in data["grids"][mesh]:
+            s = crack_summary(data, mesh, kind)
+            worst = fill(text["cracks_worst"], s) if s["leaked"] else "0"
+            rows.append(fill(text["cracks_row"], s, worst=worst))
+    before = sum(grids[m, "embree-not-recentred"] for m in meshes)
+    ratios = [data["offsets"][j] / data["scales"][i] for i, j in zip(*np.nonzero(before))]
+    before_text = (fill(text["cracks_before_leaked"], leaked=int(before.sum()), ratio=min(ratios))
+                   if ratios else text["cracks_before_clean"])
+    same = all(np.array_equal(grids[m, "naive"], grids[m, "bvh"]) for m in meshes)
+    lo, hi = data["scales"][0], data["scales"][-1]
+    positive = [d for d in data["offsets"] if d > 0]
+    return fill(
+        text["cracks"], data, pinned_ids(PINS), rows="\n".join(rows),
+        chart=chart_cracks(chart_dir, data), cells=before.size,
+        scale_range=[exponent(lo), exponent(hi)],
+        offset_range=[exponent(min(positive)), exponent(max(positive))],
+        breakdown={mesh: join(text["breakdown_item"], [dict(label=label, **counts) for label,
+                                                         counts in kinds.items()], ", ")
+                   for mesh, kinds in data["breakdown"].items()},
+        random_cases=join(text["random_case"], [dict(scale=s, offset=d)
+                                                for s, d in data["random_cases"]], ", "),
+        random_leaks=join(text["random_leak"], [dict(mesh=mesh, kind=kind, leaked=count)
+                                                for mesh, kinds in data["random_leaks"].items()
+                                                for kind, count in kinds.items()], ", "),
+        same_grids=text["cracks_same_grids"] if same else "",
+        ico=crack_summary(data, "icosphere", "naive"), cube=crack_summary(data, "cube", "naive"),
+        embree_leaked=sum(int(grids[m, "embree"].sum()) for m in meshes), before=before_text)
+
+
+def chart_cracks(chart_dir, data):
     plt = pyplot()
+    scales, offsets = data["scales"], data["offsets"]
     figure, (by_scale, by_ratio) = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     styles = {"naive": ("naive = bvh (float64)", "-o"), "embree": ("embree (float32)", "-s"),
               "embree-not-recentred": ("embree, not re-centred", "--^")}
-    meshes = sorted({mesh for mesh, _ in grids})
-    ratios = sorted({d / s for s in SCALES for d in OFFSETS if d > 0})
+    meshes = sorted(data["grids"])
+    ratios = sorted({d / s for s in scales for d in offsets if d > 0})
     for kind, (label, style) in styles.items():
-        grid = sum(grids[mesh, kind][0] for mesh in meshes)
-        per_cell = sum(grids[mesh, kind][1] for mesh in meshes)
+        grid = sum(np.array(data["grids"][mesh][kind]["leaked"]) for mesh in meshes)
+        per_cell = sum(data["grids"][mesh][kind]["rays_per_cell"] for mesh in meshes)
         rate = grid / per_cell
-        by_scale.plot(SCALES, rate.mean(axis=1), style, label=label)
+        by_scale.plot(scales, rate.mean(axis=1), style, label=label)
         xs, ys = [], []
         for ratio in ratios:
-            cells = [rate[i, j] for i, s in enumerate(SCALES) for j, d in enumerate(OFFSETS)
+            cells = [rate[i, j] for i, s in enumerate(scales) for j, d in enumerate(offsets)
                      if d > 0 and math.isclose(d / s, ratio)]
             xs.append(ratio)
             ys.append(np.mean(cells))
@@ -598,11 +574,7 @@ def chart_cracks(args, grids):
     by_ratio.set_xlabel("offset / scale, |d|/s (mean over cells)")
     by_ratio.legend()
     figure.suptitle("Rays aimed at shared edges and vertices that miss a closed mesh")
-    figure.tight_layout()
-    path = chart_path(args, "stability_cracks.png")
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_chart(plt, figure, chart_dir, "stability_cracks.png")
 
 
 # -- 3. embree far from the origin -------------------------------------------------------------
@@ -677,92 +649,52 @@ def load_cow():
     return ptrace.load(str(scenes_dir() / "meshedit" / "cow.dae")).geometry
 
 
-def geometry_far_from_origin(args):
+def measure_far(quick):
+    """Section 3's data: embree's disagreement with bvh as the cow and the rays move away
+    together (three ways to hand Embree the triangles), on cluster+outliers, and with only the
+    ray origins far away."""
     geometry = load_cow()
-    rays_count = 5000 if args.quick else 20000
-    rays = raygen.sphere_rays(geometry, rays_count, seed=3)
-    rates = far_disagreement(geometry, rays)
+    rays_count = 5000 if quick else 20000
+    rays = raygen.sphere_rays(geometry, rays_count, seed=COW_SEED)
     distances = [10.0 ** k for k in range(1, 8)]
-    camera = distant_camera_disagreement(geometry, rays_count, distances)
-    outlier_n = 4000 if args.quick else 20000
-    outliers = outlier_disagreement(outlier_n, rays_count)
-    chart = chart_far(args, rates, distances, camera)
+    outlier_n = 4000 if quick else 20000
     lower, upper = geometry.bounds()
-    keys = ("hit_miss", "prim", "t", "any")
-    lines = [
-        "## 3. Embree's float32 far from the origin", "",
-        (f"The course's cow ({geometry.triangle_count:,} triangles, box "
-         f"{np.round(upper - lower, 2).tolist()} around the origin) and {rays_count:,} rays "
-         "`accel.raygen.sphere_rays(cow, n, seed=3)`, geometry and ray origins both moved by "
-         "m (1, 0.7, 0.3)/|.|. Disagreement of embree with bvh (float64, the reference): hit vs "
-         f"miss, another primitive, or t off by more than {T_TOLERANCE:g} relative; *any* counts "
-         "a ray once. Three ways to hand the triangles to Embree's float32: as they are (the "
-         "backend before this study), re-centred on the centre of their bounding box, and "
-         "re-centred on the per-axis median of the vertices (what accel/embree.py does now)."),
-        "",
-        ("| m | before: hit/miss | before: primitive | before: t | before: any | box centre: any "
-         "| median: hit/miss | median: primitive | median: t | median: any |"),
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for i, magnitude in enumerate(FAR_MAGNITUDES):
-        b = rates["embree-not-recentred"][i]
-        a = rates["embree"][i]
-        lines.append(f"| {magnitude:.0e} | " + " | ".join(f"{b[key]:.2%}" for key in keys)
-                     + f" | {rates['embree-box-centre'][i]['any']:.2%} | "
-                     + " | ".join(f"{a[key]:.2%}" for key in keys) + " |")
-    lines += [
-        "", (f"Why the median and not the box centre: *cluster+outliers* of section 1 "
-        f"({outlier_n:,} triangles, 8 of them 1e6 away; {rays_count:,} rays at the cluster):"), "",
-        "| Embree input | hit/miss | primitive | t | any |", "|---|---:|---:|---:|---:|"]
-    for kind in FAR_KINDS:
-        lines.append(f"| {FAR_LABELS[kind]} | "
-                     + " | ".join(f"{outliers[kind][key]:.2%}" for key in keys) + " |")
-    before = rates["embree-not-recentred"]
-    after = rates["embree"]
-    grows_from = next((m for m, r in zip(FAR_MAGNITUDES, before) if r["any"] > 0.001), None)
-    lines += [
-        "", f"![embree vs bvh far from the origin]({chart.name})", "",
-        ("What re-centring cannot fix: the cow left at the origin and ray origins at distance R "
-         "from it aiming at random points of its box (embree, re-centred, vs bvh):"), "",
-        "| R | hit/miss | primitive | t | any |", "|---:|---:|---:|---:|---:|"]
-    for distance, r in zip(distances, camera):
-        lines.append(f"| {distance:.0e} | " + " | ".join(f"{r[key]:.2%}" for key in keys) + " |")
-    lines += [
-        "",
-        ("**Where it fails.** Embree takes float32, 24 bits, about 7 significant digits of each "
-         "coordinate. Rounded as they were, the cow's coordinates moved m away keep only the "
-         "digits that m leaves: disagreement with bvh passed 0.1% of rays from m = "
-         f"{grows_from:.0e} and reached {before[FAR_MAGNITUDES.index(1e4)]['any']:.1%} at 1e4, "
-         f"{before[FAR_MAGNITUDES.index(1e5)]['any']:.1%} at 1e5 and {before[-1]['any']:.1%} at "
-         f"1e7 (where {before[-1]['hit_miss']:.1%} of rays hit in one and missed in the other). "
-         "Re-centring on the bounding box's centre fixes the moved cow but breaks a scene whose "
-         "box is set by a few far triangles: on cluster+outliers it disagreed on "
-         f"{outliers['embree-box-centre']['any']:.1%} of the rays (not re-centred: "
-         f"{outliers['embree-not-recentred']['any']:.1%}), because the box's centre lies far "
-         "from the cluster. A ray origin far from the geometry is the same problem and no "
-         "translation of the geometry fixes it: a camera R = 1e5 away from the cow disagreed on "
-         f"{camera[distances.index(1e5)]['any']:.1%} of rays, at 1e7 on "
-         f"{camera[-1]['any']:.1%}; there, use bvh (float64)."), "",
-        ("**What ptrace does.** accel/embree.py re-centres: it subtracts a centre, the per-axis "
-         "median of the vertices, from every vertex in float64 before rounding to float32, "
-         "and the same centre from each ray origin (plus tmin x direction) per query; t needs no "
-         "correction because a translation does not change it, and the interface is unchanged. "
-         f"After it the disagreement is {max(r['any'] for r in after):.2%} at most over m = "
-         f"1..1e7, and {outliers['embree']['any']:.2%} on cluster+outliers. Pinned by "
-         "`tests/accel/test_stability_geometry.py::test_embree_agrees_with_bvh_far_from_origin` "
-         "(re-centred: at most 0.1% of 5,000 rays at any m = 1..1e7; not re-centred: over 10% "
-         "at 1e5, so the test notices re-centring going away), "
-         "`::test_embree_recentring_survives_far_outliers` (at most 0.1% on cluster+outliers; "
-         "the box centre's over 10%) and `::test_embree_never_leaks_on_closed_meshes`."), ""]
-    return "\n".join(lines)
+    return plain(dict(
+        triangles=geometry.triangle_count, box=np.round(upper - lower, 2), rays=rays_count,
+        seed=COW_SEED, t_tolerance=T_TOLERANCE, magnitudes=FAR_MAGNITUDES,
+        moved=far_disagreement(geometry, rays), distances=distances,
+        camera=distant_camera_disagreement(geometry, rays_count, distances),
+        outlier_triangles=outlier_n, outliers=outlier_disagreement(outlier_n, rays_count)))
 
 
-def chart_far(args, rates, distances, camera):
+def write_far(data, chart_dir):
+    text = blocks(TEMPLATE)
+    moved = data["moved"]
+    before, after = moved["embree-not-recentred"], moved["embree"]
+    rows = [dict(m=m, before=b, box=c, after=a) for m, b, c, a in
+            zip(data["magnitudes"], before, moved["embree-box-centre"], after)]
+    grows_from = next((m for m, r in zip(data["magnitudes"], before) if r["any"] > 0.001),
+                      math.inf)
+    return fill(
+        text["far"], data, pinned_ids(PINS), rows=join(text["far_row"], rows),
+        outlier_rows=join(text["far_outlier_row"], [dict(label=FAR_LABELS[kind], r=r)
+                                                    for kind, r in data["outliers"].items()]),
+        camera_rows=join(text["far_camera_row"], [dict(distance=d, r=r) for d, r in
+                                                  zip(data["distances"], data["camera"])]),
+        chart=chart_far(chart_dir, data), grows_from=grows_from,
+        # by the power of ten of m (or R): {before[5][any]} is the "any" rate at m = 1e5
+        before={exponent(m): r for m, r in zip(data["magnitudes"], before)},
+        camera={exponent(d): r for d, r in zip(data["distances"], data["camera"])},
+        after_max=max(r["any"] for r in after))
+
+
+def chart_far(chart_dir, data):
     plt = pyplot()
     figure, axes = plt.subplots(figsize=(7, 4))
     for kind, style in zip(FAR_KINDS, ("--^", ":v", "-o")):
-        axes.plot(FAR_MAGNITUDES, [r["any"] for r in rates[kind]], style,
+        axes.plot(data["magnitudes"], [r["any"] for r in data["moved"][kind]], style,
                   label=f"cow moved m: {FAR_LABELS[kind]}")
-    axes.plot(distances, [r["any"] for r in camera], "-.s",
+    axes.plot(data["distances"], [r["any"] for r in data["camera"]], "-.s",
               label="cow at origin, ray origins R away (median)")
     axes.set_xscale("log")
     axes.set_yscale("symlog", linthresh=1e-3)
@@ -771,77 +703,89 @@ def chart_far(args, rates, distances, camera):
     axes.set_ylabel("fraction of rays disagreeing with bvh")
     axes.set_title("Embree (float32) vs bvh (float64), cow")
     axes.legend(fontsize=8)
-    figure.tight_layout()
-    path = chart_path(args, "stability_far.png")
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+    return save_chart(plt, figure, chart_dir, "stability_far.png")
+
+
+# -- light transport; the studies in the tests -------------------------------------------------
+def measure_light(quick):
+    """The light-transport studies' data (benchmarks/stability_light.py)."""
+    from . import stability_light
+    return stability_light.measure(quick)
+
+
+def write_light(data, chart_dir):
+    """The light-transport sections, their charts saved beside the report."""
+    from . import stability_light
+    return "\n\n".join(stability_light.write_sections(data, chart_dir))
+
+
+def write_pinned(data, chart_dir):
+    """Failure regimes whose study lives in the test suite itself (the tests measure and assert
+    on every run; their figures are quoted, not measured by this script): no data."""
+    return fill(blocks(TEMPLATE)["pinned"], pinned_ids(PINS), offset=OFFSET)
 
 
 # -- the report --------------------------------------------------------------------------------
-def light_transport(args):
-    """The light-transport studies (benchmarks/stability_light.py), charts beside the report."""
-    from .stability_light import light_sections
-    return "\n".join(light_sections(args.quick, (report.RESULTS / args.output).parent))
+# (data key, measure(quick) -> plain data or None for no data, write(data, chart dir) -> Markdown)
+SECTIONS = [("distributions", measure_distributions, write_distributions),
+            ("cracks", measure_cracks, write_cracks),
+            ("far", measure_far, write_far),
+            ("light", measure_light, write_light),
+            ("pinned", None, write_pinned)]
 
 
-def pinned_by_tests(args):
-    """Failure regimes whose study lives in the test suite itself (the tests measure and assert
-    on every run; their figures are quoted here, not measured by this script)."""
-    return "\n".join([
-        "## Studied in the tests themselves", "",
-        "- Self-intersection (tests/ptrace/test_stability.py): rays leaving random triangles by "
-        "ptrace's spawn rule (offset 1e-6 x the largest coordinate along the geometric normal) "
-        "re-hit their own triangle at rate 0 on naive, bvh and embree for coordinates of 1e-8, "
-        "1e-3, 1, 1e3 and 1e8 (4,000 rays each); with no offset the rate is about 50% on every "
-        "backend, and with 1e-9 Embree's float32 fails at 1e8. Rays leaving spheres outward "
-        "never re-hit them, inward only reach the far side (1e-6 to 1e6).",
-        "- Shadow rays toward an area light with an emissive quad lying on it are never blocked "
-        "by the quad (tests/ptrace/test_light_transport.py; and, for receivers far larger than "
-        "their distance to the light, tests/ptrace/test_stability_light.py).",
-        "- No NaN or infinite pixel, and no dropped non-finite sample, in any of the 25 course "
-        "scenes under the seed's flag sets (-m 0/1/2/6/100, -H, -l 1-16, -a) at 16x12, 4 spp "
-        "(tests/ptrace/test_stability.py).",
-        "- Malformed input (tests/ptrace/malformed_corpus.py, test_malformed_corpus.py): 201 "
-        "seeded broken files (truncations, lying and 2 GB counts, NaN/inf numbers, indices out "
-        "of range, missing ids, 1,000-100,000-deep nesting, an entity bomb, an external "
-        "entity, non-COLLADA text); each ends in one line `ptrace: error: ...`, exit 2, under "
-        "2 s and 256 MiB, leaving no output file.", ""])
+def measure(quick, threads=None):
+    """Every section's data, and the run's: {"run": {...}, section name: data}."""
+    load = os.getloadavg()[0]
+    warm_up()
+    start = time.perf_counter()
+    data = {"run": dict(quick=quick, threads=threads or numba.get_num_threads(),
+                        niceness=os.nice(0), load=load, cores=os.cpu_count())}
+    for name, measure_section, _ in SECTIONS:
+        if measure_section is not None:
+            data[name] = measure_section(quick)
+    data["run"]["seconds"] = time.perf_counter() - start
+    return plain(data)
 
 
-SECTIONS = [geometry_bvh_distributions, geometry_cracks, geometry_far_from_origin,
-            light_transport, pinned_by_tests]
+def report_text(data, chart_dir):
+    """The Markdown report of data (what measure returns); charts are saved into chart_dir."""
+    text = blocks(TEMPLATE)
+    run = data["run"]
+    busy = run["niceness"] > 0 or run["load"] > 0.5
+    notes = ([text["intro_quick"]] if run["quick"] else []) + \
+        ([fill(text["intro_busy"], run)] if busy else [])
+    intro = fill(text["intro"], run, reproduce=REPRODUCE, notes="".join(n + " " for n in notes),
+                 quick_flag=" --quick" if run["quick"] else "")
+    sections = [write(data.get(name), chart_dir) for name, _, write in SECTIONS]
+    return "\n".join([report.header(text["title"]), intro, "", "\n\n".join(sections), "",
+                      fill(text["total"], run), ""])
+
+
+def write_report(data, output="stability.md"):
+    """Write data's report to output (relative to report.RESULTS, or absolute), its charts
+    beside it and data itself as JSON beside it (same name, .json); return the report's path."""
+    path = report.RESULTS / output
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = report_text(data, path.parent)
+    save_json(path, data)
+    return report.write(path, text)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer triangles and rays")
     parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--output", default="stability.md",
-                        help="report path (relative to benchmarks/results/); charts go beside it")
+    parser.add_argument("--output", default=None,
+                        help="report path (relative to benchmarks/results/; default "
+                             "stability.md, or a temporary directory with --quick); charts "
+                             "and stability.json go beside it")
     args = parser.parse_args(argv)
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
     pyplot()
-    (report.RESULTS / args.output).parent.mkdir(parents=True, exist_ok=True)
-    load = os.getloadavg()[0]
-    warm_up()
-    start = time.perf_counter()
-    niceness = os.nice(0)
-    busy = (f"This run had niceness {niceness} and started at a load average of {load:.1f} on "
-            f"{os.cpu_count()} cores (other jobs beside it): its rays/s and build seconds are low "
-            "and noisy; node counts, depths, nodes visited, leak and "
-            "disagreement rates do not depend on timing. " if niceness > 0 or load > 0.5 else "")
-    parts = [report.header("Where methods fail: geometry, light transport, input"),
-             (f"{'Quick mode (--quick): fewer triangles and rays. ' if args.quick else ''}{busy}"
-             f"{numba.get_num_threads()} threads. Reproduce: `{REPRODUCE}"
-             f"{' --quick' if args.quick else ''}` (`{REPRODUCE}` without --quick for the full "
-             "sizes). Every section says where the method fails, the figures, what ptrace does "
-             "there and which test pins it."), ""]
-    for section in SECTIONS:
-        parts.append(section(args))
-    parts.append(f"Total time {time.perf_counter() - start:.0f} s.")
-    path = report.write(args.output, "\n".join(parts) + "\n")
-    print(f"wrote {path}")
+    output = output_path(args.output, args.quick, "stability.md")
+    path = write_report(measure(args.quick, numba.get_num_threads()), output)
+    print(f"wrote {path} and {path.with_suffix('.json').name} beside it")
     return 0
 
 

@@ -4,8 +4,15 @@ what ptrace does there. The measurements are the report's own helpers, at the --
 
 A test here that starts failing because a method got *better* (the BVH gains on overlapping
 boxes, the float64 kernel becomes watertight) is asking for the report to be rerun and updated.
+
+The report is written from the measured data alone (stability.write_report): the last tests run
+the writer on made-up data and check that the text follows the numbers and that every test it
+names (stability.PINS) is defined, here or in the other test files it quotes.
 """
+import copy
+import json
 import math
+import re
 
 import numba
 import numpy as np
@@ -14,7 +21,7 @@ import pytest
 import accel
 from accel import raygen
 from accel.bvh import STACK_SIZE
-from benchmarks import stability
+from benchmarks import report, stability, templating
 
 N = 4000            # triangles per distribution (the report's --quick size)
 RAYS = 1000
@@ -146,17 +153,156 @@ def test_embree_recentring_survives_far_outliers():
     assert rates["embree-box-centre"]["any"] > 0.10, rates["embree-box-centre"]   # measured 36%
 
 
-# -- the report runs ------------------------------------------------------------------------------
+# -- the report: written from the data alone -------------------------------------------------------
+def test_every_pinned_test_exists():
+    """The report names the tests of stability.PINS: each is a test function of its file (this
+    one's by name here, so renaming one of them fails this test until PINS follows)."""
+    here = {name for name, value in globals().items() if name.startswith("test_")
+            and callable(value)}
+    for path, function in stability.PINS.values():
+        assert function in (here if path == stability.GEOMETRY_TESTS
+                            else templating.defined_tests(path)), (path, function)
+
+
+def disagreement(rate):
+    return dict(hit_miss=rate, prim=rate / 2, t=rate / 4, any=rate)
+
+
+def synthetic_data():
+    """Made-up measurements with the shape of stability.measure's (no light sections)."""
+    def bvh(rate, visits):
+        return dict(build_seconds=0.0126, nodes=1999, wide_nodes=700, depth=12, largest_leaf=4,
+                    mean_leaf=2.5, bytes=128_000, allocated_bytes=130_000,
+                    python_peak_bytes=900_000, rays_per_second=rate, mean_visits=visits,
+                    mean_tests=12.0, exact=True)
+
+    results = {name: {"naive": dict(rays_per_second=1000.0), "bvh-mean": bvh(50_000.0, 40.0),
+                      "bvh-sah": bvh(60_000.0, 30.0), "hit_fraction": 0.5,
+                      "embree": dict(build_seconds=0.002, rays_per_second=200_000.0,
+                                     same_prim=1.0)}
+               for name in stability.DISTRIBUTIONS}
+    results["identical"]["bvh-mean"]["rays_per_second"] = 2000.0
+    cells = [[0] * len(stability.OFFSETS) for _ in stability.SCALES]
+    grids = {mesh: {kind: dict(leaked=copy.deepcopy(cells), rays_per_cell=1000)
+                    for kind in stability.CRACK_KINDS} for mesh in ("icosphere", "cube")}
+    for mesh in grids:
+        for kind in ("naive", "bvh"):
+            grids[mesh][kind]["leaked"][2][3] = 30          # s = 0.1, |d| = 0.01: 3.0%
+    grids["cube"]["embree-not-recentred"]["leaked"][0][-1] = 1000     # |d|/s = 1e9
+    labels = ("outside edge", "outside vertex", "inside edge", "inside vertex")
+    magnitudes, distances = stability.FAR_MAGNITUDES, [10.0 ** k for k in range(1, 8)]
+    return {
+        "run": dict(quick=True, threads=2, niceness=0, load=0.0, cores=2, seconds=12.0),
+        "distributions": dict(triangles=4000, rays=1000, ray_seed=1, depth_bound=24,
+                              mean_split_depth=12, stack_size=64, max_leaf_size=4,
+                              allocated_bytes=600_000, results=results),
+        "cracks": dict(scales=stability.SCALES, offsets=stability.OFFSETS,
+                       triangles=dict(icosphere=320, cube=192), grids=grids, random_rays=500,
+                       random_cases=[[1.0, 0.0]],
+                       random_leaks={m: dict(naive=0, embree=0) for m in grids},
+                       breakdown={m: {label: dict(missed=1, rays=10) for label in labels}
+                                  for m in grids}),
+        "far": dict(triangles=5856, box=[0.81, 1.46, 1.48], rays=5000, seed=3,
+                    t_tolerance=1e-4, magnitudes=magnitudes,
+                    moved={"embree-not-recentred": [disagreement(m / 1e7) for m in magnitudes],
+                           "embree-box-centre": [disagreement(0.0) for m in magnitudes],
+                           "embree": [disagreement(0.0) for m in magnitudes]},
+                    distances=distances, camera=[disagreement(d / 1e8) for d in distances],
+                    outlier_triangles=4000,
+                    outliers={kind: disagreement(0.36 if kind == "embree-box-centre" else 0.0)
+                              for kind in stability.FAR_KINDS})}
+
+
+@pytest.fixture
+def geometry_only(monkeypatch, tmp_path):
+    """stability's report without the light-transport sections, written into tmp_path."""
+    monkeypatch.setattr(stability, "SECTIONS", [s for s in stability.SECTIONS if s[0] != "light"])
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
+
+
+def cells(row):
+    """The cells of a Markdown table row (an escaped pipe, \\|, is inside a cell)."""
+    return re.split(r"(?<!\\)\|", row.strip().strip("|"))
+
+
+def check_tables(text):
+    """Every table row has as many cells as its header."""
+    for table in re.findall(r"(?:^\|.*\|\n)+", text + "\n", re.M):
+        lines = table.strip().splitlines()
+        assert all(len(cells(line)) == len(cells(lines[0])) for line in lines), table
+
+
+def check_quoted_tests(text):
+    quoted = templating.quoted_tests(text)
+    assert quoted
+    for path, function in quoted:
+        assert function in templating.defined_tests(path), (path, function)
+    return quoted
+
+
+def test_report_follows_the_data(geometry_only, tmp_path):
+    data = synthetic_data()
+    assert templating.plain(data) == json.loads(json.dumps(data)) == data
+    path = stability.write_report(data, "stability.md")
+    text = path.read_text()
+    assert json.loads(path.with_suffix(".json").read_text()) == data
+    for chart in ("stability_distributions.png", "stability_cracks.png", "stability_far.png"):
+        assert (tmp_path / chart).stat().st_size > 1000
+    check_tables(text)
+    quoted = check_quoted_tests(text)
+    assert set(quoted) == set(stability.PINS.values())    # every pinned test is quoted
+    # the figures are the data's
+    assert "| identical | the whole scene | 50% | bvh-mean | 0.013 | 1,999 | 700 | 12 |" in text
+    assert "the mean split ran at 2.0x and 50.0x naive's speed on them" in text
+    assert "leaked 0.03% of the rays aimed at the icosphere's edges" in text
+    assert "at most 3.0% in one cell, 1 of 110 cells" in text
+    assert "all in cells where |d|/s >= 1e+09" in text
+    assert "reached 0.1% at 1e4, 1.0% at 1e5 and 100.0% at 1e7" in text
+    assert "Total time 12 s." in text and "Quick mode (--quick)" in text
+    # ... and a changed number changes the report
+    changed = copy.deepcopy(data)
+    changed["distributions"]["results"]["identical"]["bvh-mean"]["rays_per_second"] = 3000.0
+    changed["far"]["moved"]["embree-not-recentred"][5]["any"] = 0.6
+    changed["cracks"]["grids"]["icosphere"]["naive"]["leaked"][2][3] = 50
+    again = stability.write_report(changed, "changed.md").read_text()
+    assert "the mean split ran at 3.0x and 50.0x" in again
+    assert "| identical | the whole scene | 50% | bvh-mean |" in again
+    assert "reached 0.1% at 1e4, 60.0% at 1e5" in again
+    assert "at most 5.0% in one cell" in again
+    assert "identical grids" in text and "identical grids" not in again   # naive != bvh now
+
+
+def test_a_renamed_test_stops_the_report(geometry_only, monkeypatch):
+    monkeypatch.setitem(stability.PINS, "bounded",
+                        (stability.GEOMETRY_TESTS, "test_that_was_renamed"))
+    with pytest.raises(LookupError, match="test_that_was_renamed"):
+        stability.write_report(synthetic_data(), "stability.md")
+
+
 @pytest.mark.slow
-def test_quick_report_writes_markdown_and_charts(tmp_path):
+def test_quick_report_writes_markdown_json_and_charts(tmp_path, monkeypatch):
     threads = numba.get_num_threads()
     try:
         assert stability.main(["--quick", "--output", str(tmp_path / "stability.md")]) == 0
     finally:
         numba.set_num_threads(threads)
     text = (tmp_path / "stability.md").read_text()
-    for heading in ("## 1.", "## 2.", "## 3."):
+    for heading in ("## 1.", "## 2.", "## 3.", "## Hemisphere", "## Adaptive",
+                    "## Russian roulette", "## Fireflies", "## Studied in the tests"):
         assert heading in text
-    assert "NOT all exact" not in text
-    for chart in ("stability_distributions.png", "stability_cracks.png", "stability_far.png"):
+    assert "NOT all exact" not in text and "DID NOT REPRODUCE" not in text
+    for chart in ("stability_distributions.png", "stability_cracks.png", "stability_far.png",
+                  "stability_light_hemisphere.png", "stability_light_adaptive.png",
+                  "stability_light_roulette.png", "stability_light_fireflies.png"):
         assert (tmp_path / chart).stat().st_size > 1000
+    check_tables(text)
+    check_quoted_tests(text)
+    # the report is a function of the JSON beside it: written again from it, the same text
+    data = json.loads((tmp_path / "stability.json").read_text())
+    assert data["run"]["quick"] and set(data) >= {"distributions", "cracks", "far", "light"}
+    monkeypatch.setattr(report, "RESULTS", tmp_path / "again")
+    again = stability.write_report(data, "stability.md").read_text()
+    body = [line for line in text.splitlines() if not line.startswith(("- date", "- command"))]
+    assert [line for line in again.splitlines()
+            if not line.startswith(("- date", "- command"))] == body
+    assert not list(tmp_path.glob("*.tmp"))

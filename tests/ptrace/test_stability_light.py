@@ -4,15 +4,24 @@ depths and Russian roulette fail, and what ptrace does there. The measurements a
 own helpers, at smaller sizes and with fixed seeds.
 
 A test here that starts failing because a method got *better* is asking for the report to be
-rerun and updated.
+rerun and updated. The tests use the studies' own estimators (study.COURSE, study.RR,
+study.FIREFLY; see benchmarks/stability_light.py for why each).
+
+The report is written from the measured data alone (study.write_sections): the last tests run the
+writer on made-up data and check that the text follows the numbers and that every test it names
+(study.PINS) is defined here.
 """
+import copy
+import json
 import math
 import pathlib
+import re
 
 import numpy as np
 import pytest
 
 import ptrace
+from benchmarks import report, templating
 from benchmarks import stability_light as study
 from ptrace import integrator
 from ptrace.integrator import LUMINANCE
@@ -24,7 +33,8 @@ SIZE = (16, 12)
 # -- hemisphere sampling against light sampling ----------------------------------------------------
 @pytest.fixture(scope="module")
 def sweep():
-    return study.hemisphere_sweep([0.5, 0.25, 0.1, 0.05], SIZE, 64)
+    """{side: row} of the study's sweep (the course's light sampling against -H)."""
+    return {r["side"]: r for r in study.hemisphere_sweep([0.5, 0.25, 0.1, 0.05], SIZE, 64)}
 
 
 def stderr(relvar, mean, spp=64):
@@ -34,18 +44,18 @@ def stderr(relvar, mean, spp=64):
 
 def test_hemisphere_variance_grows_as_the_light_shrinks(sweep):
     big, small = sweep[0.5], sweep[0.05]
-    print({side: (r["light"][0], r["hemisphere"][0]) for side, r in sweep.items()})
+    print({side: (r["light"]["relvar"], r["hemisphere"]["relvar"]) for side, r in sweep.items()})
     # area 100x smaller: about 100x the variance (1 / area); at least 10x
-    assert small["hemisphere"][0] > 10 * big["hemisphere"][0]
-    assert small["hemisphere"][0] > 100 * small["light"][0]
+    assert small["hemisphere"]["relvar"] > 10 * big["hemisphere"]["relvar"]
+    assert small["hemisphere"]["relvar"] > 100 * small["light"]["relvar"]
 
 
 def test_light_sampling_variance_does_not_grow_as_the_light_shrinks(sweep):
-    largest = sweep[0.5]["light"][0]
+    largest = sweep[0.5]["light"]["relvar"]
     for side, r in sweep.items():
-        assert r["light"][0] <= 1.5 * largest, side
+        assert r["light"]["relvar"] <= 1.5 * largest, side
         for method in ("light", "hemisphere"):
-            relvar, mean = r[method]
+            relvar, mean = r[method]["relvar"], r[method]["mean"]
             # unbiased: within 4 standard errors (plus the quadrature's 0.5%) of the quadrature
             assert abs(mean - r["reference"]) <= 4 * stderr(relvar, mean) + 0.005 * \
                 r["reference"], (side, method, mean, r["reference"])
@@ -53,11 +63,14 @@ def test_light_sampling_variance_does_not_grow_as_the_light_shrinks(sweep):
 
 def test_hemisphere_under_a_point_light_warns_and_is_black():
     scene, camera = study.point_light_scene(), study.floor_camera(*SIZE)
+    kwargs = dict(camera=camera, resolution=SIZE, spp=4, max_depth=3, **study.COURSE)
     with pytest.warns(RuntimeWarning, match="hemisphere sampling"):
-        image = ptrace.render(scene, camera=camera, resolution=SIZE, spp=4, max_depth=3,
-                              hemisphere=True)
+        image = ptrace.render(scene, hemisphere=True, **kwargs)
     assert image.max() == 0.0
-    assert ptrace.render(scene, camera=camera, resolution=SIZE, spp=4, max_depth=3).min() > 0
+    assert ptrace.render(scene, **kwargs).min() > 0
+    measured = study.point_light_hemisphere(SIZE)      # what the report quotes
+    assert measured["hemisphere_max"] == 0.0 and measured["light_mean"] > 0
+    assert any("hemisphere sampling" in message for message in measured["warnings"])
 
 
 def test_emitter_on_the_light_does_not_shadow_a_wide_floor():
@@ -65,7 +78,7 @@ def test_emitter_on_the_light_does_not_shadow_a_wide_floor():
     origin, so when a receiver's coordinates exceeded its distance to the light's plane the
     spawn offset carried the ray's end onto the emissive quad lying on the light and the floor
     went black. Shadow rays now run from the spawned origin to the light's point."""
-    means = study.shadow_bug(halves=(0.75, 2.0))
+    means = {r["half"]: r["mean"] for r in study.shadow_bug(halves=(0.75, 2.0))}
     assert means[2.0] == pytest.approx(means[0.75], rel=0.01)
 
 
@@ -75,16 +88,18 @@ ADAPTIVE_SPP, TOL = 128, 0.05
 
 @pytest.fixture(scope="module")
 def adaptive():
+    """{case: {batch: {rule: false_convergence}}}."""
     out = {}
     for case in study.CASE_TEXT:
         snapshots, reference, options = study.adaptive_case(case, SIZE, ADAPTIVE_SPP, seed=3)
-        out[case] = study.adaptive_table(snapshots, reference, ADAPTIVE_SPP, (16, 32), TOL)
+        out[case] = study.by_batch(study.adaptive_table(snapshots, reference, ADAPTIVE_SPP,
+                                                        (16, 32), TOL))
     return out
 
 
 @pytest.mark.parametrize("case", study.DIM_CASES)
 def test_course_rule_stops_dim_pixels_black(adaptive, case):
-    course = adaptive[case][16, "course"]
+    course = adaptive[case][16]["course"]
     print(case, course)
     assert course["false"] > 0.2
     assert course["black"] == course["false"] == course["early"]
@@ -95,29 +110,31 @@ def test_ptrace_rule_stops_fewer_falsely(adaptive, case):
     table = adaptive[case]
     print(case, table)
     for batch in (16, 32):
-        assert table[batch, "ptrace"]["false"] <= table[batch, "course"]["false"]
-    assert table[16, "ptrace"]["false"] < 0.8 * table[16, "course"]["false"]
+        assert table[batch]["ptrace"]["false"] <= table[batch]["course"]["false"]
+    assert table[16]["ptrace"]["false"] < 0.8 * table[16]["course"]["false"]
     # a pixel stops black only after 2 batches of zeros: the course's rule at twice the batch
-    assert table[16, "ptrace"]["black"] == table[32, "course"]["black"]
+    assert table[16]["ptrace"]["black"] == table[32]["course"]["black"]
     if case == "reflector":
-        assert table[32, "ptrace"]["false"] < 0.05
+        assert table[32]["ptrace"]["false"] < 0.05
 
 
 def test_adaptive_works_where_samples_are_rarely_zero(adaptive):
     for rule in study.RULES:
-        direct = adaptive["direct"][16, rule]
+        direct = adaptive["direct"][16][rule]
         print(rule, direct)
         assert direct["early"] > 0.5
         assert direct["false"] < 0.02
 
 
 def test_replay_matches_an_adaptive_render():
+    """On the study's reflector case, with its options (the course's estimator)."""
     camera = study.floor_camera(*SIZE)
-    snapshots, _ = study.batch_sums(study.reflector_scene(), camera, 64, 8, seed=5, max_depth=2)
+    options = dict(max_depth=2, **study.COURSE)
+    snapshots, _ = study.batch_sums(study.reflector_scene(), camera, 64, 8, seed=5, **options)
     mean, samples = study.simulate_adaptive(snapshots, 8, 16, TOL, study.RULES["ptrace"])
     stats = {}
     image = ptrace.render(study.reflector_scene(), camera=camera, resolution=SIZE, spp=64,
-                          seed=5, max_depth=2, adaptive=(16, TOL), stats=stats)
+                          seed=5, adaptive=(16, TOL), stats=stats, **options)
     assert 0 < (samples < 64).mean() < 1
     np.testing.assert_array_equal(stats["samples"], study.to_image(samples, camera))
     np.testing.assert_allclose(image @ LUMINANCE, study.to_image(mean, camera), rtol=1e-5,
@@ -129,13 +146,13 @@ def test_replay_matches_an_adaptive_render():
 def cornell():
     scene = ptrace.load(SHIPPED)
     camera = study.small_course_camera(scene, *SIZE)
-    return scene, camera, study.unlit_by_camera(scene, camera, 64)
+    return scene, camera, study.unlit_by_camera(scene, camera, 64, **study.RR)
 
 
 def test_roulette_is_unbiased(cornell):
     scene, camera, mask = cornell
-    rr = study.depth_run(scene, camera, 64, 100, mask=mask)
-    deep = study.depth_run(scene, camera, 64, 16, "off", mask=mask)
+    rr = study.depth_run(scene, camera, 64, 100, mask=mask, **study.RR)
+    deep = study.depth_run(scene, camera, 64, 16, "off", mask=mask, **study.RR)
     print(rr, deep)
     assert abs(rr["mean"] - deep["mean"]) < 4 * math.hypot(rr["stderr"], deep["stderr"])
     assert rr["rays"] < 0.8 * deep["rays"]
@@ -143,7 +160,7 @@ def test_roulette_is_unbiased(cornell):
 
 def test_fixed_depth_without_roulette_is_biased_low(cornell):
     scene, camera, mask = cornell
-    means = [study.depth_run(scene, camera, 16, d, "off", mask=mask)["mean"]
+    means = [study.depth_run(scene, camera, 16, d, "off", mask=mask, **study.RR)["mean"]
              for d in (1, 2, 4, 8, 16)]
     print(means)
     # the same seed: a deeper render adds only non-negative terms to the same paths
@@ -158,8 +175,8 @@ def test_default_cap_is_integrator_rr_cap(cornell):
     kwargs = dict(camera=camera, resolution=SIZE, spp=4, max_depth=100)
     np.testing.assert_array_equal(ptrace.render(scene, rr_cap=integrator.RR_CAP, **kwargs),
                                   ptrace.render(scene, **kwargs))
-    default = study.depth_run(scene, camera, 4, 100, mask=mask)
-    given = study.depth_run(scene, camera, 4, 100, integrator.RR_CAP, mask=mask)
+    default = study.depth_run(scene, camera, 4, 100, mask=mask, **study.RR)
+    given = study.depth_run(scene, camera, 4, 100, integrator.RR_CAP, mask=mask, **study.RR)
     assert {k: v for k, v in given.items() if k != "seconds"} == \
         {k: v for k, v in default.items() if k != "seconds"}
 
@@ -172,9 +189,9 @@ def test_low_cap_changes_the_image_but_stays_unbiased(cornell):
     kwargs = dict(camera=camera, resolution=SIZE, spp=8, max_depth=100)
     assert not np.array_equal(ptrace.render(scene, rr_cap=0.25, **kwargs),
                               ptrace.render(scene, **kwargs))
-    low = study.depth_run(scene, camera, 64, 100, 0.25, mask=mask)
-    ours = study.depth_run(scene, camera, 64, 100, mask=mask)
-    deep = study.depth_run(scene, camera, 64, 16, "off", mask=mask)
+    low = study.depth_run(scene, camera, 64, 100, 0.25, mask=mask, **study.RR)
+    ours = study.depth_run(scene, camera, 64, 100, mask=mask, **study.RR)
+    deep = study.depth_run(scene, camera, 64, 16, "off", mask=mask, **study.RR)
     print(low, ours, deep)
     assert low["mean"] != ours["mean"]
     assert abs(low["mean"] - deep["mean"]) < 4 * math.hypot(low["stderr"], deep["stderr"])
@@ -214,7 +231,7 @@ def fireflies(course_scene):
     for name in ("CBspheres.dae", "CBspheres_lambertian.dae"):
         scene = ptrace.load(course_scene(f"sky/{name}"))
         camera = study.small_course_camera(scene, 32, 24)
-        samples = study.diffuse_sample_radiance(scene, camera, 16, max_depth=5)
+        samples = study.diffuse_sample_radiance(scene, camera, 16, **study.FIREFLY)
         out[name] = study.firefly_stats(samples)
     return out
 
@@ -222,15 +239,150 @@ def fireflies(course_scene):
 def test_caustic_fireflies(fireflies):
     glass, diffuse = fireflies["CBspheres.dae"], fireflies["CBspheres_lambertian.dae"]
     print({k: {m: v for m, v in r.items() if m != "clamps"} for k, r in fireflies.items()})
+    outliers = study.by_k(glass["outliers"])
     assert glass["max"] > 150 * glass["mean"]
-    assert glass["above"][100] > 0
-    assert glass["energy"][30] > 0.05
+    assert outliers[100]["above"] > 0
+    assert outliers[30]["energy"] > 0.05
     assert diffuse["max"] < 80 * diffuse["mean"]
 
 
 def test_a_clamp_would_trade_energy_for_variance(fireflies):
-    clamp = fireflies["CBspheres.dae"]["clamps"][30]
+    clamp = study.by_k(fireflies["CBspheres.dae"]["clamps"])[30]
     print(fireflies["CBspheres.dae"]["clamps"])
     assert clamp["lost"] > 0.03
     assert clamp["variance"] < 0.5
-    assert fireflies["CBspheres_lambertian.dae"]["clamps"][30]["lost"] < 0.005
+    assert study.by_k(fireflies["CBspheres_lambertian.dae"]["clamps"])[30]["lost"] < 0.005
+
+
+# -- the report: written from the data alone -------------------------------------------------------
+def test_every_pinned_test_exists():
+    """The report names the tests of study.PINS: each is a test function of this file, so
+    renaming one of them fails this test until PINS follows."""
+    for path, function in study.PINS.values():
+        assert path == study.TEST and callable(globals().get(function)), function
+
+
+def convergence(false):
+    return dict(early=false, false=false, false_of_early=1.0, black=false, samples=100.0)
+
+
+def synthetic_data():
+    """Made-up measurements with the shape of study.measure's, and a run."""
+    sweep = [dict(side=side, area=side ** 2, light=dict(relvar=0.02, mean=0.12),
+                  hemisphere=dict(relvar=0.05 / side ** 2, mean=0.12), reference=0.12)
+             for side in (0.5, 0.05)]
+    table = [dict(batch=batch, course=convergence(4.8 / batch), ptrace=convergence(2.4 / batch))
+             for batch in (8, 16, 32, 64)]
+
+    def run(name, rule, depth, mean):
+        return dict(name=name, rule=rule, max_depth=depth, mean=mean, stderr=0.0002,
+                    relvar=1.5, rays=1 + depth / 100, seconds=0.1)
+
+    fixed = {1: 0.03, 2: 0.04, 4: 0.05, 8: 0.054, 16: 0.06}
+    runs = [run(f"no RR, m={depth}", "off", depth, mean) for depth, mean in fixed.items()]
+    runs += [run("RR (ptrace, cap 0.95), m=100", "ptrace", 100, 0.0601),
+             run("RR (ptrace, cap 0.95), m=5", "ptrace", 5, 0.057)]
+    runs += [run(f"RR cap {cap:g}, m=100", cap, 100, 0.0601 if cap >= 0.8 else 0.059)
+             for cap in (0.95, 0.8, 0.5, 0.25)]
+
+    def firefly(top):
+        return dict(mean=0.06, spp=64, max=top,
+                    outliers=[dict(k=k, above=0.01 / k, energy=0.1 / k) for k in study.OUTLIERS],
+                    clamps=[dict(k=k, lost=0.3 / k, variance=min(1.0, k / 100),
+                                 worse_after=None if k >= 1000 else 100.0 * k)
+                            for k in study.CLAMPS])
+
+    quick = dict(quick=True, width=32, height=24, spp=64)
+    return {
+        "run": dict(quick=True, threads=2, seconds=7.0),
+        "hemisphere": dict(quick, options=study.COURSE, floor_albedo=0.5, light_height=1.0,
+                           quadrature=32, sweep=sweep, point_light=dict(
+                               warnings=["hemisphere sampling (-H) sees nothing"],
+                               hemisphere_max=0.0, light_mean=0.45),
+                           shadow_bug=[dict(half=0.75, mean=0.12), dict(half=2.0, mean=0.12)]),
+        "adaptive": dict(quick, batches=[8, 16, 32, 64], tolerance=0.05, options=study.COURSE,
+                         cases={case: dict(options=dict(max_depth=1, **study.COURSE),
+                                           zero_chance=0.9, table=copy.deepcopy(table))
+                                for case in study.CASE_TEXT}),
+        "roulette": dict(quick, kept=0.99, options=study.RR, default_cap=0.95, runs=runs),
+        "fireflies": dict(quick, options=study.FIREFLY,
+                          scenes={"CBspheres.dae": firefly(22.0),
+                                  "CBspheres_lambertian.dae": firefly(2.4)})}
+
+
+def cells(row):
+    """The cells of a Markdown table row (an escaped pipe, \\|, is inside a cell)."""
+    return re.split(r"(?<!\\)\|", row.strip().strip("|"))
+
+
+def check_report(text):
+    """Every table row has as many cells as its header; every test named is one of PINS."""
+    for table in re.findall(r"(?:^\|.*\|\n)+", text + "\n", re.M):
+        lines = table.strip().splitlines()
+        assert all(len(cells(line)) == len(cells(lines[0])) for line in lines), table
+    quoted = templating.quoted_tests(text)
+    assert set(quoted) == set(study.PINS.values())
+    for path, function in quoted:
+        assert function in templating.defined_tests(path), (path, function)
+
+
+def test_report_follows_the_data(tmp_path, monkeypatch):
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
+    data = synthetic_data()
+    assert templating.plain(data) == json.loads(json.dumps(data)) == data
+    path = study.write_report(data, "light.md")
+    text = path.read_text()
+    assert json.loads(path.with_suffix(".json").read_text()) == data
+    for chart in ("hemisphere", "adaptive", "roulette", "fireflies"):
+        assert (tmp_path / f"stability_light_{chart}.png").stat().st_size > 1000
+    check_report(text)
+    # the figures are the data's
+    assert "over a 100x smaller area -H's relvar grew 100x" in text
+    assert 'light samples alone with independent random numbers (`direct="light", ' \
+        'sampler="independent"`)' in text
+    assert "with batches of 16 it left 30% (*reflector*) and 30% (*hemisphere*)" in text
+    assert "-16.7% at 4 vertices, -10.00% at 8 in this box" in text
+    assert "(`direct=\"mis\", sampler=\"independent\"`: the standard errors" in text
+    assert "given explicitly, 0.95 reproduced the default run to the bit" in text
+    assert "Caps 0.95 and 0.8 gave the same image" in text
+    assert "on CBspheres the largest sample was 367x the mean" in text
+    assert "a clamp at 30x keeps 30% of it" in text and "1.0% at 30x here" in text
+    assert "| 1000 x mean | 0.03% | 1.00 | never |" in text
+    assert "Total time 7 s." in text
+    # ... and a changed number changes the report
+    changed = copy.deepcopy(data)
+    changed["adaptive"]["cases"]["reflector"]["table"][1]["course"]["false"] = 0.5
+    changed["fireflies"]["scenes"]["CBspheres.dae"]["max"] = 30.0
+    changed["roulette"]["runs"][7]["mean"] = 0.0602       # the default cap given explicitly
+    again = study.write_report(changed, "changed.md").read_text()
+    assert "with batches of 16 it left 50% (*reflector*) and 30% (*hemisphere*)" in again
+    assert "on CBspheres the largest sample was 500x the mean" in again
+    assert "GIVEN EXPLICITLY, 0.95 DID NOT REPRODUCE the default run (mean 0.06020 against " \
+        "0.06010)" in again
+    assert "Caps 0.95 and 0.8" not in again
+
+
+def test_a_renamed_test_stops_the_report(tmp_path, monkeypatch):
+    monkeypatch.setitem(study.PINS, "replay", (study.TEST, "test_that_was_renamed"))
+    with pytest.raises(LookupError, match="test_that_was_renamed"):
+        study.write_sections(synthetic_data(), tmp_path)
+
+
+@pytest.mark.slow
+def test_quick_report_writes_markdown_json_and_charts(tmp_path, monkeypatch):
+    import numba
+    threads = numba.get_num_threads()
+    try:
+        assert study.main(["--quick", "--output", str(tmp_path / "light.md")]) == 0
+    finally:
+        numba.set_num_threads(threads)
+    text = (tmp_path / "light.md").read_text()
+    check_report(text)
+    assert "DID NOT REPRODUCE" not in text and "NO WARNING" not in text
+    data = json.loads((tmp_path / "light.json").read_text())
+    assert set(data) == {"run", *(name for name, _, _ in study.SECTIONS)}
+    # the report is a function of the JSON beside it: written again from it, the same text
+    monkeypatch.setattr(report, "RESULTS", tmp_path / "again")
+    again = study.write_report(data, "light.md").read_text()
+    assert [line for line in again.splitlines() if not line.startswith("- date")] == \
+        [line for line in text.splitlines() if not line.startswith("- date")]
