@@ -92,6 +92,20 @@ def test_path_render_summary_and_rate_image(tmp_path):
     assert 0 < red.sum() < red.size
 
 
+def test_direct_and_sampler_flags_reach_the_render(tmp_path):
+    """--direct light --sampler independent is the course's estimator on independent numbers:
+    its image differs from the default's (MIS, Sobol'), and each flag alone changes it too."""
+    images = {}
+    for name, flags in (("default", []), ("light", ["--direct", "light"]),
+                        ("independent", ["--sampler", "independent"])):
+        output = tmp_path / f"{name}.exr"
+        result = run("-s", 4, "-m", 2, "-r", 24, 18, "-q", *flags, "-f", output, SHIPPED)
+        assert result.returncode == 0, result.stderr
+        images[name] = read_image(output)
+    assert not np.array_equal(images["default"], images["light"])
+    assert not np.array_equal(images["default"], images["independent"])
+
+
 def test_hemisphere_on_a_scene_without_emitters_warns_once(tmp_path, scenes_dir):
     result = run("-H", "-r", 16, 12, "-f", tmp_path / "cow.png", scenes_dir / "meshedit/cow.dae")
     assert result.returncode == 0, result.stderr
@@ -117,6 +131,8 @@ BAD_CALLS = {
     "missing camera file": (["-c", "/nonexistent-cam.txt", "--integrator", "normals"], "camera"),
     "zero light samples": (["-l", "0"], "at least 1"),
     "negative depth": (["-m", "-1"], "negative"),
+    "unknown estimator": (["--direct", "bdpt"], "invalid choice"),
+    "unknown sampler": (["--sampler", "halton"], "invalid choice"),
 }
 
 
