@@ -1,197 +1,357 @@
-"""Speed against accuracy: relative MSE against wall time for ptrace's estimators and backends.
+"""Error against time, as a user would compare: ptrace's estimators and Mitsuba 3 on full frames.
 
-    python -m benchmarks.error_vs_time [--quick]
+    python -m benchmarks.error_vs_time [--quick] [--scenes CBspheres_lambertian CBbunny ...]
 
-Scene variants_sp23/sky/CBspheres_lambertian.dae at ptrace's -m 5, the central 160x120 window
-of the 480x360 frame (ptrace's crop, so every pixel is the one of the full render). Reference:
-benchmarks/references/CBspheres_lambertian_m5_mitsuba.exr (Mitsuba 3, 1024 spp; its own noise
-sets a floor of about 5e-4 on these curves). For each method, renders at doubling -s give points
-(wall seconds, relative MSE), all on 2 threads with kernels compiled beforehand:
-- light sampling at -l 1, 4 and 16 (bvh), hemisphere sampling -H at -l 4 (on sky/ version of
-  the file: -H sees only emissive geometry and the sp23 light has none; the sky/ file's
-  emissive quad lies on the light, outside the window, so both converge to the same image);
-- adaptive (-a 8 0.05, -l 4) against uniform sampling at the same -l: a point per -s cap;
-- --accel naive, bvh, embree at -l 4 (the same images, different time);
-- Mitsuba 3 scalar_rgb on the same window, where mitsuba is importable (its own curve).
-- Russian roulette on (ptrace's default) against off (render option roulette=False: every
-  path runs to -m), both at -l 4; the study of roulette against depth is in stability.md.
-The report ends with verdicts computed from the curves. Writes
-benchmarks/results/error_vs_time.md and .png.
+Scenes: the course's CBspheres_lambertian, CBbunny and CBspheres (mirror and glass) at -m 5, the
+whole 480x360 frame, 2 threads. Each is rendered WITHOUT its emissive quad, by both renderers
+(benchmarks.mitsuba_reference.without_emissive_primitives: the quad is the <light>'s visible
+face in ptrace, which Mitsuba cannot reproduce; CS184.md 1.6), so both see one scene: the
+<light> as a one-sided area light hidden from camera rays. Mapping:
+benchmarks.mitsuba_reference.mitsuba_scene, with Mitsuba's `volpath` integrator (its `path`
+counts crossing the light's null-BSDF rectangle as a bounce) and ptrace's Schlick glass
+(register_schlick_glass; Mitsuba's `dielectric` has the exact Fresnel equations).
+
+Reference per scene: Mitsuba 3 llvm_ad_rgb at REFERENCE_SPP samples per pixel (made once, kept
+in benchmarks/.cache/, which git ignores; the report gives its mean). Relative MSE = mean over
+pixels whose reference is at most 1 in every channel (directly seen lights are left out) of
+(x - ref)^2 / (ref^2 + 0.01), as the issue measured it.
+
+Curves (points at doubling -s; seconds = wall time of the render call, compiled kernels, BVH
+build included; Mitsuba's = its render call after an untimed JIT warm-up):
+- ptrace with multiple importance sampling or light sampling alone (--direct), with the Sobol'
+  or the independent sampler (--sampler), -l 1 / 4 / 16, three roulette rules (ptrace's: from
+  vertex 2, continue with min(0.95, max throughput); Mitsuba's: the same from vertex 5;
+  pbrt-v4's: from vertex 2, min(1, max throughput)) and roulette off, the embree backend;
+- Mitsuba 3 llvm_ad_rgb's `path` integrator with its independent and multijitter samplers.
+
+Measuring (measure(): plain data, written as error_vs_time.json) is apart from writing
+(write_report(): the Markdown from a template with named fields, and one chart per scene).
 """
 import argparse
+import json
 import os
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from . import report
 from .accel_rays import scenes_dir
-from .mitsuba_reference import REFERENCES, mitsuba_scene
 
-SCENE = "variants_sp23/sky/CBspheres_lambertian.dae"
-SCENE_WITH_QUAD = "sky/CBspheres_lambertian.dae"
-REFERENCE = REFERENCES / "CBspheres_lambertian_m5_mitsuba.exr"
+SCENES = {"CBspheres_lambertian": "sky/CBspheres_lambertian.dae",
+          "CBbunny": "sky/CBbunny.dae",
+          "CBspheres": "sky/CBspheres.dae"}
 FULL = (480, 360)
-WINDOW = (160, 120, 160, 120)      # x, y (from the bottom), width, height
 DEPTH = 5
+THREADS = 2
+REFERENCE_SPP = 4096
+CACHE = Path(__file__).resolve().parent / ".cache"
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+DEFAULT = "ptrace mis sobol (default)"
+PTRACE_METHODS = {
+    DEFAULT: {},
+    "ptrace mis independent": dict(sampler="independent"),
+    "ptrace light sobol": dict(direct="light"),
+    "ptrace light independent (the course's estimator)": dict(direct="light",
+                                                              sampler="independent"),
+    "ptrace -l 4": dict(light_samples=4),
+    "ptrace -l 16": dict(light_samples=16),
+    "roulette from vertex 5 (Mitsuba's rule)": dict(rr_depth=5),
+    "roulette uncapped (pbrt-v4's rule)": dict(rr_cap=1.0),
+    "roulette off": dict(roulette=False),
+    "ptrace embree": dict(accel="embree"),
+}
+MITSUBA_SAMPLERS = ("independent", "multijitter")
+MITSUBA_VARIANT = "llvm_ad_rgb"
 
 
 def relative_mse(image, reference):
-    return float(np.mean((image - reference) ** 2 / (reference ** 2 + 1e-2)))
+    """Mean of (x - ref)^2 / (ref^2 + 0.01) over the pixels whose reference is <= 1."""
+    mask = reference.max(axis=-1) <= 1.0
+    error = ((image - reference) ** 2 / (reference ** 2 + 1e-2)).mean(axis=-1)
+    return float(error[mask].mean())
 
 
-def verdict_lines(curves, best):
-    """One line per comparison the issue asks for, from the measured points: `best` is each
-    method's lowest relative MSE x seconds (its efficiency; lower is better)."""
-    def ratio(a, b):
-        return best[b] / best[a]
-
-    lines = []
-    light = min((k for k in best if k.startswith("light -l")), key=best.get)
-    hemisphere = next(k for k in best if k.startswith("hemisphere"))
-    lines.append(f"- Light sampling against hemisphere sampling: {light} is "
-                 f"{ratio(light, hemisphere):.0f}x more efficient than {hemisphere}.")
-    order = sorted((k for k in best if k.startswith("light -l")), key=best.get)
-    fewest_best = order[0] == "light -l 1"
-    lines.append("- Light samples per vertex: best first " + ", ".join(
-        f"{k} ({best[k]:.4f})" for k in order) + (
-        " (more shadow rays per vertex cost more time than the variance they remove here)."
-        if fewest_best else "."))
-    adaptive = next(k for k in best if k.startswith("adaptive"))
-    uniform = "light -l 4"
-    word = "more" if best[adaptive] < best[uniform] else "less"
-    lines.append(f"- Adaptive against uniform sampling at -l 4: adaptive is {word} efficient "
-                 f"({best[adaptive]:.4f} against {best[uniform]:.4f}, "
-                 f"{max(ratio(adaptive, uniform), ratio(uniform, adaptive)):.2f}x).")
-    off = "roulette off -l 4"
-    word = "more" if best[uniform] < best[off] else "less"
-    lines.append(f"- Russian roulette on against off (-m {DEPTH}, -l 4): roulette is {word} "
-                 f"efficient ({best[uniform]:.4f} against {best[off]:.4f}, "
-                 f"{max(ratio(uniform, off), ratio(off, uniform)):.2f}x).")
-    same = []
-    for kind in ("naive -l 4", "embree -l 4"):
-        bvh = {p[0]: p for p in curves[uniform]}
-        shared = [p for p in curves[kind] if p[0] in bvh]
-        worst = max(abs(p[2] / bvh[p[0]][2] - 1) for p in shared)
-        times = sorted(p[1] / bvh[p[0]][1] for p in shared)
-        same.append(f"{kind.split()[0]}: relative MSE within {100 * worst:.2f}% of bvh's at "
-                    f"every -s, median time {times[len(times) // 2]:.2f}x bvh's")
-    lines.append("- Backends (same images, different time): " + "; ".join(same) + ".")
-    mitsuba = [k for k in best if k.startswith("Mitsuba")]
-    if mitsuba:
-        lines.append(f"- Against {mitsuba[0]}: ptrace's best ({light}) needs "
-                     f"{best[light] / best[mitsuba[0]]:.2f}x the wall time for the same "
-                     "relative MSE.")
-    return lines
-
-
-def main(argv=None):
+def test_scene(name):
+    """The loaded course scene without its emissive quad: what both renderers render."""
     import ptrace
-    from ptrace.image import read_image
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--output", default="error_vs_time.md")
-    args = parser.parse_args(argv)
-    x, y, w, h = WINDOW
-    reference = read_image(REFERENCE)[FULL[1] - y - h:FULL[1] - y, x:x + w]
-    scene = ptrace.load(os.path.join(scenes_dir(), SCENE))
-    ptrace.render(scene, spp=2, resolution=(8, 6), max_depth=2, light_samples=2,
-                  adaptive=(1, 0.5))
-    for kind in ("naive", "embree"):
-        ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=2, accel=kind)
-    spps = [1, 2, 4, 8] if args.quick else [1, 2, 4, 8, 16, 32, 64]
+    from .mitsuba_reference import without_emissive_primitives
+    return without_emissive_primitives(ptrace.load(os.path.join(scenes_dir(), SCENES[name])))
 
-    # -H sees only emissive geometry, and the sp23 file's light has none: -H runs on the sky/
-    # version of the same scene, whose emissive quad lies exactly on the light (outside the window)
-    with_quad = ptrace.load(os.path.join(scenes_dir(), SCENE_WITH_QUAD))
-    ptrace.render(with_quad, spp=1, resolution=(8, 6), max_depth=2, hemisphere=True)
 
-    def curve(label, spp_list=spps, on=scene, **options):
-        points = []
-        for spp in spp_list:
-            stats = {}
-            start = time.perf_counter()
-            image = ptrace.render(on, spp=spp, resolution=FULL, crop=WINDOW, max_depth=DEPTH,
-                                  threads=args.threads, stats=stats, **options)
-            seconds = time.perf_counter() - start
-            points.append((spp, seconds, relative_mse(image, reference),
-                           float(stats["samples"].mean())))
-            print(label, points[-1], flush=True)
-        return label, points
+class Mitsuba:
+    """Mitsuba 3 renders of a ptrace scene in one variant (None if it cannot run here)."""
 
-    curves = [
-        curve("light -l 1", light_samples=1),
-        curve("light -l 4", light_samples=4),
-        curve("light -l 16", light_samples=16),
-        curve("hemisphere -H -l 4 (sky/ file)", on=with_quad, light_samples=4, hemisphere=True),
-        curve("adaptive -a 8 0.05 -l 4", spp_list=[s for s in spps if s >= 8] + [128, 256],
-              light_samples=4, adaptive=(8, 0.05)),
-        curve("roulette off -l 4", light_samples=4, roulette=False),
-        curve("naive -l 4", spp_list=spps[:4], light_samples=4, accel="naive"),
-        curve("embree -l 4", light_samples=4, accel="embree"),
-    ]
-    mitsuba_note = "Mitsuba 3 is not installed here (pip install mitsuba): no Mitsuba curve."
-    try:
-        import mitsuba as mi
-    except ImportError:
-        mi = None
-    if mi is not None:
-        mi.set_variant("scalar_rgb")
+    def __init__(self, variant=MITSUBA_VARIANT, threads=THREADS):
+        from .paths_per_second import import_mitsuba, set_variant
+        self.mi, libllvm, note = import_mitsuba()
+        self.note = note or (set_variant(self.mi, variant, threads, libllvm)
+                             if self.mi is not None else None)
+        self.variant = variant
+        self.schlick = False
+
+    @property
+    def available(self):
+        return self.mi is not None and self.note is None
+
+    def render(self, scene, spp, sampler="independent", seed=0, repeats=1):
+        """(image, seconds of the fastest of `repeats` timed renders, actual spp)."""
+        import drjit as dr
         from ptrace.camera import course_camera
-        camera = course_camera(scene, *FULL)
-        points = []
+        from .mitsuba_reference import mitsuba_scene, register_schlick_glass
+        mi = self.mi
+        if not self.schlick:
+            register_schlick_glass(mi)
+            self.schlick = True
         with tempfile.TemporaryDirectory() as workdir:
-            for spp in spps:
-                description = mitsuba_scene(scene, camera, DEPTH, spp, 7, workdir)
-                description["sensor"]["film"].update(
-                    crop_offset_x=x, crop_offset_y=FULL[1] - y - h, crop_width=w, crop_height=h)
-                loaded = mi.load_dict(description)
-                start = time.perf_counter()
-                image = np.array(mi.render(loaded), dtype=np.float32)
-                seconds = time.perf_counter() - start
-                points.append((spp, seconds, relative_mse(image, reference), float(spp)))
-                print("mitsuba", points[-1], flush=True)
-        curves.append((f"Mitsuba {mi.__version__} scalar_rgb", points))
-        mitsuba_note = (f"Mitsuba {mi.__version__} scalar_rgb renders the same window (film "
-                        "crop) with its own path tracer; its time excludes loading the scene. "
-                        "Its llvm variant (the issue's anchor, rel. MSE x s about 0.0075 on the "
-                        "full frame) needs libLLVM, not installed here.")
+            # volpath: Mitsuba's path integrator would count crossing the light rectangle's
+            # null BSDF as a bounce; Schlick glass: ptrace's (and the course's) Fresnel
+            description = mitsuba_scene(scene, course_camera(scene, *FULL), DEPTH, spp, seed,
+                                        workdir, glass="schlick", integrator="volpath")
+            description["sensor"]["sampler"]["type"] = sampler
+            loaded = mi.load_dict(description)
+        actual = loaded.sensors()[0].sampler().sample_count()
 
+        def once(s):
+            image = mi.render(loaded, seed=s)
+            dr.eval(image)
+            dr.sync_thread()
+            return image
+
+        once(seed + 1000)          # JIT compilation, untimed
+        best, image = float("inf"), None
+        for r in range(repeats):
+            start = time.perf_counter()
+            image = once(seed + r)
+            best = min(best, time.perf_counter() - start)
+        return np.array(image, dtype=np.float32)[..., :3], best, actual
+
+
+def reference(name, mitsuba, spp):
+    """The scene's Mitsuba reference image, made once and cached."""
+    from ptrace.image import read_image, write_image
+    path = CACHE / f"{name}_m{DEPTH}_{mitsuba.variant}_{spp}spp.exr"
+    if path.exists():
+        return read_image(path)[..., :3], path
+    CACHE.mkdir(exist_ok=True)
+    print(f"{name}: rendering the {spp}-spp Mitsuba reference ...", flush=True)
+    image, seconds, _ = mitsuba.render(test_scene(name), spp, seed=12345)
+    write_image(path, image)
+    print(f"{name}: reference in {seconds:.0f} s -> {path}", flush=True)
+    return image, path
+
+
+def measure_scene(name, mitsuba, spps, repeats, reference_spp):
+    """{method: [point, ...]} for one scene; a point is {spp, seconds, rel_mse, luminance}."""
+    import ptrace
+    ref, ref_path = reference(name, mitsuba, reference_spp)
+    scene = test_scene(name)
+    curves = {}
+
+    def point(spp, seconds, image):
+        return {"spp": int(spp), "seconds": seconds, "rel_mse": relative_mse(image, ref),
+                "luminance": float((image @ LUMINANCE).mean())}
+
+    for label, options in PTRACE_METHODS.items():
+        ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=DEPTH, **options)   # compile
+        points = []
+        for spp in (spps if options.get("light_samples", 1) < 16 else spps[:-1] or spps):
+            best, image = float("inf"), None
+            for r in range(repeats):
+                start = time.perf_counter()
+                image = ptrace.render(scene, spp=spp, resolution=FULL, max_depth=DEPTH,
+                                      threads=THREADS, seed=r, **options)
+                best = min(best, time.perf_counter() - start)
+            points.append(point(spp, best, image))
+            print(name, label, points[-1], flush=True)
+        curves[label] = points
+    for sampler in MITSUBA_SAMPLERS:
+        label = f"Mitsuba {mitsuba.variant} {sampler}"
+        points = []
+        for spp in spps:
+            image, seconds, actual = mitsuba.render(scene, spp, sampler=sampler,
+                                                    repeats=repeats)
+            points.append(point(actual, seconds, image))
+            print(name, label, points[-1], flush=True)
+        curves[label] = points
+    return {"scene": SCENES[name], "reference": {
+        "file": str(ref_path.relative_to(Path(__file__).resolve().parents[1])),
+        "spp": reference_spp, "variant": mitsuba.variant,
+        "luminance": float((ref @ LUMINANCE).mean()),
+        "masked_fraction": float((ref.max(axis=-1) > 1.0).mean())}, "curves": curves}
+
+
+def measure(names, spps, repeats, reference_spp=REFERENCE_SPP):
+    """Everything the report says, as plain data."""
+    mitsuba = Mitsuba()
+    if not mitsuba.available:
+        raise SystemExit(f"error_vs_time needs Mitsuba 3 {MITSUBA_VARIANT}: {mitsuba.note}")
+    return {"resolution": list(FULL), "max_depth": DEPTH, "threads": THREADS,
+            "spp": list(spps), "repeats": repeats, "mitsuba": mitsuba.mi.__version__,
+            "reference_spp": reference_spp,
+            "scenes": {name: measure_scene(name, mitsuba, spps, repeats, reference_spp)
+                       for name in names}}
+
+
+# -- what the numbers say ---------------------------------------------------------------------------
+
+def at_spp(points, spp):
+    return next((p for p in points if p["spp"] == spp), None)
+
+
+def efficiency(points):
+    """Lowest relative MSE x seconds along a curve (lower is better)."""
+    return min(p["rel_mse"] * p["seconds"] for p in points)
+
+
+def target_spp(data):
+    """The -s the targets compare at: 16, or the largest measured."""
+    return 16 if 16 in data["spp"] else max(data["spp"])
+
+
+def targets(data):
+    """The issue's targets per scene: rows of named values."""
+    spp = target_spp(data)
+    rows = []
+    for name, result in data["scenes"].items():
+        curves = result["curves"]
+        independent = f"Mitsuba {MITSUBA_VARIANT} independent"
+        multijitter = f"Mitsuba {MITSUBA_VARIANT} multijitter"
+        ours = at_spp(curves[DEFAULT], spp)
+        ours_independent = at_spp(curves["ptrace mis independent"], spp)
+        theirs = at_spp(curves[independent], spp)
+        theirs_mj = at_spp(curves[multijitter], spp)
+        rows.append({
+            "scene": name,
+            "ptrace_mse": ours["rel_mse"], "ptrace_independent_mse": ours_independent["rel_mse"],
+            "mitsuba_independent_mse": theirs["rel_mse"] if theirs else None,
+            "mitsuba_multijitter_mse": theirs_mj["rel_mse"] if theirs_mj else None,
+            "ptrace_efficiency": efficiency(curves[DEFAULT]),
+            "ptrace_independent_efficiency": efficiency(curves["ptrace mis independent"]),
+            "mitsuba_independent_efficiency": efficiency(curves[independent]),
+            "mitsuba_multijitter_efficiency": efficiency(curves[multijitter]),
+            "luminance_ratio": ours["luminance"] / result["reference"]["luminance"],
+        })
+    return rows
+
+
+def roulette_rules(data):
+    """Efficiency of each roulette rule relative to ptrace's default, per scene."""
+    labels = [DEFAULT, "roulette from vertex 5 (Mitsuba's rule)",
+              "roulette uncapped (pbrt-v4's rule)", "roulette off"]
+    return {name: {label: efficiency(result["curves"][label]) for label in labels}
+            for name, result in data["scenes"].items()}
+
+
+# -- writing ---------------------------------------------------------------------------------------
+
+TEMPLATE = """{header}Full {width}x{height} frames at ptrace's -m {depth} (Mitsuba max_depth {mitsuba_depth}), {threads} threads, \
+each scene without its emissive quad in both renderers (see the module docstring). Reference: \
+Mitsuba {mitsuba} {variant} at {reference_spp} spp per scene. Relative MSE leaves out pixels whose \
+reference exceeds 1 (directly seen lights). Seconds: the fastest of {repeats} render call(s) \
+(ptrace: kernels compiled, BVH build included; Mitsuba: after an untimed JIT render).
+
+## Targets (at {target_spp} samples per pixel; efficiency = lowest relative MSE x seconds on the curve)
+
+| scene | ptrace rel. MSE (mis, sobol) | Mitsuba multijitter | ptrace (mis, independent) | Mitsuba independent | ptrace efficiency | Mitsuba multijitter efficiency | Mitsuba independent efficiency | ptrace mean / reference |
+|---|---:|---:|---:|---:|---:|---:|---:|---:|
+{target_rows}
+
+## Roulette rules (efficiency, lower is better; ratio to ptrace's rule)
+
+| scene | {roulette_header} |
+|---|{roulette_align}|
+{roulette_rows}
+
+{roulette_verdict}
+
+## Every point
+
+| scene | method | -s | seconds | relative MSE | MSE x s | mean luminance |
+|---|---|---:|---:|---:|---:|---:|
+{point_rows}
+
+{charts}
+"""
+
+
+def _roulette_section(data):
+    rules = roulette_rules(data)
+    labels = list(next(iter(rules.values())))
+    rows = []
+    for name, values in rules.items():
+        base = values[DEFAULT]
+        rows.append(f"| {name} | " + " | ".join(
+            f"{values[label]:.4f} ({values[label] / base:.2f}x)" for label in labels) + " |")
+    geometric = {label: float(np.exp(np.mean([np.log(v[label] / v[DEFAULT])
+                                              for v in rules.values()]))) for label in labels}
+    best = min(geometric, key=geometric.get)
+    verdict = ("Geometric mean over the scenes, relative to ptrace's rule: " + "; ".join(
+        f"{label} {value:.2f}x" for label, value in geometric.items())
+        + f". Most efficient: {best}.")
+    return labels, rows, verdict
+
+
+def write_report(data, output="error_vs_time.md"):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axis = plt.subplots(figsize=(7, 5))
-    for label, points in curves:
-        axis.loglog([p[1] for p in points], [p[2] for p in points], marker="o", label=label,
-                    ls="--" if "Mitsuba" in label else "-")
-    axis.set_xlabel("wall seconds (160x120 window, 2 threads)")
-    axis.set_ylabel("relative MSE against Mitsuba 1024 spp")
-    axis.grid(True, which="both", alpha=0.3)
-    axis.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(report.RESULTS / "error_vs_time.png", dpi=100)
+    charts = []
+    for name, result in data["scenes"].items():
+        fig, axis = plt.subplots(figsize=(7.5, 5))
+        for label, points in result["curves"].items():
+            axis.loglog([p["seconds"] for p in points], [p["rel_mse"] for p in points],
+                        marker="o", ms=3, label=label,
+                        ls="--" if label.startswith("Mitsuba") else "-",
+                        lw=2.5 if label == DEFAULT else 1.2)
+        axis.set_xlabel(f"wall seconds ({data['resolution'][0]}x{data['resolution'][1]}, "
+                        f"{data['threads']} threads)")
+        axis.set_ylabel(f"relative MSE against Mitsuba {result['reference']['spp']} spp")
+        axis.set_title(f"{name}, -m {data['max_depth']}")
+        axis.grid(True, which="both", alpha=0.3)
+        axis.legend(fontsize=7)
+        fig.tight_layout()
+        chart = f"error_vs_time_{name}.png"
+        fig.savefig(report.RESULTS / chart, dpi=100)
+        plt.close(fig)
+        charts.append(f"![{name}: relative MSE against wall time]({chart})")
+    target_rows = [
+        f"| {r['scene']} | {r['ptrace_mse']:.4f} | {r['mitsuba_multijitter_mse']:.4f} | "
+        f"{r['ptrace_independent_mse']:.4f} | {r['mitsuba_independent_mse']:.4f} | "
+        f"{r['ptrace_efficiency']:.4f} | {r['mitsuba_multijitter_efficiency']:.4f} | "
+        f"{r['mitsuba_independent_efficiency']:.4f} | {r['luminance_ratio']:.4f} |"
+        for r in targets(data)]
+    labels, roulette_rows, verdict = _roulette_section(data)
+    point_rows = [f"| {name} | {label} | {p['spp']} | {p['seconds']:.2f} | {p['rel_mse']:.5f} | "
+                  f"{p['rel_mse'] * p['seconds']:.5f} | {p['luminance']:.4f} |"
+                  for name, result in data["scenes"].items()
+                  for label, points in result["curves"].items() for p in points]
+    text = TEMPLATE.format(
+        header=report.header("Error against time: ptrace and Mitsuba 3, full frames"),
+        width=data["resolution"][0], height=data["resolution"][1], depth=data["max_depth"],
+        mitsuba_depth=data["max_depth"] + 1, threads=data["threads"], mitsuba=data["mitsuba"],
+        variant=MITSUBA_VARIANT, repeats=data["repeats"],
+        target_spp=target_spp(data), reference_spp=data["reference_spp"],
+        target_rows="\n".join(target_rows), roulette_header=" | ".join(labels),
+        roulette_align="---:|" * len(labels), roulette_rows="\n".join(roulette_rows),
+        roulette_verdict=verdict, point_rows="\n".join(point_rows), charts="\n\n".join(charts))
+    path = report.write(output, text)
+    report.write(Path(output).with_suffix(".json").name, json.dumps(data, indent=1))
+    return path
 
-    rows = []
-    for label, points in curves:
-        for spp, seconds, error, mean_spp in points:
-            rows.append(f"| {label} | {spp} | {mean_spp:.1f} | {seconds:.2f} | {error:.5f} | "
-                        f"{error * seconds:.5f} |")
-    best = {label: min(p[1] * p[2] for p in points) for label, points in curves}
-    verdicts = verdict_lines(dict(curves), best)
-    lines = [report.header("Speed against accuracy on CBspheres_lambertian (-m 5)"),
-             f"Window {w}x{h} at ({x}, {y}) of the {FULL[0]}x{FULL[1]} frame; reference "
-             f"{REFERENCE.name}; relative MSE = mean of (x - ref)^2 / (ref^2 + 0.01). Wall time "
-             "includes the BVH build, not compiling. " + mitsuba_note, "",
-             "| method | -s | mean samples per pixel | wall s | relative MSE | MSE x s |",
-             "|---|---:|---:|---:|---:|---:|", *rows, "",
-             "Best relative MSE x seconds per method (lower is better; constant along a curve "
-             "while noise dominates): " + "; ".join(f"{k} {v:.4f}" for k, v in best.items()) + ".",
-             "", "## Verdicts", "", *verdicts,
-             "", "![relative MSE against wall time](error_vs_time.png)", ""]
-    path = report.write(args.output, "\n".join(lines))
-    print(f"wrote {path}")
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="1-4 spp, one scene")
+    parser.add_argument("--scenes", nargs="+", choices=list(SCENES), default=None)
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--output", default="error_vs_time.md")
+    args = parser.parse_args(argv)
+    names = args.scenes or (["CBspheres_lambertian"] if args.quick else list(SCENES))
+    spps = [1, 2, 4] if args.quick else [1, 2, 4, 8, 16, 32]
+    data = measure(names, spps, args.repeats, 256 if args.quick else REFERENCE_SPP)
+    print(f"wrote {write_report(data, args.output)}")
 
 
 if __name__ == "__main__":

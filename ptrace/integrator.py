@@ -406,9 +406,11 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
             g += lg
             b += lb
             rays += n
-        # at the last vertex only multiple importance sampling traces the BSDF's ray: for the
-        # light it finds, the other half of the direct light just sampled
-        if vertex == options.max_depth and (delta or not mis):
+        # at the last vertex the BSDF's ray is traced only for the light it finds: after a
+        # delta BSDF, whose light no light sample can reach (so -m N counts the same paths as
+        # pbrt's and Mitsuba's max depth N + 1; the course stops there, leaving a mirror black
+        # at -m 1), and with multiple importance sampling, the other half of the direct light
+        if vertex == options.max_depth and not (delta or mis):
             break
         base = vertex * DIMS_PER_VERTEX
         u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)

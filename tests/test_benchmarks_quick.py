@@ -2,6 +2,7 @@
 
 The report and chart go to a temporary directory, never into benchmarks/results/.
 """
+import json
 import struct
 
 import numba
@@ -83,22 +84,39 @@ def test_runner_all_passes_quick_and_output(tmp_path, monkeypatch, capsys):
     assert "no_such_module: skipped" in out and "report: skipped (no main(argv))" in out
 
 
-def test_error_vs_time_verdicts_follow_the_numbers():
-    from benchmarks import error_vs_time
-    point = lambda spp, seconds, error: (spp, seconds, error, float(spp))   # noqa: E731
-    curves = {
-        "light -l 1": [point(1, 1.0, 0.01)], "light -l 4": [point(1, 2.0, 0.01)],
-        "light -l 16": [point(1, 8.0, 0.01)], "hemisphere -H -l 4": [point(1, 1.0, 1.0)],
-        "adaptive -a 8 0.05 -l 4": [point(8, 1.0, 0.01)],
-        "roulette off -l 4": [point(1, 4.0, 0.01)],
-        "naive -l 4": [point(1, 20.0, 0.01)], "embree -l 4": [point(1, 3.0, 0.0101)],
-        "Mitsuba 3 scalar_rgb": [point(1, 0.5, 0.01)]}
-    best = {k: min(p[1] * p[2] for p in v) for k, v in curves.items()}
-    text = "\n".join(error_vs_time.verdict_lines(curves, best))
-    assert "light -l 1 is 100x more efficient than hemisphere" in text
-    assert "best first light -l 1 (0.0100), light -l 4 (0.0200), light -l 16" in text
-    assert "adaptive is more efficient (0.0100 against 0.0200, 2.00x)" in text
-    assert "roulette is more efficient (0.0200 against 0.0400, 2.00x)" in text
-    assert "naive: relative MSE within 0.00% of bvh's at every -s, median time 10.00x" in text
-    assert "embree: relative MSE within 1.00%" in text
-    assert "needs 2.00x the wall time" in text
+def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypatch):
+    """The report is written from measured data only: a synthetic measurement gives the target
+    rows, the roulette verdict and the JSON beside the Markdown that its numbers imply."""
+    from benchmarks import error_vs_time as evt
+    from benchmarks import report
+    monkeypatch.setattr(report, "RESULTS", tmp_path)
+
+    def curve(seconds, error):
+        return [{"spp": s, "seconds": seconds * s, "rel_mse": error / s, "luminance": 0.3}
+                for s in (1, 2, 4, 8, 16)]
+
+    curves = {label: curve(1.0, 0.5) for label in evt.PTRACE_METHODS}
+    curves[evt.DEFAULT] = curve(1.0, 0.2)
+    curves["roulette from vertex 5 (Mitsuba's rule)"] = curve(1.0, 0.1)
+    curves["roulette off"] = curve(2.0, 0.2)
+    curves[f"Mitsuba {evt.MITSUBA_VARIANT} independent"] = curve(0.5, 0.4)
+    curves[f"Mitsuba {evt.MITSUBA_VARIANT} multijitter"] = curve(0.5, 0.1)
+    data = {"resolution": [480, 360], "max_depth": 5, "threads": 2, "spp": [1, 2, 4, 8, 16],
+            "repeats": 1, "mitsuba": "3.x", "reference_spp": 4096,
+            "scenes": {"CBbunny": {"scene": "sky/CBbunny.dae", "curves": curves, "reference": {
+                "file": "x.exr", "spp": 4096, "variant": "llvm_ad_rgb", "luminance": 0.25,
+                "masked_fraction": 0.01}}}}
+    [row] = evt.targets(data)
+    assert row["ptrace_mse"] == pytest.approx(0.2 / 16)
+    assert row["mitsuba_multijitter_mse"] == pytest.approx(0.1 / 16)
+    assert row["ptrace_efficiency"] == pytest.approx(0.2)
+    assert row["mitsuba_independent_efficiency"] == pytest.approx(0.2)
+    assert row["luminance_ratio"] == pytest.approx(1.2)
+    rules = evt.roulette_rules(data)["CBbunny"]
+    assert rules["roulette off"] == pytest.approx(0.4)
+    path = evt.write_report(data, "evt.md")
+    text = path.read_text()
+    assert "Most efficient: roulette from vertex 5 (Mitsuba's rule)." in text
+    assert "| CBbunny | 0.0125 | 0.0063 |" in text
+    assert (tmp_path / "error_vs_time_CBbunny.png").exists()
+    assert json.loads((tmp_path / "evt.json").read_text()) == data
