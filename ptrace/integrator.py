@@ -39,7 +39,12 @@ from .scene import AMBIENT, AREA, EMISSION, GLASS, REFRACTION
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
-RR_DEPTH = 2            # default first vertex after whose BSDF sample roulette may end a path
+# default first vertex after whose BSDF sample roulette may end a path: 5, Mitsuba's, chosen by
+# benchmarks/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
+# ptrace's earlier 2 and pbrt-v4's rule): starting at 2, q = min(0.95, throughput) ends dim
+# paths early and turns a dim mirror's chains into rare heavy ones (CBcoil: 4x the spread of a
+# pixel's mean, tests/ptrace/test_per_pixel.py)
+RR_DEPTH = 5
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive

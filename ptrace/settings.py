@@ -29,7 +29,8 @@ class Settings:
     max_depth (-m); hemisphere (-H): direct light by uniform hemisphere sampling; roulette:
     Russian roulette (False runs every path to max_depth; the course has no such flag); rr_cap:
     roulette continues with probability min(rr_cap, max throughput); rr_depth: the first vertex
-    at which it may end a path (2: from the second bounce); adaptive (-a): None or (samples per
+    at which it may end a path (default 5, as Mitsuba; 2: from the second bounce, ptrace's rule
+    before); adaptive (-a): None or (samples per
     batch, tolerance); direct: "mis" (light samples and the BSDF's sample combined by multiple
     importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
     (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers).

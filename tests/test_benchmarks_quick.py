@@ -97,7 +97,7 @@ def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypat
 
     curves = {label: curve(1.0, 0.5) for label in evt.PTRACE_METHODS}
     curves[evt.DEFAULT] = curve(1.0, 0.2)
-    curves["roulette from vertex 5 (Mitsuba's rule)"] = curve(1.0, 0.1)
+    curves["roulette from vertex 2 (ptrace's rule before)"] = curve(1.0, 0.1)
     curves["roulette off"] = curve(2.0, 0.2)
     curves[f"Mitsuba {evt.MITSUBA_VARIANT} independent"] = curve(0.5, 0.4)
     curves[f"Mitsuba {evt.MITSUBA_VARIANT} multijitter"] = curve(0.5, 0.1)
@@ -116,7 +116,7 @@ def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypat
     assert rules["roulette off"] == pytest.approx(0.4)
     path = evt.write_report(data, "evt.md")
     text = path.read_text()
-    assert "Most efficient: roulette from vertex 5 (Mitsuba's rule)." in text
+    assert "Most efficient: roulette from vertex 2 (ptrace's rule before)." in text
     assert "| CBbunny | 0.0125 | 0.0063 |" in text
     assert (tmp_path / "error_vs_time_CBbunny.png").exists()
     assert json.loads((tmp_path / "evt.json").read_text()) == data

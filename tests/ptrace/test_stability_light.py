@@ -205,7 +205,7 @@ def test_a_vanishing_cap_stops_every_path_at_the_second_bounce(cornell):
     scene, camera, _ = cornell
     # light sampling alone: with MIS, m=2 also traces vertex 2's BSDF ray for the light it
     # finds, which a path that roulette ends at vertex 2 never traces
-    kwargs = dict(camera=camera, resolution=SIZE, spp=4, direct="light")
+    kwargs = dict(camera=camera, resolution=SIZE, spp=4, direct="light", rr_depth=2)
     stats_cap, stats_m2 = {}, {}
     capped = ptrace.render(scene, max_depth=100, rr_cap=1e-9, stats=stats_cap, **kwargs)
     two = ptrace.render(scene, max_depth=2, roulette=False, stats=stats_m2, **kwargs)
