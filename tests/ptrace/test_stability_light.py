@@ -240,7 +240,10 @@ def test_caustic_fireflies(fireflies):
     glass, diffuse = fireflies["CBspheres.dae"], fireflies["CBspheres_lambertian.dae"]
     print({k: {m: v for m, v in r.items() if m != "clamps"} for k, r in fireflies.items()})
     outliers = study.by_k(glass["outliers"])
-    assert glass["max"] > 150 * glass["mean"]
+    # roulette from vertex 5 (rr_depth) boosts fewer paths than it did from vertex 2, so the
+    # largest sample is smaller (109x the mean at 16 spp, 406x with the old rule at 256 spp);
+    # the contrast is the point: glass has samples the diffuse spheres' 80x bound excludes
+    assert glass["max"] > 80 * glass["mean"]
     assert outliers[100]["above"] > 0
     assert outliers[30]["energy"] > 0.05
     assert diffuse["max"] < 80 * diffuse["mean"]
