@@ -25,8 +25,8 @@ random rays and slower on camera rays; float32 boxes were slower). A wide node i
 floats (256 bytes, 64-byte aligned): for each of the six planes lower x, y, z, upper x, y, z the
 value of its 4 children, then the 4 children's links, then their counts. A link is a wide node's
 row when its count is 0 and the first entry in `order` of a leaf otherwise; an unused slot has an
-empty box (lower +inf, upper -inf) that no ray enters. Triangles are stored as (p0, e1, e2) rows
-in leaf order.
+empty box (lower +inf, upper -inf) that no ray enters. Triangles are stored as (p0, p1, p2) rows
+in leaf order (what both triangle tests of accel.kernels read).
 """
 import time
 from collections import namedtuple
@@ -35,8 +35,8 @@ import numpy as np
 from numba import njit, prange
 
 from . import compiled
-from .kernels import (NO_HIT, better, slab_setup, sphere_hit, stored_triangle_hit,
-                      triangle_edges)
+from .kernels import (NO_HIT, better, row_triangle_hit, shear_setup, slab_setup, sphere_hit,
+                      triangle_test)
 from .types import Hits
 
 STACK_SIZE = 128
@@ -309,18 +309,20 @@ def _child_entries(nodes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, 
 
 @njit(cache=True)
 def _pack_triangles(order, vertices, faces):
-    """Each triangle's (p0, e1, e2) in leaf order, so a leaf reads its triangles from
+    """Each triangle's vertices (p0, p1, p2) in leaf order, so a leaf reads its triangles from
     consecutive rows instead of through order -> faces -> vertices."""
     n_tri = faces.shape[0]
     tris = np.zeros((order.shape[0], 9))
     for i in range(order.shape[0]):
         if order[i] < n_tri:
-            (tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4], tris[i, 5],
-             tris[i, 6], tris[i, 7], tris[i, 8]) = triangle_edges(vertices, faces, order[i])
+            for j in range(3):
+                for a in range(3):
+                    tris[i, 3 * j + a] = vertices[faces[order[i], j], a]
     return tris
 
 
-BVHRecord = namedtuple("BVHRecord", ["nodes", "tris", "order", "n_tri", "centers", "radii"])
+BVHRecord = namedtuple("BVHRecord", ["nodes", "tris", "order", "n_tri", "centers", "radii",
+                                     "triangle"])
 
 
 @njit(cache=True)
@@ -337,7 +339,9 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
     centers, radii = record.centers, record.radii
     stack, counts, entry, entries = scratch
+    test = record.triangle
     ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+    shear = shear_setup(ox, oy, oz, dx, dy, dz)
     best_t = hi
     best_prim = NO_HIT
     best_u = 0.0
@@ -359,7 +363,7 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
                 p = order[i]
                 if p < n_tri:
                     tests += 1
-                    t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
+                    t, u, v = row_triangle_hit(tris, i, test, ox, oy, oz, dx, dy, dz, shear)
                     if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
                         best_t, best_prim, best_u, best_v = t, p, u, v
                 else:
@@ -403,7 +407,9 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
     centers, radii = record.centers, record.radii
     stack, counts, _, entries = scratch
+    test = record.triangle
     ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+    shear = shear_setup(ox, oy, oz, dx, dy, dz)
     top = 0
     if nodes.shape[0] > 0:
         stack[0], counts[0] = 0, 0
@@ -416,7 +422,7 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
             for i in range(link, link + k):
                 p = order[i]
                 if p < n_tri:
-                    t, u, v = stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz)
+                    t, u, v = row_triangle_hit(tris, i, test, ox, oy, oz, dx, dy, dz, shear)
                     if t >= lo and t <= hi:
                         return True
                 elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, hi) <= hi:
@@ -456,7 +462,8 @@ class BVHAccelerator:
     kind = "bvh"
     record_class = BVHRecord
 
-    def __init__(self, geometry, max_leaf_size=4, split="mean"):
+    def __init__(self, geometry, max_leaf_size=4, split="mean", triangle="watertight"):
+        test = triangle_test(triangle)
         if split not in SPLITS:
             raise ValueError(f"unknown BVH split {split!r}; choose one of {', '.join(SPLITS)}")
         max_leaf_size = int(max_leaf_size)
@@ -465,6 +472,7 @@ class BVHAccelerator:
         self.geometry = geometry
         self.max_leaf_size = max_leaf_size
         self.split = split
+        self.triangle = triangle
         start = time.perf_counter()
         prim_lower, prim_upper = geometry.primitive_bounds()
         centroid = 0.5 * (prim_lower + prim_upper)
@@ -493,7 +501,7 @@ class BVHAccelerator:
             raise RuntimeError("BVH deeper than the traversal stack")
         self._last_work = None
         self.compiled = BVHRecord(self._nodes, self._tris, self.order, geometry.triangle_count,
-                                  geometry.centers, geometry.radii)
+                                  geometry.centers, geometry.radii, test)
 
     def intersect(self, rays):
         rays.validate()
@@ -528,6 +536,7 @@ class BVHAccelerator:
         return {"kind": self.kind, "primitives": self.geometry.primitive_count,
                 "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
                 "build_seconds": self._build_seconds, "split": self.split,
+                "triangle": self.triangle,
                 "nodes": nodes, "wide_nodes": int(self._nodes.shape[0]),
                 "leaves": int((self.count > 0).sum()),
                 "max_depth": int(self.max_depth), "max_leaf_size": self.max_leaf_size,

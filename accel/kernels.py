@@ -1,5 +1,5 @@
-"""Primitive tests shared by every backend: Möller–Trumbore triangles, analytic spheres; and the
-per-ray set-up of the BVH's slab tests.
+"""Primitive tests shared by every backend: triangles (watertight by default, Möller–Trumbore as an
+option), analytic spheres; and the per-ray set-up of the BVH's slab tests.
 
 All three backends call these same functions, so naive and bvh compute bit-identical t values.
 A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course). Between two
@@ -15,28 +15,37 @@ NO_HIT = -1
 MISS = np.nan
 
 
-@njit(cache=True, inline="always")
-def triangle_edges(vertices, faces, tri):
-    """(p0, e1, e2) of triangle `tri`, nine floats: the part of Möller–Trumbore that does not
-    depend on the ray (the BVH stores it per triangle, in leaf order)."""
-    i0 = faces[tri, 0]
-    i1 = faces[tri, 1]
-    i2 = faces[tri, 2]
-    p0x = vertices[i0, 0]
-    p0y = vertices[i0, 1]
-    p0z = vertices[i0, 2]
-    return (p0x, p0y, p0z,
-            vertices[i1, 0] - p0x, vertices[i1, 1] - p0y, vertices[i1, 2] - p0z,
-            vertices[i2, 0] - p0x, vertices[i2, 1] - p0y, vertices[i2, 2] - p0z)
+# The triangle tests (accel.build(kind, geometry, triangle=...) for naive and bvh). A record
+# carries the chosen test as an int, so one compiled traversal serves both (the branch goes the
+# same way for every triangle of a render, which a branch predictor does not pay for).
+TRIANGLE_TESTS = ("watertight", "moller-trumbore")
+WATERTIGHT = 0
+MOLLER_TRUMBORE = 1
+
+
+def triangle_test(name):
+    """The record's int for a triangle test's name; ValueError naming the choices otherwise."""
+    if name not in TRIANGLE_TESTS:
+        raise ValueError(f"unknown triangle test {name!r}; choose one of "
+                         f"{', '.join(TRIANGLE_TESTS)}")
+    return TRIANGLE_TESTS.index(name)
 
 
 @njit(cache=True, inline="always")
-def triangle_hit_edges(p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z, ox, oy, oz, dx, dy, dz):
-    """Möller–Trumbore on a triangle given as (p0, e1, e2): (t, u, v); t = MISS (NaN) on a miss.
+def moller_trumbore(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z, ox, oy, oz, dx, dy, dz):
+    """Möller–Trumbore on the triangle (p0, p1, p2): (t, u, v); t = MISS (NaN) on a miss.
 
     Edges are inclusive (u, v, 1-u-v in [0, 1]); no determinant epsilon and no back-face
-    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses.
+    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses. Not
+    watertight: u and v are computed per triangle from its own edge vectors, so a ray through a
+    shared edge can round outside both triangles (benchmarks/results/stability.md, section 2).
     """
+    e1x = p1x - p0x
+    e1y = p1y - p0y
+    e1z = p1z - p0z
+    e2x = p2x - p0x
+    e2y = p2y - p0y
+    e2z = p2z - p0z
     # s1 = d x e2
     s1x = dy * e2z - dz * e2y
     s1y = dz * e2x - dx * e2z
@@ -63,13 +72,104 @@ def triangle_hit_edges(p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z, ox, oy, oz, 
 
 
 @njit(cache=True, inline="always")
+def shear_setup(ox, oy, oz, dx, dy, dz):
+    """What the watertight test needs of a ray, once per ray: the axis kz of the direction's
+    largest component and kx, ky the next two (cyclically), the origin's components in that
+    order, and the shear (sx, sy, sz) that maps the direction to (0, 0, 1). A zero direction
+    gets sz = NaN, so every t is NaN: a miss."""
+    ax, ay, az = abs(dx), abs(dy), abs(dz)
+    if ax > ay and ax > az:
+        kz = 0
+    elif ay > az:
+        kz = 1
+    else:
+        kz = 2
+    kx = (kz + 1) % 3
+    ky = (kx + 1) % 3
+    d = (dx, dy, dz)
+    o = (ox, oy, oz)
+    big = d[kz]
+    if big == 0.0:
+        return kx, ky, kz, o[kx], o[ky], o[kz], 0.0, 0.0, np.nan
+    return kx, ky, kz, o[kx], o[ky], o[kz], -d[kx] / big, -d[ky] / big, 1.0 / big
+
+
+@njit(cache=True, inline="always")
+def watertight(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
+    """Woop, Benthin and Wald's watertight test (JCGT 2013; pbrt-v4's IntersectTriangle) on the
+    triangle (a, b, c) already translated to the ray's origin and permuted by shear_setup():
+    (t, u, v), t = MISS (NaN) on a miss; u and v are the barycentric weights of b and c, as
+    Möller–Trumbore's.
+
+    After the shear the ray is the z axis, and the triangle's 2D edge functions decide the hit.
+    Two triangles that share an edge compute that edge's function from the same sheared vertices
+    in the same float64 operations (a product is the same whichever factor comes first, and
+    x - y is exactly -(y - x)), so the two values are exact negatives: a ray through the edge
+    is inside one of them or on the edge of both, never outside both. Edges are inclusive (an
+    edge function of 0 passes); a triangle seen edge-on (det = 0) misses. pbrt falls back to
+    float64 when a float32 edge function is 0; these are float64 already, and the argument
+    above does not need a fallback: the shared edge's two values stay exact negatives.
+    """
+    ax += sx * az
+    ay += sy * az
+    bx += sx * bz
+    by += sy * bz
+    cx += sx * cz
+    cy += sy * cz
+    e0 = bx * cy - by * cx
+    e1 = cx * ay - cy * ax
+    e2 = ax * by - ay * bx
+    if (e0 < 0.0 or e1 < 0.0 or e2 < 0.0) and (e0 > 0.0 or e1 > 0.0 or e2 > 0.0):
+        return MISS, 0.0, 0.0
+    det = e0 + e1 + e2
+    if det == 0.0:
+        return MISS, 0.0, 0.0
+    inv = 1.0 / det
+    t = (e0 * az + e1 * bz + e2 * cz) * sz * inv
+    return t, e1 * inv, e2 * inv
+
+
+@njit(cache=True, inline="always")
+def row_triangle_hit(rows, i, test, ox, oy, oz, dx, dy, dz, shear):
+    """The chosen test on row i of an array of (p0, p1, p2) rows (9 floats: the BVH stores its
+    triangles so, in leaf order); shear is shear_setup() of the ray."""
+    if test == WATERTIGHT:
+        kx, ky, kz, px, py, pz, sx, sy, sz = shear
+        return watertight(rows[i, kx] - px, rows[i, ky] - py, rows[i, kz] - pz,
+                          rows[i, 3 + kx] - px, rows[i, 3 + ky] - py, rows[i, 3 + kz] - pz,
+                          rows[i, 6 + kx] - px, rows[i, 6 + ky] - py, rows[i, 6 + kz] - pz,
+                          sx, sy, sz)
+    return moller_trumbore(rows[i, 0], rows[i, 1], rows[i, 2], rows[i, 3], rows[i, 4],
+                           rows[i, 5], rows[i, 6], rows[i, 7], rows[i, 8],
+                           ox, oy, oz, dx, dy, dz)
+
+
+@njit(cache=True, inline="always")
+def mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear):
+    """The chosen test on triangle `tri` of a mesh: the same arithmetic as row_triangle_hit on
+    its vertices, so every backend computes bit-identical t, u, v whether it reads the mesh or
+    the BVH's per-triangle copy."""
+    i0 = faces[tri, 0]
+    i1 = faces[tri, 1]
+    i2 = faces[tri, 2]
+    if test == WATERTIGHT:
+        kx, ky, kz, px, py, pz, sx, sy, sz = shear
+        return watertight(vertices[i0, kx] - px, vertices[i0, ky] - py, vertices[i0, kz] - pz,
+                          vertices[i1, kx] - px, vertices[i1, ky] - py, vertices[i1, kz] - pz,
+                          vertices[i2, kx] - px, vertices[i2, ky] - py, vertices[i2, kz] - pz,
+                          sx, sy, sz)
+    return moller_trumbore(vertices[i0, 0], vertices[i0, 1], vertices[i0, 2],
+                           vertices[i1, 0], vertices[i1, 1], vertices[i1, 2],
+                           vertices[i2, 0], vertices[i2, 1], vertices[i2, 2],
+                           ox, oy, oz, dx, dy, dz)
+
+
+@njit(cache=True, inline="always")
 def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
-    """Möller–Trumbore: (t, u, v) of the ray against triangle `tri`; t = MISS (NaN) on a miss.
-    The same arithmetic as triangle_hit_edges on triangle_edges, so every backend computes
-    bit-identical t, u, v whether it reads the mesh or the BVH's per-triangle copy."""
-    p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z = triangle_edges(vertices, faces, tri)
-    return triangle_hit_edges(p0x, p0y, p0z, e1x, e1y, e1z, e2x, e2y, e2z,
-                              ox, oy, oz, dx, dy, dz)
+    """The default (watertight) test of the ray against triangle `tri`, for a single query (a
+    traversal calls shear_setup once per ray and mesh_triangle_hit per triangle instead)."""
+    return mesh_triangle_hit(vertices, faces, tri, WATERTIGHT, ox, oy, oz, dx, dy, dz,
+                             shear_setup(ox, oy, oz, dx, dy, dz))
 
 
 @njit(cache=True, inline="always")
@@ -145,14 +245,6 @@ def slab_setup(dx, dy, dz):
     iz = inverse_direction(dz)
     nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
     return ix, iy, iz, nx, ny, nz, fx, fy, fz
-
-
-@njit(cache=True, inline="always")
-def stored_triangle_hit(tris, i, ox, oy, oz, dx, dy, dz):
-    """triangle_hit_edges on row i of an array of triangle_edges rows."""
-    return triangle_hit_edges(tris[i, 0], tris[i, 1], tris[i, 2], tris[i, 3], tris[i, 4],
-                              tris[i, 5], tris[i, 6], tris[i, 7], tris[i, 8],
-                              ox, oy, oz, dx, dy, dz)
 
 
 @njit(cache=True, inline="always")

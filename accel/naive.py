@@ -10,10 +10,11 @@ import numpy as np
 from numba import njit
 
 from . import compiled
-from .kernels import NO_HIT, better, spheres_any, spheres_closest, triangle_hit
+from .kernels import (NO_HIT, better, mesh_triangle_hit, shear_setup, spheres_any,
+                      spheres_closest, triangle_test)
 from .types import Hits
 
-NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii"])
+NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii", "triangle"])
 
 
 @njit(cache=True)
@@ -23,14 +24,15 @@ def new_scratch(record):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    vertices, faces = record.vertices, record.faces
+    vertices, faces, test = record.vertices, record.faces, record.triangle
+    shear = shear_setup(ox, oy, oz, dx, dy, dz)
     n_tri = faces.shape[0]
     best_t = tmax
     best_prim = NO_HIT
     best_u = 0.0
     best_v = 0.0
     for tri in range(n_tri):
-        t, u, v = triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz)
+        t, u, v = mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear)
         if t >= tmin and t <= best_t and better(t, tri, best_t, best_prim):
             best_t, best_prim, best_u, best_v = t, tri, u, v
     best_t, best_prim, best_u, best_v = spheres_closest(
@@ -43,9 +45,10 @@ def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    vertices, faces = record.vertices, record.faces
+    vertices, faces, test = record.vertices, record.faces, record.triangle
+    shear = shear_setup(ox, oy, oz, dx, dy, dz)
     for tri in range(faces.shape[0]):
-        t, u, v = triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz)
+        t, u, v = mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear)
         if t >= tmin and t <= tmax:
             return True
     return spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, tmin, tmax)
@@ -58,11 +61,12 @@ class NaiveAccelerator:
     kind = "naive"
     record_class = NaiveRecord
 
-    def __init__(self, geometry):
+    def __init__(self, geometry, triangle="watertight"):
         start = time.perf_counter()
         self.geometry = geometry
+        self.triangle = triangle
         self.compiled = NaiveRecord(geometry.vertices, geometry.faces, geometry.centers,
-                                    geometry.radii)
+                                    geometry.radii, triangle_test(triangle))
         self._build_seconds = time.perf_counter() - start
 
     def intersect(self, rays):
@@ -76,4 +80,4 @@ class NaiveAccelerator:
     def stats(self):
         return {"kind": self.kind, "primitives": self.geometry.primitive_count,
                 "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
-                "build_seconds": self._build_seconds}
+                "triangle": self.triangle, "build_seconds": self._build_seconds}

@@ -82,6 +82,33 @@ def test_backends_agree_on_course_meshes(course_geometry, relpath):
                                           np.isfinite(hits.t) & (hits.t <= rays.tmax))
 
 
+@pytest.mark.parametrize("relpath", ["meshedit/cow.dae", "sky/CBbunny.dae"])
+def test_the_two_triangle_tests_agree_off_the_edges(course_geometry, relpath):
+    """Möller–Trumbore (the option) and the watertight test (the default) are the same
+    intersection computed differently: the same primitive for all but rays through an edge
+    (where either neighbour is right), t and barycentrics to float64 rounding. bvh equals naive
+    bit for bit with either test."""
+    geometry = course_geometry(relpath)
+    for label, rays in ray_batches(geometry, 10000).items():
+        watertight = accel.build("bvh", geometry).intersect(rays)
+        mt = accel.build("bvh", geometry, triangle="moller-trumbore").intersect(rays)
+        assert_same_hits(accel.build("naive", geometry, triangle="moller-trumbore")
+                         .intersect(rays), mt)
+        same = (watertight.prim == mt.prim) & (mt.prim >= 0)
+        assert (watertight.prim != mt.prim).mean() <= 1e-3, label
+        assert same.sum() > 0.05 * len(rays), label
+        scale = np.maximum(np.abs(mt.t[same]), 1e-3)
+        np.testing.assert_allclose(watertight.t[same] / scale, mt.t[same] / scale, atol=1e-9)
+        np.testing.assert_allclose(watertight.u[same], mt.u[same], atol=1e-7)
+        np.testing.assert_allclose(watertight.v[same], mt.v[same], atol=1e-7)
+
+
+def test_unknown_triangle_test_names_the_tests():
+    for kind in ("naive", "bvh"):
+        with pytest.raises(ValueError, match="watertight, moller-trumbore"):
+            accel.build(kind, ONE_TRIANGLE, triangle="plucker")
+
+
 def test_course_spheres_are_analytic(course_geometry):
     geometry = course_geometry("sky/CBspheres.dae")
     assert geometry.sphere_count == 2
@@ -99,9 +126,14 @@ def test_course_spheres_are_analytic(course_geometry):
 ONE_TRIANGLE = accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
 
 
-@pytest.mark.parametrize("kind", accel.KINDS)
-def test_tmin_tmax_and_barycentrics(kind):
-    backend = accel.build(kind, ONE_TRIANGLE)
+BACKENDS = [("naive", {}), ("bvh", {}), ("embree", {}),
+            ("naive", {"triangle": "moller-trumbore"}), ("bvh", {"triangle": "moller-trumbore"})]
+BACKEND_IDS = ["naive", "bvh", "embree", "naive-mt", "bvh-mt"]
+
+
+@pytest.mark.parametrize("kind, options", BACKENDS, ids=BACKEND_IDS)
+def test_tmin_tmax_and_barycentrics(kind, options):
+    backend = accel.build(kind, ONE_TRIANGLE, **options)
     origins = np.array([[0.25, 0.5, 1.0]] * 5)
     directions = np.array([[0, 0, -1.0], [0, 0, -2.0], [0, 0, -1.0], [0, 0, -1.0], [0, 0, -1.0]])
     tmin = np.array([0.0, 0.0, 1.5, 0.0, 1.0])     # ray 2 starts past the triangle
@@ -116,9 +148,9 @@ def test_tmin_tmax_and_barycentrics(kind):
                                   [True, True, False, False, True])
 
 
-@pytest.mark.parametrize("kind", accel.KINDS)
-def test_axis_aligned_and_parallel_rays(kind):
-    backend = accel.build(kind, ONE_TRIANGLE)
+@pytest.mark.parametrize("kind, options", BACKENDS, ids=BACKEND_IDS)
+def test_axis_aligned_and_parallel_rays(kind, options):
+    backend = accel.build(kind, ONE_TRIANGLE, **options)
     # directions with zero components, exactly along axes, and parallel to the triangle's plane
     origins = np.array([[0.2, 0.2, 5.0], [-1.0, 0.2, 0.0], [0.2, -1.0, 0.5], [0.3, 0.3, -2.0]])
     directions = np.array([[0, 0, -3.0], [1.0, 0, 0], [0, 1.0, 0], [0, 0, 0.5]])
