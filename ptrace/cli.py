@@ -57,7 +57,7 @@ def _positive_float(name):
 
 def build_parser():
     import accel
-    from .settings import DIRECT, INTEGRATORS, SAMPLERS
+    from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
     add = parser.add_argument
@@ -90,6 +90,9 @@ def build_parser():
         default=None, help="render only this cell (y counted from the bottom) and save just it")
     add("-c", "--camera", default=None, metavar="FILE", help="the course's camera settings file")
     add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
+    add("--bvh-split", choices=BVH_SPLITS, default="mean",
+        help="with --accel bvh: mean (split at the mean centroid, the course's; default) or sah "
+             "(binned surface area heuristic)")
     add("--seed", type=_nonnegative_int("seed"), default=0, help="random seed (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",
         help="path (light transport) or normals (the course's normal shading)")
@@ -200,7 +203,7 @@ def run(argv):
                        client=client, light_samples=args.light_samples,
                        max_depth=args.max_depth, adaptive=args.adaptive,
                        hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-                       notice=None if args.quiet else _notice)
+                       bvh_split=args.bvh_split, notice=None if args.quiet else _notice)
         write_image(output, image)
         write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
     finally:
@@ -209,8 +212,9 @@ def run(argv):
     seconds = stats["render_seconds"]
     mean_spp = stats["samples"].mean()
     where = f"workers {stats['workers']} " if "workers" in stats else ""
+    split = f" split {args.bvh_split}" if args.bvh_split != "mean" else ""
     print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} (mean {mean_spp:.1f}) "
-          f"{where}accel {args.accel} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
+          f"{where}accel {args.accel}{split} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
     if stats["interrupted"]:

@@ -56,8 +56,8 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     transport flags of ptrace.settings.Settings: light_samples (-l, default 1), max_depth (-m,
     default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
     (default True; False runs every path to max_depth, for comparisons: the course has no such
-    flag). stats, if a dict, receives build and render seconds, rays traced, per-pixel sample
-    counts ("samples", (H, W)), the number of non-finite samples dropped, and whether Ctrl-C
+    flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
+    if a dict, receives build and render seconds, rays traced, per-pixel sample counts ("samples", (H, W)), the number of non-finite samples dropped, and whether Ctrl-C
     interrupted the render. client renders on a Dask cluster; notice, if given, is called with
     a one-line message when the kernels must be compiled first (a cold numba cache).
     """

@@ -14,6 +14,7 @@ from .scene import DIRECTIONAL, POINT
 INTEGRATORS = ("path", "normals")
 DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
 SAMPLERS = ("sobol", "independent")   # --sampler
+BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
 
 def _is_int(value):
@@ -33,7 +34,9 @@ class Settings:
     before); adaptive (-a): None or (samples per
     batch, tolerance); direct: "mis" (light samples and the BSDF's sample combined by multiple
     importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
-    (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers).
+    (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers);
+    bvh_split: the BVH's split, "mean" (the seed's mean-centroid split) or "sah" (binned surface
+    area heuristic); only with accel="bvh".
     """
     spp: int = 1
     accel: str = "bvh"
@@ -48,6 +51,7 @@ class Settings:
     adaptive: tuple = None
     direct: str = "mis"
     sampler: str = "sobol"
+    bvh_split: str = "mean"
 
     def __post_init__(self):
         if not (_is_int(self.spp) and self.spp >= 1):
@@ -73,6 +77,12 @@ class Settings:
         if self.sampler not in SAMPLERS:
             raise PtraceError(f"unknown sampler {self.sampler!r}; choose one of "
                               f"{', '.join(SAMPLERS)}")
+        if self.bvh_split not in BVH_SPLITS:
+            raise PtraceError(f"unknown BVH split {self.bvh_split!r}; choose one of "
+                              f"{', '.join(BVH_SPLITS)}")
+        if self.bvh_split != "mean" and self.accel != "bvh":
+            raise PtraceError(f"a BVH split applies only to the bvh accelerator, not "
+                              f"{self.accel}")
         if not 0.0 < self.rr_cap <= 1.0:
             raise PtraceError(f"the roulette cap must be in (0, 1], got {self.rr_cap!r}")
         set_ = object.__setattr__
@@ -96,11 +106,19 @@ class Settings:
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
         known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
-                 "rr_depth", "direct", "sampler"}
+                 "rr_depth", "direct", "sampler", "bvh_split"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
         return cls(spp=spp, accel=accel, integrator=integrator, seed=seed, **options)
+
+    def accel_options(self):
+        """The keywords of accel.build for this render's backend."""
+        return {"split": self.bvh_split} if self.accel == "bvh" else {}
+
+    def build_accel(self, geometry):
+        """The render's accelerator over geometry."""
+        return accel.build(self.accel, geometry, **self.accel_options())
 
     def kernel_options(self):
         """The integrator's Options record."""

@@ -106,6 +106,21 @@ def test_direct_and_sampler_flags_reach_the_render(tmp_path):
     assert not np.array_equal(images["default"], images["independent"])
 
 
+def test_bvh_split_reaches_the_build_and_leaves_the_image_alone(tmp_path):
+    """--bvh-split sah builds the SAH tree (the summary says so) and, the BVH's answers being
+    exact whatever the tree, renders the mean split's image bit for bit."""
+    images, summaries = {}, {}
+    for split in ("mean", "sah"):
+        output = tmp_path / f"{split}.exr"
+        result = run("-s", 2, "-m", 2, "-r", 24, 18, "-q", "--bvh-split", split, "-f", output,
+                     SHIPPED)
+        assert result.returncode == 0, result.stderr
+        images[split], summaries[split] = read_image(output), result.stdout + result.stderr
+    np.testing.assert_array_equal(images["mean"], images["sah"])
+    assert "accel bvh split sah build" in summaries["sah"]
+    assert "accel bvh build" in summaries["mean"]
+
+
 def test_hemisphere_on_a_scene_without_emitters_warns_once(tmp_path, scenes_dir):
     result = run("-H", "-r", 16, 12, "-f", tmp_path / "cow.png", scenes_dir / "meshedit/cow.dae")
     assert result.returncode == 0, result.stderr
@@ -133,6 +148,8 @@ BAD_CALLS = {
     "negative depth": (["-m", "-1"], "negative"),
     "unknown estimator": (["--direct", "bdpt"], "invalid choice"),
     "unknown sampler": (["--sampler", "halton"], "invalid choice"),
+    "unknown split": (["--bvh-split", "median"], "invalid choice"),
+    "split without bvh": (["--bvh-split", "sah", "--accel", "embree"], "only to the bvh"),
 }
 
 

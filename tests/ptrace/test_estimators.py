@@ -169,3 +169,15 @@ def test_estimator_and_sampler_settings_are_checked():
     options = ptrace.Settings(direct="light", sampler="independent", rr_depth=5).kernel_options()
     assert (options.mis, options.sampler, options.rr_depth) == (False, 0, 5)
     assert ptrace.Settings().kernel_options().mis
+
+
+def test_bvh_split_setting():
+    from accel.bvh import SPLITS
+    from ptrace.settings import BVH_SPLITS
+    assert BVH_SPLITS == SPLITS
+    with pytest.raises(ptrace.PtraceError, match="BVH split"):
+        ptrace.Settings(bvh_split="median")
+    with pytest.raises(ptrace.PtraceError, match="only to the bvh"):
+        ptrace.Settings(accel="naive", bvh_split="sah")
+    assert ptrace.Settings(bvh_split="sah").accel_options() == {"split": "sah"}
+    assert ptrace.Settings(accel="embree").accel_options() == {}
