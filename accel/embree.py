@@ -22,7 +22,17 @@ median of the vertices, and each ray origin is moved by the same offset in float
 rounding (t is unchanged by a translation). The median, not the bounding box's centre: a few far
 outliers move the box's centre away from where the triangles are, which made a dense cluster with
 far outliers disagree on a large share of the rays (benchmarks/stability.py measures all of this,
-through the `centre` method).
+through the `centre` method). No translation helps a ray whose origin is far from the triangles
+(a camera 1e5 away from the cow disagreed with bvh on 14% of the rays): its float32 origin loses
+the ray. So each ray is first clipped, in float64, to the triangles' box in the re-centred frame
+(computed at build, padded outward by BOX_PAD of its scale so that no hit on its faces is lost to
+rounding): a ray whose [tmin, tmax] misses the box skips Embree (spheres are still tested), and
+an origin farther than the box's scale (its largest coordinate plus its diagonal) from where the
+ray enters the box is moved forward to that entry point before rounding, Embree's t being
+measured from there (the shift added back in float64, tnear and tfar reduced by it). Nearer
+origins are not moved: their float32 coordinates are already about as fine as the triangles',
+and such rays (a camera in or by the scene, every spawned ray) keep their answers bit for bit.
+`clip_to_bounds=False` turns the clipping off, for the stability study and the tests.
 
 Grazing hits. Embree's t is off by about a float32 ulp of the coordinates divided by the cosine
 between the ray and the triangle: large where a ray grazes a triangle (a surface ray meeting a
@@ -35,8 +45,11 @@ Intervals are inclusive, tmin <= t <= tmax, with Embree's own tnear and tfar (tn
 inclusive too). Embree's t of a hit exactly at tmin can come out an ulp short, so tnear is tmin
 less about 8 float32 ulps and tfar is tmax rounded down; a reported t always lies inside
 [tmin, tmax]. Embree's segment cannot start behind the origin, so a negative tmin moves the origin
-back by tmin instead. A ray float32 cannot hold (zero direction, an overflowing coordinate)
-misses the triangles.
+back by tmin instead (unless the box's entry lies beyond that point and far from it: then the
+origin goes there). From a moved origin Embree's t carries the float32 noise of the box's
+coordinates rather than of t, so there tnear's slack is also at least TNEAR_SLACK of the box's
+scale (a hit exactly at tmin is still found). A ray float32 cannot hold (zero direction, an
+overflowing coordinate of the direction or of an origin that is not moved) misses the triangles.
 
 Spheres are few and stay analytic (accel.kernels): after the triangle query they are folded in
 with tmax cut to the triangle hit, a tie going to the triangle (the lower id); sphere ids follow
@@ -135,10 +148,13 @@ rtc_occluded1 = types.ExternalFunction("rtcOccluded1",
 # -- the compiled face ---------------------------------------------------------------------------
 
 # scene: RTCScene handle (0: no triangles), valid while the accelerator lives; centre: the
-# re-centring offset; vertices, faces: the float64 triangles (for grazing hits; sphere ids start
-# at the number of faces)
-EmbreeRecord = namedtuple("EmbreeRecord", ["scene", "centre", "vertices", "faces", "centers",
-                                           "radii"])
+# re-centring offset; box: the triangles' box in the re-centred frame, padded (lower x, y, z,
+# upper x, y, z); scale: its largest coordinate's size plus its diagonal (the size of the
+# coordinates Embree sees); clip: whether rays are clipped to the box (EmbreeAccelerator's
+# clip_to_bounds); vertices, faces: the float64 triangles (for grazing hits; sphere ids start at
+# the number of faces)
+EmbreeRecord = namedtuple("EmbreeRecord", ["scene", "centre", "box", "scale", "clip", "vertices",
+                                           "faces", "centers", "radii"])
 
 # RTCRayHit, in 4-byte words from its (16-byte aligned) start. RTCRay: org_x, org_y, org_z,
 # tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags (48 bytes); RTCHit at byte 48: Ng_x,
@@ -148,6 +164,10 @@ _NG, _U, _V, _PRIM_ID, _GEOM_ID, _INST_ID, _INST_PRIM_ID = 12, 15, 16, 17, 18, 1
 # Embree's t of a hit exactly at tmin can come out an ulp short: tnear sits this fraction (about
 # 8 float32 ulps) below tmin
 TNEAR_SLACK = 2.0 ** -20
+# the box rays are clipped to is the triangles' box padded outward by this fraction of its scale:
+# thousands of float32 ulps of the coordinates, so neither the rounding of the triangles nor that
+# of a moved origin puts a triangle outside it or an origin inside it
+BOX_PAD = 2.0 ** -12
 # a hit whose cosine to the triangle's normal is below this is computed again in float64
 GRAZING_COSINE = 0.1
 SCRATCH_FLOATS = 48      # 192 bytes: the 96-byte RTCRayHit at any 4-byte alignment, with room
@@ -171,19 +191,67 @@ def _round_down(x):
 
 
 @njit(cache=True, inline="always")
+def _slab(lower, upper, p, d, enter, leave):
+    """(enter, leave) narrowed to the parameters where p + t d lies in [lower, upper] on one axis
+    (enter > leave once the ray misses)."""
+    if d == 0.0:
+        if p < lower or p > upper:
+            return np.inf, -np.inf
+        return enter, leave
+    inverse = 1.0 / d
+    a = (lower - p) * inverse
+    b = (upper - p) * inverse
+    if a > b:
+        a, b = b, a
+    return max(enter, a), min(leave, b)
+
+
+@njit(cache=True, inline="always")
 def _set_ray(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Write the ray, in the re-centred frame, into the scratch's RTCRay. Returns (usable, shift):
-    shift is what to add to Embree's t (a negative tmin moves the origin back instead)."""
+    shift is what to add to Embree's t. A negative tmin moves the origin back by tmin; an origin
+    far from the triangles' box is moved forward to where the ray enters it. Not usable: a ray
+    float32 cannot hold, or one whose [tmin, tmax] does not meet the box."""
     floats, words, k, address = scratch
-    shift = min(tmin, 0.0)
     centre = record.centre
-    x = np.float32((ox - centre[0]) + shift * dx)
-    y = np.float32((oy - centre[1]) + shift * dy)
-    z = np.float32((oz - centre[2]) + shift * dz)
+    px = ox - centre[0]
+    py = oy - centre[1]
+    pz = oz - centre[2]
+    shift = min(tmin, 0.0)
+    moved = False
+    floor = 0.0
+    if record.clip:
+        box = record.box
+        enter, leave = -np.inf, np.inf
+        enter, leave = _slab(box[0], box[3], px, dx, enter, leave)
+        enter, leave = _slab(box[1], box[4], py, dy, enter, leave)
+        enter, leave = _slab(box[2], box[5], pz, dz, enter, leave)
+        if not max(enter, tmin) <= min(leave, tmax):
+            return False, 0.0            # no triangle on [tmin, tmax]: Embree is not asked
+        if enter > shift:
+            # Only an origin more than the box's scale from where the ray enters the box is
+            # moved. Nearer, its coordinates are at most a few times the box's, so its float32
+            # rounding is about as fine as the triangles' and moving it gains nothing; and those
+            # rays (cameras in or by the scene, every spawned ray) keep their answers bit for bit.
+            length2 = dx * dx + dy * dy + dz * dz
+            ahead = enter - shift
+            if ahead * ahead * length2 > record.scale * record.scale:
+                shift = enter
+                moved = True
+                # Embree's t now carries the float32 noise of the box's coordinates, not of t:
+                # tnear's slack is at least TNEAR_SLACK of the box's scale
+                floor = TNEAR_SLACK * record.scale / np.sqrt(length2)
+    x = np.float32(px + shift * dx)
+    y = np.float32(py + shift * dy)
+    z = np.float32(pz + shift * dz)
     fx = np.float32(dx)
     fy = np.float32(dy)
     fz = np.float32(dz)
-    tnear = _round_down((tmin - shift) * (1.0 - TNEAR_SLACK))
+    if moved:
+        near = tmin - shift
+        tnear = _round_down(max(near - max(near * TNEAR_SLACK, floor), 0.0))
+    else:
+        tnear = _round_down((tmin - shift) * (1.0 - TNEAR_SLACK))
     tfar = _round_down(tmax - shift)
     usable = (tnear <= tfar and np.isfinite(x) and np.isfinite(y) and np.isfinite(z)
               and np.isfinite(fx) and np.isfinite(fy) and np.isfinite(fz)
@@ -317,24 +385,48 @@ class EmbreeAccelerator:
     kind = "embree"
     record_class = EmbreeRecord
 
-    def __init__(self, geometry):
+    def __init__(self, geometry, clip_to_bounds=True):
+        """clip_to_bounds=False turns off the clipping of rays to the triangles' box (the module
+        docstring, Float32): the backend as it was before, for the stability study and the
+        tests that measure what the clipping buys; ptrace never turns it off."""
         self.geometry = geometry
+        self.clip_to_bounds = bool(clip_to_bounds)
         start = time.perf_counter()
         centre = np.asarray(self.centre(geometry), dtype=np.float64).reshape(3)
         scene = 0
+        box = np.zeros(6)
+        scale = 0.0
         if geometry.triangle_count:
             if geometry.vertices.shape[0] >= 2 ** 32:
                 raise ValueError("Embree's index buffer holds at most 2**32 - 1 vertices")
             vertices = np.zeros(geometry.vertices.size + 4, dtype=np.float32)  # + 16 bytes
             vertices[:-4] = (geometry.vertices - centre).reshape(-1)
             indices = np.ascontiguousarray(geometry.faces, dtype=np.uint32)
+            box, scale = self._box(geometry, centre, vertices[:-4].reshape(-1, 3))
             device, scene = _build_scene(vertices, indices)
             # the shared buffers are owned here and by the finalizer, which lets them go last
             self._vertex_buffer, self._index_buffer = vertices, indices
             self._finalizer = weakref.finalize(self, _release, scene, device, vertices, indices)
-        self.compiled = EmbreeRecord(np.int64(scene), centre, geometry.vertices, geometry.faces,
+        self.compiled = EmbreeRecord(np.int64(scene), centre, box, np.float64(scale),
+                                     self.clip_to_bounds, geometry.vertices, geometry.faces,
                                      geometry.centers, geometry.radii)
         self._build_seconds = time.perf_counter() - start
+
+    @staticmethod
+    def _box(geometry, centre, rounded):
+        """(box, scale): the box of the triangles' corners in the re-centred frame, both as float64
+        and as the float32 Embree holds (rounded), padded outward by BOX_PAD x scale; scale is the
+        largest coordinate's size plus the diagonal of the unpadded box."""
+        used = np.zeros(geometry.vertices.shape[0], dtype=bool)
+        used[geometry.faces.reshape(-1)] = True
+        exact = geometry.vertices[used] - centre
+        rounded = rounded[used].astype(np.float64)
+        lower = np.minimum(exact.min(axis=0), rounded.min(axis=0))
+        upper = np.maximum(exact.max(axis=0), rounded.max(axis=0))
+        scale = float(np.abs(np.concatenate([lower, upper])).max()
+                      + np.linalg.norm(upper - lower))
+        pad = BOX_PAD * scale
+        return np.concatenate([lower - pad, upper + pad]), scale
 
     def centre(self, geometry):
         """The offset the triangles and ray origins are moved by before rounding to float32:
@@ -345,7 +437,7 @@ class EmbreeAccelerator:
 
     def __reduce__(self):
         # Embree handles mean nothing in another process: a copy is rebuilt from the geometry
-        return type(self), (self.geometry,)
+        return type(self), (self.geometry, self.clip_to_bounds)
 
     def intersect(self, rays):
         rays.validate()
