@@ -1,9 +1,11 @@
 """Seeded ray batches over a geometry, for tests and benchmarks (not used by rendering).
 
-Three kinds, each deterministic for a given seed:
+Four kinds, each deterministic for a given seed:
 - sphere_rays: from random points on a sphere around the bounds toward random points inside;
 - camera_rays: a pinhole camera outside the bounds looking at the centre, one ray per pixel;
-- surface_rays: from random points on random triangles, in random directions, with a small tmin.
+- surface_rays: from random points on random triangles, in random directions, with a small tmin;
+- shadow_rays: segments from surface_rays' points to random points on a small square light above
+  the bounds (or a given parallelogram light), for any-hit (occluded) queries.
 """
 import numpy as np
 
@@ -69,3 +71,39 @@ def surface_rays(geometry, n, seed=0, tmin_scale=1e-4):
     else:
         origins = centre + rng.normal(size=(n, 3))
     return Rays(origins, _unit_vectors(rng, n), tmin=tmin_scale * radius)
+
+
+def light_square(geometry):
+    """(centre, edge_x, edge_y) of shadow_rays' default light: a horizontal square facing down,
+    centred over the bounds' top face at 1.5 box heights above the box centre along +y (at least
+    1.5 quarter-diagonals, so a flat mesh still gets a light above it), side a quarter of the
+    box diagonal."""
+    centre, radius = _frame(geometry)
+    bounds = geometry.bounds()
+    height = 0.0 if bounds is None else float(bounds[1][1] - bounds[0][1])
+    side = 0.5 * radius                                 # a quarter of the diagonal (2 * radius)
+    above = centre + np.array([0.0, 1.5 * max(height, side), 0.0])
+    return above, np.array([side, 0.0, 0.0]), np.array([0.0, 0.0, side])
+
+
+def shadow_rays(geometry, n, seed=0, tmin_scale=1e-4, light=None):
+    """Shadow segments from points on the surface to points on a light, for occluded().
+
+    Origins are exactly surface_rays(geometry, n, seed, tmin_scale)'s (points on random
+    triangles; spheres for a sphere-only geometry). Each ray aims at a uniform random point
+    q = centre + s * edge_x + r * edge_y (s, r in [-1/2, 1/2]) of the parallelogram light
+    `light` = (centre, edge_x, edge_y), by default light_square(geometry). The direction is
+    q - origin, not normalised, so t in [tmin, tmax] spans the segment, trimmed at both ends by
+    the same fraction of its length: tmin = tmin_scale (off the surface) and
+    tmax = 1 - tmin_scale (just short of the light, which may be geometry itself). Both are
+    scalars, as in the other generators (a per-ray t bound array would be a read-only view
+    inside Rays, another numba specialisation of every kernel).
+    """
+    surface = surface_rays(geometry, n, seed=seed, tmin_scale=tmin_scale)
+    centre, edge_x, edge_y = light_square(geometry) if light is None else (
+        np.asarray(part, dtype=np.float64) for part in light)
+    rng = np.random.default_rng((seed, 1))   # independent of surface_rays' stream
+    s, r = rng.random(n) - 0.5, rng.random(n) - 0.5
+    targets = centre + s[:, None] * edge_x + r[:, None] * edge_y
+    return Rays(surface.origins, targets - surface.origins, tmin=tmin_scale,
+                tmax=1.0 - tmin_scale)

@@ -2,6 +2,7 @@
 
 The report and chart go to a temporary directory, never into benchmarks/results/.
 """
+import argparse
 import json
 import struct
 
@@ -28,6 +29,32 @@ def test_synthetic_series_is_exact_and_deterministic():
 
 
 def test_accel_rays_smallest_mode(tmp_path, monkeypatch, scenes_dir):
+    import numpy as np
+
+    import ptrace
+    from accel import raygen
+
+    def table_rows(text, heading):
+        """The data rows ("| ..." lines after the separator) of the first table under `heading`,
+        each as a list of stripped cells."""
+        lines = text.splitlines()
+        at = next(i for i, line in enumerate(lines) if line.startswith(heading))
+        rows, started = [], False
+        for line in lines[at + 1:]:
+            if line.startswith("#"):
+                break
+            if line.startswith("|---"):
+                started = True
+            elif started and line.startswith("| "):
+                rows.append([c.strip() for c in line.strip().strip("|").split("|")])
+            elif started:
+                break
+        return rows
+
+    def is_number(cell):
+        digits = cell.replace(",", "")
+        return digits.replace(".", "", 1).isdigit() and float(digits) > 0
+
     monkeypatch.setenv("PTRACE_SCENES", str(scenes_dir))
     output = tmp_path / "out" / "accel_rays.md"
     threads = numba.get_num_threads()
@@ -39,25 +66,75 @@ def test_accel_rays_smallest_mode(tmp_path, monkeypatch, scenes_dir):
         numba.set_num_threads(threads)
     assert code == 0
     text = output.read_text()
-    for title in ("## Builds", "## Closest-hit rays per second", "## bvh / embree rays/s ratio",
-                  "## Traversal work per ray", "## Targets (issue 5)"):
+    for title in ("## Targets (issue 14), 2 threads", "## bvh / embree rays/s ratio",
+                  "## Rays per second (2 threads)", "## Rays per second at 1 thread",
+                  "## Builds", "## Traversal work per ray"):
         assert title in text
-    rows = [line for line in text.splitlines() if line.startswith("| ")]
-    for mesh, triangles in (("meshedit/teapot.dae", "2,464"), ("torus-1k", "1,024")):
-        for backend in ("bvh mean", "bvh sah", "embree"):
-            assert any(r.startswith(f"| {mesh} | {triangles} | {backend} |") for r in rows)
-        for kind in accel_rays.RAY_KINDS:
-            for t in (1, 2):
-                matching = [r for r in rows if r.startswith(f"| {mesh} | {triangles} | ")
-                            and f"| {kind} | {t} |" in r]
-                assert len(matching) == 1, (mesh, kind, t)
-                cells = [c.strip() for c in matching[0].strip("|").split("|")]
-                assert len(cells) == 12 and all(c.replace(",", "").replace(".", "").isdigit()
-                                                for c in cells[5:])
-            assert any(r.startswith(f"| {mesh} | {kind} | ") and r.endswith("| 0/0 |")
-                       for r in rows)                   # bvh agrees with naive on every ray
-    targets = [r for r in rows if "| >= 0." in r]
-    assert len(targets) == 8 and all(r.endswith("| not run |") for r in targets)
+    assert "Targets (issue 5)" not in text
+    assert accel_rays.RAY_KINDS == ("random", "camera", "secondary", "shadow")
+    backends = ("naive", "bvh mean", "bvh sah", "bvh mean mt", "bvh sah mt", "embree")
+    assert accel_rays.BACKENDS == backends
+    meshes = (("meshedit/teapot.dae", "2,464"), ("torus-1k", "1,024"))
+    for mesh, triangles in meshes:
+        # one table per mesh at 2 threads: a row per ray kind, every backend's rays/s and the
+        # three ratios positive numbers (the Möller–Trumbore variants run on the tori too)
+        assert f"{triangles} triangles; shadow rays go to the synthetic square." in text
+        header = next(line for line in text.split(f"### {mesh}\n", 1)[1].splitlines()
+                      if line.startswith("| kind |"))
+        assert header == ("| kind | query | rays | naive rays | " + " | ".join(backends)
+                          + " | mean/embree | sah/embree | wt/MT mean |")
+        rows = table_rows(text, f"### {mesh}")
+        assert [r[0] for r in rows] == list(accel_rays.RAY_KINDS)
+        for row in rows:
+            assert row[1] == ("any hit" if row[0] == "shadow" else "closest")
+            assert len(row) == 4 + len(backends) + 3 and all(is_number(c) for c in row[2:]), row
+        # the other thread count: the same cells, one row per kind
+        rows = [r for r in table_rows(text, "## Rays per second at 1 thread") if r[0] == mesh]
+        assert [(r[1], r[2]) for r in rows] == [(k, "1") for k in accel_rays.RAY_KINDS]
+        assert all(len(r) == 3 + len(backends) + 3 and all(is_number(c) for c in r[3:])
+                   for r in rows)
+        [summary] = [r for r in table_rows(text, "## bvh / embree rays/s ratio") if r[0] == mesh]
+        assert len(summary) == 2 + 2 * 4 + 2 and all(is_number(c) for c in summary[2:])
+        builds = [r for r in table_rows(text, "## Builds") if r[0] == mesh]
+        assert [r[2] for r in builds] == ["bvh mean", "bvh sah", "embree"]
+        work = [r for r in table_rows(text, "## Traversal work per ray") if r[0] == mesh]
+        assert [r[1] for r in work] == list(accel_rays.RAY_KINDS)
+        assert all(r[-1] == "0/0" for r in work)          # bvh agrees with naive on every ray
+        assert 0 < float(work[-1][2]) < 1                  # some shadow rays blocked, not all
+    # issue 14's targets, none of whose meshes ran here
+    targets = table_rows(text, "## Targets (issue 14)")
+    four = ["meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae", "meshedit/maxplanck.dae"]
+    expected = ([("bvh / embree, closest hit", "random", m, "0.80x") for m in four]
+                + [("bvh / embree, closest hit", "secondary", m, "0.60x") for m in four]
+                + [("bvh / embree, any hit", "shadow", "sky/CBbunny.dae", "0.80x")]
+                + [("watertight / Möller–Trumbore", k, m, "0.90x")
+                   for k in ("random", "secondary") for m in four])
+    assert [tuple(r[:4]) for r in targets] == expected
+    assert all(r[4:] == ["–", "not run", "–", "not run"] for r in targets)
+    # the verdicts follow the numbers: pass at the threshold, FAIL below it, mean decides
+    rates = {}
+    for kind in accel_rays.RAY_KINDS:
+        rates.update({(kind, 2, "embree"): 100.0, (kind, 2, "bvh mean"): 80.0,
+                      (kind, 2, "bvh sah"): 59.0, (kind, 2, "bvh mean mt"): 90.0,
+                      (kind, 2, "bvh sah mt"): 50.0})
+    fake = [{"label": m, "rates": rates} for m in four]
+    verdicts = [[c.strip() for c in line.strip("|").split("|")]
+                for line in accel_rays.targets_table(fake, argparse.Namespace(threads=[1, 2]))
+                if line.startswith("| bvh") or line.startswith("| watertight")]
+    assert [v[4:] for v in verdicts] == (
+        [["0.80x", "pass", "0.59x", "FAIL"]] * 4 + [["0.80x", "pass", "0.59x", "FAIL"]] * 4
+        + [["0.80x", "pass", "0.59x", "FAIL"]] + [["0.89x", "FAIL", "1.18x", "pass"]] * 8)
+    # the shadow batch: surface_rays' origins, segments ending 1e-4 short of the light
+    scene = ptrace.load(scenes_dir / "sky" / "CBbunny.dae")
+    light = accel_rays.scene_light(scene)
+    rays = raygen.shadow_rays(scene.geometry, 500, seed=3, light=light)
+    assert (rays.origins == raygen.surface_rays(scene.geometry, 500, seed=3).origins).all()
+    assert (rays.tmin == 1e-4).all() and (rays.tmax == 1 - 1e-4).all()
+    ends = rays.origins + rays.directions - light[0]     # on the light, within half its edges
+    for edge in light[1:]:
+        assert (np.abs(ends @ edge) <= 0.5 * (edge @ edge) + 1e-9).all()
+    centre, edge_x, edge_y = raygen.light_square(scene.geometry)
+    assert centre[1] > scene.geometry.bounds()[1][1] and edge_x @ edge_y == 0
     chart = output.with_suffix(".png").read_bytes()
     assert chart[:8] == b"\x89PNG\r\n\x1a\n" and chart[12:16] == b"IHDR"
     width, height = struct.unpack(">II", chart[16:24])
