@@ -64,6 +64,10 @@ PINS = {
     "random": (GEOMETRY_TESTS, "test_random_rays_do_not_leak"),
     "not_watertight": (GEOMETRY_TESTS, "test_moller_trumbore_is_not_watertight"),
     "far": (GEOMETRY_TESTS, "test_embree_agrees_with_bvh_far_from_origin"),
+    "far_camera": ("tests/accel/test_embree_far_camera.py",
+                   "test_a_far_camera_agrees_with_bvh_on_the_cow"),
+    "far_camera_teeth": ("tests/accel/test_embree_far_camera.py",
+                         "test_without_the_clipping_a_far_camera_disagrees"),
     "outliers": (GEOMETRY_TESTS, "test_embree_recentring_survives_far_outliers"),
     "self_hit": (STABILITY_TESTS, "test_spawned_rays_never_rehit_their_own_triangle"),
     "spheres": (STABILITY_TESTS, "test_spawned_rays_leave_spheres"),
@@ -404,6 +408,8 @@ MT = "-mt"   # suffix of a kind built with the Möller–Trumbore triangle test 
 def build(kind, geometry):
     """accel.build, plus the measurement-only embree variants of EMBREE_VARIANTS and naive or bvh
     with triangle="moller-trumbore" (kind + MT)."""
+    if kind == "embree-not-recentred":   # before this study: no re-centring, no clipping
+        return NotRecentredEmbree(geometry, clip_to_bounds=False)
     if kind in EMBREE_VARIANTS:
         return EMBREE_VARIANTS[kind](geometry)
     if kind.endswith(MT):
@@ -638,14 +644,15 @@ def outlier_disagreement(n, rays_count, kinds=FAR_KINDS):
             for kind in kinds}
 
 
-def distant_camera_disagreement(geometry, rays_count, distances, seed=0):
+def distant_camera_disagreement(geometry, rays_count, distances, seed=0, clip=True):
     """Geometry left where it is, ray origins at `distance` from its centre aiming at random
-    points of its box: what re-centring cannot fix (the ray origin itself is far)."""
+    points of its box: what re-centring cannot fix (the ray origin itself is far), and what
+    clipping each ray to the triangles' box does (clip=False: embree without it)."""
     rng = np.random.default_rng(seed)
     lower, upper = geometry.bounds()
     centre = 0.5 * (lower + upper)
     bvh = accel.build("bvh", geometry)
-    embree = accel.build("embree", geometry)
+    embree = accel.build("embree", geometry, clip_to_bounds=clip)
     out = []
     for distance in distances:
         unit = rng.normal(size=(rays_count, 3))
@@ -677,6 +684,8 @@ def measure_far(quick):
         seed=COW_SEED, t_tolerance=T_TOLERANCE, magnitudes=FAR_MAGNITUDES,
         moved=far_disagreement(geometry, rays), distances=distances,
         camera=distant_camera_disagreement(geometry, rays_count, distances),
+        camera_not_clipped=distant_camera_disagreement(geometry, rays_count, distances,
+                                                       clip=False),
         outlier_triangles=outlier_n, outliers=outlier_disagreement(outlier_n, rays_count)))
 
 
@@ -692,12 +701,15 @@ def write_far(data, chart_dir):
         text["far"], data, pinned_ids(PINS), rows=join(text["far_row"], rows),
         outlier_rows=join(text["far_outlier_row"], [dict(label=FAR_LABELS[kind], r=r)
                                                     for kind, r in data["outliers"].items()]),
-        camera_rows=join(text["far_camera_row"], [dict(distance=d, r=r) for d, r in
-                                                  zip(data["distances"], data["camera"])]),
+        camera_rows=join(text["far_camera_row"], [
+            dict(distance=d, r=r, before=b) for d, r, b in
+            zip(data["distances"], data["camera"], data["camera_not_clipped"])]),
         chart=chart_far(chart_dir, data), grows_from=grows_from,
         # by the power of ten of m (or R): {before[5][any]} is the "any" rate at m = 1e5
         before={exponent(m): r for m, r in zip(data["magnitudes"], before)},
         camera={exponent(d): r for d, r in zip(data["distances"], data["camera"])},
+        camera_before={exponent(d): r for d, r in zip(data["distances"],
+                                                      data["camera_not_clipped"])},
         after_max=max(r["any"] for r in after))
 
 
@@ -707,8 +719,10 @@ def chart_far(chart_dir, data):
     for kind, style in zip(FAR_KINDS, ("--^", ":v", "-o")):
         axes.plot(data["magnitudes"], [r["any"] for r in data["moved"][kind]], style,
                   label=f"cow moved m: {FAR_LABELS[kind]}")
-    axes.plot(data["distances"], [r["any"] for r in data["camera"]], "-.s",
-              label="cow at origin, ray origins R away (median)")
+    axes.plot(data["distances"], [r["any"] for r in data["camera_not_clipped"]], "-.s",
+              label="cow at origin, ray origins R away (not clipped: before)")
+    axes.plot(data["distances"], [r["any"] for r in data["camera"]], "-D",
+              label="cow at origin, ray origins R away (clipped to the box: ptrace)")
     axes.set_xscale("log")
     axes.set_yscale("symlog", linthresh=1e-3)
     axes.set_ylim(0, 1.5)

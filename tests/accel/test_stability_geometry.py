@@ -226,7 +226,8 @@ def synthetic_data():
                     moved={"embree-not-recentred": [disagreement(m / 1e7) for m in magnitudes],
                            "embree-box-centre": [disagreement(0.0) for m in magnitudes],
                            "embree": [disagreement(0.0) for m in magnitudes]},
-                    distances=distances, camera=[disagreement(d / 1e8) for d in distances],
+                    distances=distances, camera=[disagreement(0.0) for d in distances],
+                    camera_not_clipped=[disagreement(d / 1e8) for d in distances],
                     outlier_triangles=4000,
                     outliers={kind: disagreement(0.36 if kind == "embree-box-centre" else 0.0)
                               for kind in stability.FAR_KINDS})}
@@ -278,6 +279,8 @@ def test_report_follows_the_data(geometry_only, tmp_path):
     assert "They leaked 2 rays in the whole grid" in text
     assert "all in cells where |d|/s >= 1e+09" in text
     assert "reached 0.1% at 1e4, 1.0% at 1e5 and 100.0% at 1e7" in text
+    assert "a camera R = 1e5 away from the cow disagreed on 0.1% of rays, at 1e7 on 10.0%" in text
+    assert "With the clipping a camera 1e5 away disagrees on 0.00% of rays" in text
     assert "Total time 12 s." in text and "Quick mode (--quick)" in text
     # ... and a changed number changes the report
     changed = copy.deepcopy(data)
