@@ -1,9 +1,10 @@
 """What numba's on-disk cache holds, so a cold first run can say that it is compiling."""
 from .integrator import render_pixels
 
-# The README's render with an empty cache on the 2-core development machine spent about this long
-# compiling (benchmarks/results/first_images.md: cold wall minus warm wall).
-COLD_COMPILE_SECONDS = 35
+# A small render of scenes/cornell.dae with an empty cache on the 2-core development machine
+# took 43-52 s of wall time (2026-12-02, after the estimator work and the watertight test; load
+# 1-2.5; a warm run takes about 2 s): benchmarks/results/first_images.md predates that work.
+COLD_COMPILE_SECONDS = 45
 
 
 def is_cold(record_class, dispatcher=render_pixels):
