@@ -27,6 +27,7 @@ import warnings
 import numba
 import numpy as np
 
+import accel
 
 from .errors import PtraceError
 from .tiles import TileWork, new_sums
@@ -35,7 +36,7 @@ TASK_RAYS = 1 << 19       # rays per task: about 0.1-0.3 s of work at 2-5 M rays
 CONNECT_TIMEOUT = 10      # seconds to reach a scheduler before giving up
 INSTALL_HINT = 'distributed rendering needs Dask: pip install "ptrace[dist]"'
 
-_built = collections.OrderedDict()   # (scene key, accel kind, split) -> (backend, build seconds)
+_built = collections.OrderedDict()   # (scene key, accel kind, bvh split) -> backend
 _works = collections.OrderedDict()   # job token -> (backend, TileWork)
 _lock = threading.Lock()             # one tile at a time per worker process: numba runs threads
 _KEEP = 2
@@ -124,7 +125,8 @@ def tile_task(scene, job, pass_index, tile_index, first_sample, pass_n, pixel_x,
             key = (job["scene_key"], settings.accel, settings.bvh_split)
             if key not in _built:
                 start = time.perf_counter()
-                _built[key] = settings.build_accel(scene.geometry)
+                _built[key] = accel.build(settings.accel, scene.geometry,
+                                          **settings.accel_options())
                 build_seconds = time.perf_counter() - start
                 builds += 1
                 while len(_built) > _KEEP:

@@ -93,7 +93,7 @@ def test_an_error_in_a_task_names_the_tile_and_pass(client):
     def break_builds():
         import accel
 
-        def broken(kind, geometry):
+        def broken(kind, geometry, **options):
             raise RuntimeError("no accelerator today")
         distributed.accel = type("Broken", (), {"build": staticmethod(broken)})
         return accel is not None
@@ -110,6 +110,18 @@ def test_an_error_in_a_task_names_the_tile_and_pass(client):
         client.run(repair)
     # the workers are fine again
     assert ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6)).max() > 0
+
+
+def test_the_bvh_split_reaches_the_workers(client):
+    scene = ptrace.load(SHIPPED)
+    image = ptrace.render(scene, client=client, spp=1, resolution=(8, 6), bvh_split="sah")
+    np.testing.assert_array_equal(image, ptrace.render(scene, spp=1, resolution=(8, 6)))
+
+    def splits():
+        return sorted({(key[1], key[2], backend.split) for key, backend in
+                       distributed._built.items() if key[1] == "bvh"})
+    built = set().union(*client.run(splits).values())
+    assert ("bvh", "sah", "sah") in built
 
 
 def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypatch):
