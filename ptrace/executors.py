@@ -14,7 +14,7 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, notice=
     if notice is not None and is_cold(accel.record_class(settings.accel)):
         notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
     start = time.perf_counter()
-    backend = settings.build_accel(scene.geometry)
+    backend = accel.build(settings.accel, scene.geometry, **settings.accel_options())
     build_seconds = time.perf_counter() - start
     start = time.perf_counter()
     work = TileWork(scene, backend, settings, camera)

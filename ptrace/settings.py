@@ -116,10 +116,6 @@ class Settings:
         """The keywords of accel.build for this render's backend."""
         return {"split": self.bvh_split} if self.accel == "bvh" else {}
 
-    def build_accel(self, geometry):
-        """The render's accelerator over geometry."""
-        return accel.build(self.accel, geometry, **self.accel_options())
-
     def kernel_options(self):
         """The integrator's Options record."""
         mode = NORMALS if self.integrator == "normals" else PATH
