@@ -22,7 +22,7 @@ entries, checked to exist in their files when the report is written. The geometr
 3. Embree's float32 far from the origin: how often it disagrees with bvh as the cow moves away,
    with and without the re-centring that accel/embree.py does.
 
-tests/accel/test_stability_geometry.py pins the claims of the report with the helpers below.
+tests/test_benchmark_stability_geometry.py pins the claims of the report with the helpers below.
 """
 import argparse
 import inspect
@@ -49,7 +49,7 @@ AXIS = np.array([1.0, 0.7, 0.3]) / np.linalg.norm([1.0, 0.7, 0.3])   # direction
 RAY_SEED = 1        # section 1's rays
 COW_SEED = 3        # section 3's rays
 TEMPLATE = "stability.md"
-GEOMETRY_TESTS = "tests/accel/test_stability_geometry.py"
+GEOMETRY_TESTS = "tests/test_benchmark_stability_geometry.py"
 STABILITY_TESTS = "tests/ptrace/test_stability.py"
 # claim -> (test file, test function): the tests the report quotes, by the field names of the
 # template (`{test[claim]}` prints file::function, `{short[claim]}` ::function)
@@ -73,7 +73,7 @@ PINS = {
     "spheres": (STABILITY_TESTS, "test_spawned_rays_leave_spheres"),
     "quad_shadow": ("tests/ptrace/test_light_transport.py",
                     "test_the_quad_on_the_area_light_does_not_shadow_it"),
-    "wide_floor": ("tests/ptrace/test_stability_light.py",
+    "wide_floor": ("tests/test_benchmark_stability_light.py",
                    "test_emitter_on_the_light_does_not_shadow_a_wide_floor"),
     "non_finite": (STABILITY_TESTS, "test_no_non_finite_pixel_in_any_course_scene"),
     "malformed": ("tests/ptrace/test_malformed_corpus.py",

@@ -26,7 +26,7 @@ sampler="independent". The hemisphere and adaptive studies are of the course's e
 (light sampling alone, COURSE); roulette and fireflies are of ptrace's own (its default
 direct="mis", RR and FIREFLY options).
 
-tests/ptrace/test_stability_light.py pins the claims of the report with the helpers below.
+tests/test_benchmark_stability_light.py pins the claims of the report with the helpers below.
 """
 import argparse
 import dataclasses
@@ -56,7 +56,7 @@ from .templating import blocks, fill, join, output_path, pinned_ids, plain, save
 REPRODUCE = "python -m benchmarks.stability_light"
 REPRODUCE_ALL = "python -m benchmarks.stability"
 TEMPLATE = "stability_light.md"
-TEST = "tests/ptrace/test_stability_light.py"
+TEST = "tests/test_benchmark_stability_light.py"
 # claim -> test function of TEST: the tests the report quotes, by the field names of the
 # template (`{test[claim]}` prints file::function, `{short[claim]}` ::function)
 PINS = {claim: (TEST, name) for claim, name in {

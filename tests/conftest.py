@@ -1,4 +1,4 @@
-"""Shared test helpers: where the CS184 course scenes are.
+"""Shared test set-up: where the CS184 course scenes are, and two numba threads at least.
 
 PTRACE_SCENES (if set) or <repo>/../shared/scenes/cs184. Tests that need the scenes fail (not
 skip) when neither exists: CI always has ../shared.
@@ -6,7 +6,11 @@ skip) when neither exists: CI always has ../shared.
 import os
 import pathlib
 
-import pytest
+# Before numba is imported anywhere: at least two threads, even on a one-core machine, so the
+# tests that compare one thread with two really run two (numba allows more threads than cores).
+os.environ.setdefault("NUMBA_NUM_THREADS", str(max(2, os.cpu_count() or 1)))
+
+import pytest  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DEFAULT_SCENES = REPO.parent / "shared" / "scenes" / "cs184"

@@ -41,7 +41,7 @@ def assert_same_hits(expected, actual):
     np.testing.assert_array_equal(actual.v, expected.v)
 
 
-def compare_to_float32(geometry, rays, reference, other, label):
+def compare_to_float32(geometry, rays, reference, other, label, ties=False):
     """Embree (float32) against bvh (float64): hit/miss, t and prim agreement."""
     ref_hit = reference.prim >= 0
     other_hit = other.prim >= 0
@@ -59,8 +59,12 @@ def compare_to_float32(geometry, rays, reference, other, label):
           f"{disagree}, prim differs {int(prim_differs.sum())}, max rel t {rel.max(initial=0):.2e}")
     assert disagree <= 1e-4 * len(rays), f"{label}: {disagree} hit/miss disagreements"
     assert rel.max(initial=0.0) <= 1e-4, f"{label}: t differs by {rel.max():.3e} relative"
-    # a different primitive is allowed only where the two hits tie in t (shared edges, coplanar)
-    # and the check above already holds t to 1e-4 relative for those rays
+    # float32 can send a ray grazing a shared edge to the neighbour, whose t the check above
+    # holds to 1e-4; such rays are rare (0 of 10,000 on every course mesh, 2026-12-02). With
+    # coincident primitives (ties=True) Embree may return any of them.
+    if not ties:
+        assert int(prim_differs.sum()) <= 1e-4 * len(rays), \
+            f"{label}: {int(prim_differs.sum())} rays hit another primitive"
 
 
 @pytest.mark.parametrize("relpath", COURSE_MESHES)
@@ -207,7 +211,7 @@ def test_degenerate_inputs_build_and_answer(name):
     assert stats["largest_leaf"] <= stats["max_leaf_size"]
     assert stats["max_depth"] < STACK_SIZE - 1
     compare_to_float32(geometry, rays, reference, accel.build("embree", geometry).intersect(rays),
-                       name)
+                       name, ties=name in ("1000 copies", "shared centroid"))
 
 
 @pytest.mark.parametrize("kind", accel.KINDS)
@@ -227,3 +231,60 @@ def test_nan_and_inf_are_refused(kind):
 def test_unknown_kind_names_the_kinds():
     with pytest.raises(ValueError, match="naive, bvh, embree"):
         accel.build("octree", ONE_TRIANGLE)
+
+
+TIE_BACKENDS = [("naive", {}), ("naive", dict(triangle="moller-trumbore")), ("bvh", {}),
+                ("bvh", dict(split="sah")), ("bvh", dict(triangle="moller-trumbore")),
+                ("bvh", dict(max_leaf_size=1))]
+
+
+@pytest.mark.parametrize("kind, options", TIE_BACKENDS,
+                         ids=[f"{k} {o}" if o else k for k, o in TIE_BACKENDS])
+@pytest.mark.parametrize("first", [0, 3], ids=["copy first", "copy last"])
+def test_a_tie_goes_to_the_lowest_primitive_id(kind, options, first):
+    """The README's tie rule: coincident triangles hit at exactly the same t, and the lowest id
+    wins on naive and bvh (each triangle test, each split), whichever of the two copies is
+    listed first and whether or not they share a leaf (a leaf of one primitive puts them in
+    different leaves). Other triangles around them keep the BVH from being a single leaf.
+    Embree's float32 traversal breaks such ties as it meets them: see the next test."""
+    rng = np.random.default_rng(5)
+    tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    clutter = rng.random((12, 3)) * 4 + [3.0, 3.0, 0.0]     # 4 triangles off to the side
+    vertices = np.vstack([tri, tri, clutter])
+    faces = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11], [12, 13, 14], [15, 16, 17]])
+    copies = [faces[0], faces[1]]
+    others = list(faces[2:])
+    listed = copies[:1] + others[:first] + copies[1:] + others[first:]
+    listed = np.array(listed)
+    ids = [i for i, f in enumerate(listed) if f[0] in (0, 3)]
+    n = 500
+    origins = np.column_stack([rng.random((n, 2)) * 0.3 + 0.15, np.full(n, 2.0)])
+    directions = np.column_stack([rng.normal(size=(n, 2)) * 0.05, -np.ones(n)])
+    backend = accel.build(kind, accel.Geometry(vertices, listed), **options)
+    hits = backend.intersect(accel.Rays(origins, directions))
+    hit = hits.prim >= 0
+    assert hit.sum() > 0.8 * n
+    assert (hits.prim[hit] == ids[0]).all(), np.unique(hits.prim[hit])
+    # the same rays against the two copies alone, in both orders: the first listed wins
+    for pair in (listed[ids], listed[ids][::-1]):
+        alone = accel.build(kind, accel.Geometry(vertices, pair), **options)
+        again = alone.intersect(accel.Rays(origins, directions))
+        np.testing.assert_array_equal(again.prim[hit], 0)
+        np.testing.assert_array_equal(again.t, hits.t)
+
+
+def test_embree_breaks_an_exact_tie_between_the_tied_primitives():
+    """Embree does not promise the tie rule (its float32 traversal keeps whichever of equal hits
+    it meets first): among 50 coincident copies it returns one of them, at their t to float32
+    precision."""
+    tri = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    vertices = np.tile(tri, (50, 1))
+    faces = np.arange(150).reshape(50, 3)
+    rng = np.random.default_rng(9)
+    origins = np.column_stack([rng.random((300, 2)) * 0.3 + 0.15, np.full(300, 2.0)])
+    rays = accel.Rays(origins, np.tile([0.0, 0.0, -1.0], (300, 1)))
+    embree = accel.build("embree", accel.Geometry(vertices, faces)).intersect(rays)
+    naive = accel.build("naive", accel.Geometry(vertices, faces)).intersect(rays)
+    assert (naive.prim == 0).all()
+    assert ((embree.prim >= 0) & (embree.prim < 50)).all()
+    np.testing.assert_allclose(embree.t, naive.t, rtol=1e-6)

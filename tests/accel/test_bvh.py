@@ -180,3 +180,25 @@ def test_axis_aligned_rays_on_box_planes_match_naive():
         np.testing.assert_array_equal(hits.prim, expected.prim)
         np.testing.assert_array_equal(hits.t, expected.t)
         np.testing.assert_array_equal(bvh.occluded(rays), naive.occluded(rays))
+
+
+@pytest.mark.parametrize("split", ["mean", "sah"])
+def test_traversal_stops_at_the_nearest_hit(split):
+    """A hit shrinks the ray's interval: boxes that start beyond the nearest hit found are never
+    opened. Rays straight down hit a near pair of triangles at z = 0 above 200 triangles at
+    z = -10 that they would also hit: only the near pair's leaf is tested (at most a leaf's worth
+    of triangle tests per ray), and the far cluster is as if absent."""
+    rng = np.random.default_rng(3)
+    near = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    far = rng.random((600, 3)) * [2, 2, 0.5] + [-1, -1, -10.25]
+    vertices = np.vstack([near, far])
+    faces = np.vstack([[[0, 1, 2], [0, 2, 3]], 4 + np.arange(600).reshape(200, 3)])
+    n = 2000
+    origins = np.column_stack([rng.random((n, 2)) * 1.6 - 0.8, np.full(n, 5.0)])
+    directions = np.tile([0.0, 0.0, -1.0], (n, 1))
+    backend = accel.build("bvh", accel.Geometry(vertices, faces), split=split)
+    hits = backend.intersect(accel.Rays(origins, directions))
+    assert np.isin(hits.prim, [0, 1]).all()
+    tests = backend.last_mean_triangle_tests
+    print(f"{split}: {tests:.2f} triangle tests and {backend.last_mean_visits:.2f} nodes per ray")
+    assert tests <= backend.max_leaf_size

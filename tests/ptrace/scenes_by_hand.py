@@ -54,3 +54,17 @@ def pixel_hits_on_floor(camera):
     d = camera.directions(xs + 0.5, py)
     t = -camera.position[1] / d[..., 1]
     return camera.position + t[..., None] * d
+
+
+def furnace(albedo, radiance):
+    """A closed diffuse sphere (radius 1, seen from inside) with a point light at its centre.
+
+    The point light (no falloff, like the course) gives every wall point direct radiance
+    a P / pi; the sphere sees only itself, so each bounce multiplies by a:
+    L = (a P / pi) (1 + a + ... + a^(m-1)) -> a P / (pi (1 - a)).
+    """
+    scene = make_scene(centers=[[0, 0, 0]], radii=[1.0],
+                       materials=[dict(kind=DIFFUSE, albedo=(albedo,) * 3)], material_index=[0],
+                       lights=[point_light((0, 0, 0), radiance)])
+    camera = Camera(np.array([0.0, 0.0, 0.3]), np.zeros(3), np.eye(3), 10.0, 16, 16, 1e-3, 1e3)
+    return scene, camera

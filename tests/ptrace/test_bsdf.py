@@ -93,18 +93,38 @@ def test_diffuse_pdf_integrates_to_one_and_eval_is_albedo_over_pi():
         pytest.approx(tuple(M.albedo[0] / math.pi))
 
 
-def test_microfacet_reflects_at_most_what_arrives():
-    """White-furnace check of one microfacet bounce: the directional albedo is at most 1."""
+@pytest.mark.parametrize("m", [1, 2])
+def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
+    """One microfacet bounce's directional albedo (red): the mean of the sampled weights
+    f cos / pdf equals the integral of eval's f cos over the hemisphere (a midpoint rule, to within 4
+    standard errors of the mean); and it is
+    at most 1 (a conductor cannot reflect more than arrives)."""
     rng = np.random.default_rng(2)
+    kind = int(M.kind[m])
     for theta in (0, 45, 80):
         wo = direction(theta)
         weights = []
         for u in rng.random((20000, 3)):
-            x, y, z, fr, fg, fb, pdf = sample(1, wo, u)
+            x, y, z, fr, fg, fb, pdf = sample(m, wo, u)
             weights.append(fr * z / pdf if pdf > 0 else 0.0)
-        albedo = np.mean(weights)
-        print(f"theta {theta}: directional albedo (red) {albedo:.3f}")
-        assert 0.5 < albedo <= 1.0
+        # midpoint rule in (theta, phi), 300 x 300 cells of 0.3 and 1.2 degrees
+        n_t, n_p = 300, 300
+        integral = 0.0
+        for i in range(n_t):
+            t = (i + 0.5) / n_t * math.pi / 2
+            z, r = math.cos(t), math.sin(t)
+            for j in range(n_p):
+                phi = (j + 0.5) / n_p * 2 * math.pi
+                f = bsdf_eval(kind, M.albedo, M.alpha, M.eta, M.k, m, *wo, r * math.cos(phi),
+                              r * math.sin(phi), z)
+                integral += f[0] * z * r
+        integral *= (math.pi / 2 / n_t) * (2 * math.pi / n_p)
+        sampled = np.mean(weights)
+        se = np.std(weights) / math.sqrt(len(weights))
+        print(f"m {m} theta {theta}: sampled {sampled:.4f} integral {integral:.4f} se {se:.4f}")
+        assert abs(sampled - integral) < 4 * se + 1e-3 * integral
+        assert se < 0.01 * integral                     # the comparison has power
+        assert sampled <= 1.0
 
 
 def test_mirror_reflects_exactly():
@@ -130,6 +150,34 @@ def test_glass_reflects_with_schlick_probability_and_refracts_by_snell():
         # weight f |cos| / pdf is the radiance scale (1/1.45)^2 entering
         assert fr * abs(z) / pdf == pytest.approx(1 / 1.45 ** 2, rel=1e-9)
     assert reflected / n == pytest.approx(schlick, abs=1e-3)
+
+
+@pytest.mark.parametrize("m", [4, 5], ids=["glass", "refraction"])
+def test_leaving_the_medium_refracts_by_snell_with_the_leaving_radiance_scale(m):
+    """From inside (wo below the surface, 30 degrees: under the critical angle of 43.6) the
+    ray leaves at arcsin(1.45 sin 30) on the other side, and its weight f |cos| / pdf is the
+    leaving radiance scale 1.45^2 (radiance compresses into the denser medium and expands out
+    of it); glass reflects back inside with Schlick's probability of the inside angle."""
+    inside = -direction(30)
+    inside[0], inside[1] = -inside[0], -inside[1]    # incoming from outside the normal's side
+    r0 = ((1 - 1.45) / (1 + 1.45)) ** 2
+    schlick = r0 + (1 - r0) * (1 - abs(inside[2])) ** 5
+    n = 20000
+    reflected = 0
+    for u3 in (np.arange(n) + 0.5) / n:
+        x, y, z, fr, fg, fb, pdf = sample(m, inside, (0.5, 0.5, u3))
+        assert pdf > 0
+        if z < 0:
+            reflected += 1
+            np.testing.assert_allclose([x, y, z], [-inside[0], -inside[1], inside[2]])
+            continue
+        sin_t = math.hypot(x, y)
+        assert sin_t == pytest.approx(1.45 * math.sin(math.radians(30)), rel=1e-9)   # Snell
+        assert math.hypot(sin_t, z) == pytest.approx(1.0, rel=1e-12)
+        assert x * inside[0] < 0 or inside[0] == 0      # on the far side of the normal
+        assert fr * abs(z) / pdf == pytest.approx(1.45 ** 2, rel=1e-9)
+    expected = schlick if M.kind[m] == GLASS else 0.0
+    assert reflected / n == pytest.approx(expected, abs=1e-3)
 
 
 def test_total_internal_reflection():

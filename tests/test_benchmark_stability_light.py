@@ -26,7 +26,7 @@ from benchmarks import stability_light as study
 from ptrace import integrator
 from ptrace.integrator import LUMINANCE
 
-SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
+SHIPPED = pathlib.Path(__file__).resolve().parents[1] / "scenes" / "cornell.dae"
 SIZE = (16, 12)
 
 

@@ -1,0 +1,210 @@
+"""A mutation check: plant known bugs one at a time and see which tests catch them.
+
+    python tests/mutants.py                 # every mutant, report to benchmarks/results/mutants.md
+    python tests/mutants.py rr-cap-half     # only the named ones (report printed, not written)
+    python tests/mutants.py --check         # each mutant's text is found exactly once, run nothing
+
+Each mutant is a list of (file, text, replacement) edits, each text found exactly once, and the
+tests that should catch it. For each, the working tree (tracked and untracked files, as they are
+on disk) is copied to a scratch directory, the edits are applied there, and the tests run in a
+fresh process with a fresh numba cache (numba's cache would not notice an edit in a callee's
+module) and the scratch copy first on sys.path. A mutant is *killed* when those tests fail. The
+unmutated copy must pass the same tests first, or the run stops: a mutant killed by a broken
+suite proves nothing.
+"""
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+REPORT = ROOT / "benchmarks" / "results" / "mutants.md"
+
+INTEGRATOR, KERNELS, BVH = "ptrace/integrator.py", "accel/kernels.py", "accel/bvh.py"
+RR_TEST = "tests/ptrace/test_roulette_rule.py"
+
+# name -> (what the bug is, [(file, text, replacement)], [pytest arguments])
+MUTANTS = {
+    "rr-survives-1-minus-q": (
+        "roulette continues with probability 1 - q while still dividing by q",
+        [(INTEGRATOR, "base + DIM_RR, base + DIM_RR) < q:", "base + DIM_RR, base + DIM_RR) >= q:")],
+        [RR_TEST]),
+    "rr-cap-half": (
+        "the default roulette cap is 0.5 instead of 0.95",
+        [(INTEGRATOR, "RR_CAP = 0.95 ", "RR_CAP = 0.5 ")],
+        [RR_TEST]),
+    "tie-highest-id": (
+        "between hits at the same t the higher primitive id wins (the shared better())",
+        [(KERNELS, "(best_prim == NO_HIT or prim < best_prim)",
+          "(best_prim == NO_HIT or prim > best_prim)")],
+        ["tests/accel/test_backends.py", "-k", "tie"]),
+    "glass-leaves-with-entering-scale": (
+        "light leaving glass is scaled by the entering radiance scale 1 / ior^2",
+        [("ptrace/bsdf.py", "radiance_scale = eta_ratio * eta_ratio",
+          "radiance_scale = 1.0 / (ior[m] * ior[m])")],
+        ["tests/ptrace/test_bsdf.py"]),
+    "image-written-in-place": (
+        "the output image is written straight to its target, not through a temporary file",
+        [("ptrace/image.py", "oiio.ImageOutput.create(temporary)", "oiio.ImageOutput.create(path)"),
+         ("ptrace/image.py", "output.open(temporary, spec)", "output.open(path, spec)"),
+         ("ptrace/image.py", "os.replace(temporary, path)", "pass")],
+        ["tests/ptrace/test_image.py"]),
+    "dropped-cosine": (
+        "the path throughput drops the cosine of the sampled direction",
+        [(INTEGRATOR, "weight = abs(wiz) / pdf", "weight = 1.0 / pdf")],
+        ["tests/ptrace/test_light_transport.py", "-k", "furnace"]),
+    "swapped-barycentrics": (
+        "the watertight test returns (v, u) for (u, v)",
+        [(KERNELS, "return t, e1 * inv, e2 * inv", "return t, e2 * inv, e1 * inv")],
+        ["tests/accel/test_backends.py", "-k", "barycentrics"]),
+    "no-tmax-shrink": (
+        "BVH traversal opens boxes beyond the nearest hit found so far",
+        [(BVH, "        if entry[top] > best_t:\n            continue\n",
+          "        if False:\n            continue\n"),
+         (BVH, "_child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, "
+               "best_t,", "_child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, "
+               "fy, fz, lo, hi,")],
+        ["tests/accel/test_bvh.py", "-k", "nearest"]),
+    "light-pdf-doubled": (
+        "an area light sample reports twice its solid-angle pdf",
+        [("ptrace/lights.py", "pdf = dist2 / (area[i] * -cos_light)",
+          "pdf = 2.0 * dist2 / (area[i] * -cos_light)")],
+        ["tests/ptrace/test_bsdf.py", "-k", "area_light"]),
+    "seed-in-dimension-slot": (
+        "the Sobol sampler's key takes the seed where the dimension belongs",
+        [("ptrace/sampling.py", "+ _mix(np.uint64(pixel) * _K_PIXEL + np.uint64(dim) * _K_DIM) "
+          "+ salt)", "+ _mix(np.uint64(pixel) * _K_PIXEL + np.uint64(seed) * _K_DIM) + salt)")],
+        ["tests/ptrace/test_sampler.py"]),
+    "adaptive-batch-off-by-one": (
+        "adaptive sampling's passes take one sample more than the batch",
+        [("ptrace/tiles.py", "self.batch = adaptive[0] if", "self.batch = adaptive[0] + 1 if")],
+        ["tests/ptrace/test_passes.py"]),
+    "adaptive-one-batch-of-zeros": (
+        "a pixel of equal samples stops after one batch",
+        [("ptrace/tiles.py", "(n >= 2 * batch)", "(n >= batch)")],
+        ["tests/ptrace/test_passes.py"]),
+    "spawn-on-the-wrong-side": (
+        "spawned rays leave on the side opposite their direction (self-intersection)",
+        [(INTEGRATOR, "e = offset if wx * gx + wy * gy + wz * gz >= 0.0 else -offset",
+          "e = -offset if wx * gx + wy * gy + wz * gz >= 0.0 else offset")],
+        ["tests/ptrace/test_stability.py", "-k", "spawned"]),
+    "mis-weight-one": (
+        "multiple importance sampling gives every technique weight 1 (light counted twice)",
+        [(INTEGRATOR, "return a / (a + b) if a > 0.0 else 0.0", "return 1.0 if a > 0.0 else 0.0")],
+        ["tests/ptrace/test_estimators.py", "-k", "agree or analytic"]),
+    "dask-forces-roulette": (
+        "Dask workers render with roulette on whatever the settings say",
+        [("ptrace/distributed.py", 'settings = job["settings"]',
+          'settings = type(job["settings"])(**{**vars(job["settings"]), "roulette": True})')],
+        ["tests/ptrace/test_distributed.py", "-k", "option"]),
+}
+
+
+def tree_files():
+    """Tracked and untracked (not ignored) files of the working tree, as paths under ROOT."""
+    out = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, check=True,
+                         capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if (ROOT / line).is_file()]
+
+
+def scratch_copy(files, directory):
+    for name in files:
+        target = directory / name
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(ROOT / name, target)
+
+
+def apply(directory, edits):
+    for name, text, replacement in edits:
+        path = directory / name
+        source = path.read_text()
+        if source.count(text) != 1:
+            raise SystemExit(f"{name}: the mutant's text is found {source.count(text)} times, "
+                             f"not once: {text!r}")
+        path.write_text(source.replace(text, replacement))
+
+
+def check(names):
+    for name in names:
+        for file, text, _ in MUTANTS[name][1]:
+            count = (ROOT / file).read_text().count(text)
+            if count != 1:
+                raise SystemExit(f"{name}: {file}: text found {count} times: {text!r}")
+    print(f"{len(names)} mutants: every text found exactly once")
+
+
+def run_tests(directory, args):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(directory / ".numba-cache"),
+               PYTHONDONTWRITEBYTECODE="1", PYTHONPATH=str(directory))
+    env.setdefault("PTRACE_SCENES", str((ROOT.parent / "shared" / "scenes" / "cs184").resolve()))
+    probe = subprocess.run([sys.executable, "-c", "import ptrace, accel; print(ptrace.__file__,"
+                            " accel.__file__)"], cwd=directory, env=env, capture_output=True,
+                           text=True)
+    if not all(p.startswith(str(directory)) for p in probe.stdout.split()):
+        raise SystemExit(f"the scratch copy is not what gets imported: {probe.stdout}"
+                         f"{probe.stderr}")
+    start = time.perf_counter()
+    result = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
+                             *args], cwd=directory, env=env, capture_output=True, text=True)
+    lines = [line for line in result.stdout.splitlines() if line.strip()] or [""]
+    return result.returncode, time.perf_counter() - start, lines[-1], lines
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="mutants to run (default: all)")
+    parser.add_argument("--check", action="store_true", help="only check the mutants' texts")
+    args = parser.parse_args(argv)
+    names = args.names or list(MUTANTS)
+    unknown = [n for n in names if n not in MUTANTS]
+    if unknown:
+        raise SystemExit(f"unknown mutant(s): {', '.join(unknown)}; known: {', '.join(MUTANTS)}")
+    check(names)
+    if args.check:
+        return 0
+    files = tree_files()
+    rows = []
+    started = time.strftime("%Y-%m-%d %H:%M")
+    with tempfile.TemporaryDirectory(prefix="ptrace-mutants-") as temp:
+        base = Path(temp) / "unmutated"
+        scratch_copy(files, base)
+        tests = sorted({a for n in names for a in MUTANTS[n][2] if a.endswith(".py")})
+        code, seconds, tail, lines = run_tests(base, tests)
+        print(f"unmutated: {tail} ({seconds:.0f} s)", flush=True)
+        if code != 0:
+            print("\n".join(lines[-30:]))
+            raise SystemExit("the unmutated copy fails its tests: fix the suite first")
+        for name in names:
+            what, edits, test_args = MUTANTS[name]
+            directory = Path(temp) / name
+            scratch_copy(files, directory)
+            apply(directory, edits)
+            code, seconds, tail, _ = run_tests(directory, test_args)
+            verdict = "killed" if code == 1 else "SURVIVED" if code == 0 else f"error ({code})"
+            print(f"{name}: {verdict} in {seconds:.0f} s: {tail}", flush=True)
+            rows.append((name, what, " ".join(test_args), verdict, seconds, tail))
+            shutil.rmtree(directory, ignore_errors=True)
+    survivors = [r[0] for r in rows if r[3] != "killed"]
+    if not args.names:
+        lines = ["# Mutation check", "",
+                 f"- date: {started}; command: `python tests/mutants.py`",
+                 f"- {len(rows)} mutants, {len(rows) - len(survivors)} killed"
+                 + (f"; not killed: {', '.join(survivors)}" if survivors else ""), "",
+                 "Each mutant is planted alone in a scratch copy of the working tree, run with a "
+                 "fresh numba cache against the tests that should catch it (`pytest -x`); the "
+                 "unmutated copy passed the same test files first. Killed: those tests failed.", "",
+                 "| mutant | planted bug | tests | result | seconds | pytest's last line |",
+                 "|---|---|---|---|---:|---|"]
+        lines += [f"| {n} | {w} | `{t}` | {v} | {s:.0f} | {tail} |"
+                  for n, w, t, v, s, tail in rows]
+        REPORT.write_text("\n".join(lines) + "\n")
+        print(f"report: {REPORT}")
+    return 1 if survivors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
