@@ -1,15 +1,21 @@
 """`ptrace [options] SCENE`: the course's command line over ptrace.load and ptrace.render.
 
-Anything a user can cause ends in one line on stderr and exit code 2, never a traceback.
+Anything a user can cause (a PtraceError, a bad flag) ends in one line on stderr and exit code
+2, never a traceback. Anything else is a bug in ptrace: `ptrace: internal error: ...`, the
+traceback, and exit code 1. Ctrl-C writes what was rendered and exits 130.
 """
 import argparse
+import contextlib
 import json
 import os
 import sys
+import traceback
 
 import numpy as np
 
+EXIT_INTERNAL = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
 
 
 class _Parser(argparse.ArgumentParser):
@@ -91,7 +97,7 @@ def build_parser():
     add("-c", "--camera", default=None, metavar="FILE", help="the course's camera settings file")
     add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
-        help="with --accel bvh: mean (split at the mean centroid, the course's; default) or sah "
+        help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
              "(binned surface area heuristic)")
     add("--seed", type=_nonnegative_int("seed"), default=0, help="random seed (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",
@@ -185,30 +191,35 @@ def run(argv):
         raise PtraceError("--dashboard needs --workers (a local cluster)")
     stats = {}
     client = cluster = None
-    try:
-        if args.workers is not None or args.scheduler is not None:
-            from . import distributed
-            if args.workers is not None:
-                client, cluster = distributed.local_client(args.workers, args.dashboard)
-            else:
-                client = distributed.connect(args.scheduler)
-            workers = len(client.scheduler_info()["workers"])
-            dashboard = f", dashboard {client.dashboard_link}" if args.dashboard else ""
-            print(f"ptrace: rendering on {workers} Dask workers at {client.scheduler.address}"
-                  f"{dashboard}", file=sys.stderr, flush=True)
-        image = render(scene, spp=args.spp, accel=args.accel, integrator=args.integrator,
-                       resolution=(width, height), seed=args.seed, threads=args.threads,
-                       crop=args.crop, camera=camera,
-                       progress=not args.quiet and sys.stderr.isatty(), stats=stats,
-                       client=client, light_samples=args.light_samples,
-                       max_depth=args.max_depth, adaptive=args.adaptive,
-                       hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-                       bvh_split=args.bvh_split, notice=None if args.quiet else _notice)
-        write_image(output, image)
-        write_image(rate_path(output), None, eight_bit=rate_colours(stats["samples"] / args.spp))
-    finally:
-        if client is not None:
-            distributed.shutdown(client, cluster)
+    with contextlib.ExitStack() as scope:   # left after the client's shutdown
+        try:
+            if args.workers is not None or args.scheduler is not None:
+                from . import distributed
+                # the CLI owns the process: keep Dask's Ctrl-C race out of the user's terminal
+                # from here until the client is closed (a library render scopes it to itself)
+                scope.enter_context(distributed.dropping_the_sync_cancel_race())
+                if args.workers is not None:
+                    client, cluster = distributed.local_client(args.workers, args.dashboard)
+                else:
+                    client = distributed.connect(args.scheduler)
+                workers = len(client.scheduler_info()["workers"])
+                dashboard = f", dashboard {client.dashboard_link}" if args.dashboard else ""
+                print(f"ptrace: rendering on {workers} Dask workers at "
+                      f"{client.scheduler.address}{dashboard}", file=sys.stderr, flush=True)
+            image = render(scene, spp=args.spp, accel=args.accel, integrator=args.integrator,
+                           resolution=(width, height), seed=args.seed, threads=args.threads,
+                           crop=args.crop, camera=camera,
+                           progress=not args.quiet and sys.stderr.isatty(), stats=stats,
+                           client=client, light_samples=args.light_samples,
+                           max_depth=args.max_depth, adaptive=args.adaptive,
+                           hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
+                           bvh_split=args.bvh_split, notice=None if args.quiet else _notice)
+            write_image(output, image)
+            write_image(rate_path(output), None,
+                        eight_bit=rate_colours(stats["samples"] / args.spp))
+        finally:
+            if client is not None:
+                distributed.shutdown(client, cluster)
     seconds = stats["render_seconds"]
     mean_spp = stats["samples"].mean()
     where = f"workers {stats['workers']} " if "workers" in stats else ""
@@ -219,7 +230,7 @@ def run(argv):
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
     if stats["interrupted"]:
         print("ptrace: interrupted: wrote the samples rendered so far", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     return 0
 
 
@@ -233,8 +244,20 @@ def main(argv=None):
         print(f"ptrace: error: {error}", file=sys.stderr)
     except KeyboardInterrupt:
         print("ptrace: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
+    except Exception as error:   # noqa: BLE001 - not the user's fault: a bug, told as one
+        _internal_error(error)
+        return EXIT_INTERNAL
     return EXIT_USAGE
+
+
+def _internal_error(error):
+    """A bug, not a user error: say so, with the traceback (its causes included, e.g. the one
+    a Dask worker sent back), so that it can be reported and fixed."""
+    print(f"ptrace: internal error: {type(error).__name__}: {error}", file=sys.stderr)
+    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+    print("ptrace: this is a bug in ptrace, not in your input or flags; please report it with "
+          "the traceback above", file=sys.stderr, flush=True)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ The scene is scattered to every worker once; a worker builds its acceleration st
 (scene, accelerator) and keeps the last few (its numba cache stays warm between jobs).
 """
 import collections
+import contextlib
 import logging
 import math
 import os
@@ -43,9 +44,14 @@ _KEEP = 2
 builds = 0                           # acceleration structures built by this process (tests)
 
 
+class TileTaskError(RuntimeError):
+    """A tile task failed for a reason that is not the user's (an internal error); names the
+    tile and pass, and its __cause__ is the worker's exception with the worker's traceback."""
+
+
 class _DropSyncCancelRace(logging.Filter):
     """Drops one log record: when Ctrl-C interrupts a blocking client call, the cancel callback
-    of distributed.utils.sync (dask/distributed 2024-2025) can run before its coroutine has
+    of distributed.utils.sync (dask/distributed 2024-2026) can run before its coroutine has
     assigned `future`, and tornado logs the resulting NameError with a traceback on the user's
     terminal. The interrupt itself is handled (ptrace cancels its tasks and writes what was
     merged); every other record passes."""
@@ -55,7 +61,19 @@ class _DropSyncCancelRace(logging.Filter):
         return not (isinstance(error, NameError) and "'future'" in str(error))
 
 
-logging.getLogger("tornado.application").addFilter(_DropSyncCancelRace())
+@contextlib.contextmanager
+def dropping_the_sync_cancel_race():
+    """While inside, the "tornado.application" logger drops the record described in
+    _DropSyncCancelRace; on leaving, the logger is as it was. Nothing is installed on import:
+    render_passes enters this for the render, and the CLI for its client's whole life (the
+    record can come while the client shuts down)."""
+    logger = logging.getLogger("tornado.application")
+    race = _DropSyncCancelRace()
+    logger.addFilter(race)
+    try:
+        yield race
+    finally:
+        logger.removeFilter(race)
 
 
 def _dask():
@@ -149,11 +167,15 @@ def tile_task(scene, job, pass_index, tile_index, first_sample, pass_n, pixel_x,
             nonfinite = work.trace(pixel_x, pixel_y, first_sample, pass_n, sums, np.arange(n))
             seconds = time.perf_counter() - start
             return sums, nonfinite, work.rays_traced - rays_before, build_seconds, seconds
-    except Exception as error:   # name the tile and pass; keep the worker's message
-        raise PtraceError(f"tile {tile_index} (pixels {pixel_y[0]}:{pixel_x[0]} .., {len(pixel_x)} "
-                          f"of them) of pass {pass_index} (samples {first_sample}.."
-                          f"{first_sample + pass_n - 1}) failed on {socket.gethostname()} "
-                          f"pid {os.getpid()}: {type(error).__name__}: {error}") from None
+    except Exception as error:
+        where = (f"tile {tile_index} (pixels {pixel_y[0]}:{pixel_x[0]} .., {len(pixel_x)} of "
+                 f"them) of pass {pass_index} (samples {first_sample}.."
+                 f"{first_sample + pass_n - 1}) on {socket.gethostname()} pid {os.getpid()}")
+        if isinstance(error, PtraceError):   # the user's: one line, now naming the tile
+            raise PtraceError(f"{where}: {error}") from error
+        # a bug: not the user's fault, so not a PtraceError; Dask carries the cause and its
+        # traceback (the worker's frames) back to the client, where the CLI prints both
+        raise TileTaskError(f"{where} failed: {type(error).__name__}: {error}") from error
 
 
 def tile_pixels(n_pixels, rays_per_path, pass_n, workers):
@@ -166,7 +188,14 @@ def tile_pixels(n_pixels, rays_per_path, pass_n, workers):
 
 def render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
                   worker_threads=None):
-    """Run the pass schedule as tiles x passes on the cluster; the settings travel whole."""
+    """Run the pass schedule as tiles x passes on the cluster; the settings travel whole. Ctrl-C
+    (KeyboardInterrupt) cancels the tasks and keeps what was merged."""
+    with dropping_the_sync_cancel_race():
+        return _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
+                              worker_threads)
+
+
+def _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, worker_threads):
     dd = _dask()
     start = time.perf_counter()
     workers = len(client.scheduler_info()["workers"])

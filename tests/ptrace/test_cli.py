@@ -1,27 +1,17 @@
 """The real console script, run in a subprocess: help, --info, renders, and every error case."""
 import json
 import os
-import pathlib
-import shutil
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
+import ptrace
 from ptrace.image import course_8bit, read_image
 
-SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
-
-
-def ptrace_command():
-    script = shutil.which("ptrace", path=os.path.dirname(sys.executable))
-    return [script] if script else [sys.executable, "-m", "ptrace"]
-
-
-def run(*args, cwd=None):
-    return subprocess.run(ptrace_command() + [str(a) for a in args], capture_output=True,
-                          text=True, cwd=cwd, timeout=300)
+from console import (INTERRUPTED_SPP, SHIPPED, check_interrupted_render, interrupt_once_rendering,
+                     run)
 
 
 def test_help():
@@ -62,7 +52,6 @@ def test_normals_render_written_and_read_back(tmp_path, scenes_dir, extension):
     assert "120x90" in result.stdout and "rays/s" in result.stdout and "embree" in result.stdout
     pixels = read_image(output)
     assert pixels.shape == (90, 120, 3)
-    import ptrace
     expected = ptrace.render(ptrace.load(scenes_dir / "meshedit/cow.dae"), integrator="normals",
                              resolution=(120, 90), accel="embree")
     if extension == "png":
@@ -178,24 +167,14 @@ def test_scene_errors_are_one_line_and_exit_2(tmp_path):
 
 
 def test_ctrl_c_writes_what_was_rendered(tmp_path):
-    import signal
-    import time
-    output = tmp_path / "box.png"
-    # compile (or load) the kernels first, so the interrupt lands in the render itself
-    assert run("-s", 1, "-m", 3, "-r", 4, 3, "-f", tmp_path / "warm.png", SHIPPED).returncode == 0
-    for warm in tmp_path.glob("warm*"):
-        warm.unlink()
-    process = subprocess.Popen(ptrace_command() + ["-s", "1000000", "-m", "3", "-r", "32", "24",
-                                                   "-f", str(output), str(SHIPPED)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(12)
-    process.send_signal(signal.SIGINT)
-    stdout, stderr = process.communicate(timeout=120)
-    assert process.returncode == 130, stderr
-    assert "interrupted" in stderr and "Traceback" not in stderr
-    pixels = read_image(output)
-    assert pixels.shape == (24, 32, 3) and pixels.max() > 0   # a partial render, not black
-    assert (tmp_path / "box_rate.png").exists()
+    """Ctrl-C (once the progress bar shows samples done) writes the samples summed so far and
+    exits 130: the image is the same-seed render of exactly those samples."""
+    output = tmp_path / "box.exr"
+    resolution = (64, 48)
+    code, stdout, stderr = interrupt_once_rendering(
+        ["-s", INTERRUPTED_SPP, "-m", 3, "-r", *resolution, "-f", output, SHIPPED])
+    assert code == 130, stderr
+    check_interrupted_render(output, INTERRUPTED_SPP, resolution, 3, stdout, stderr)
 
 
 @pytest.mark.slow

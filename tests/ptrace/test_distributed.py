@@ -1,22 +1,26 @@
 """Distributed rendering on a local Dask cluster: bit-identical to in-process, robust to a lost
 worker, clear errors, and dask never imported unless asked for."""
 import os
+import re
 import signal
 import subprocess
 import sys
 import threading
 import time
+import uuid
 
 import cloudpickle   # comes with dask[distributed], which the test extra installs
+import dask.distributed as dd
 import numpy as np
 import pytest
 
 import ptrace
-from ptrace import distributed
+from ptrace import cli, distributed
 from ptrace.errors import PtraceError
 from ptrace.image import read_image
 
-from test_cli import SHIPPED, ptrace_command, run
+from console import (INTERRUPTED_SPP, SHIPPED, check_interrupted_render, interrupt_once_rendering,
+                     run)
 
 pytestmark = pytest.mark.slow
 # functions below run on workers and the scheduler: send them by value (tests/ is not a package
@@ -89,12 +93,13 @@ def test_each_worker_builds_once_per_scene(client, monkeypatch):
     assert all(after[w] - before[w] <= 1 for w in after)
 
 
-def test_an_error_in_a_task_names_the_tile_and_pass(client):
+def break_builds_on_the_workers(client, error):
+    """Every worker's next accelerator build raises `error`; returns the repair to run."""
     def break_builds():
         import accel
 
         def broken(kind, geometry, **options):
-            raise RuntimeError("no accelerator today")
+            raise error
         distributed.accel = type("Broken", (), {"build": staticmethod(broken)})
         return accel is not None
 
@@ -103,13 +108,62 @@ def test_an_error_in_a_task_names_the_tile_and_pass(client):
         distributed.accel = accel
 
     client.run(break_builds)
+    return lambda: client.run(repair)
+
+
+def test_a_user_error_in_a_task_names_the_tile_and_pass(client):
+    """A PtraceError on a worker (the user's: here, a backend the worker cannot build) comes
+    back as a PtraceError, one line naming the tile and the pass."""
+    repair = break_builds_on_the_workers(client, PtraceError("no accelerator today"))
     try:
-        with pytest.raises(PtraceError, match=r"tile \d+ .* of pass 0 .*no accelerator today"):
+        with pytest.raises(PtraceError, match=r"^tile \d+ .* of pass 0 .*: no accelerator today$"):
             ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6))
     finally:
-        client.run(repair)
+        repair()
     # the workers are fine again
     assert ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6)).max() > 0
+
+
+def test_a_bug_in_a_task_is_not_a_user_error_and_keeps_its_cause(client):
+    """Anything else raised on a worker is a bug: not a PtraceError (which the CLI would show as
+    the user's fault, without a traceback), but a TileTaskError naming the tile and the pass,
+    chained to the worker's exception with the worker's traceback."""
+    import traceback
+    repair = break_builds_on_the_workers(client, ZeroDivisionError("planted bug"))
+    try:
+        with pytest.raises(distributed.TileTaskError) as caught:
+            ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6))
+    finally:
+        repair()
+    error = caught.value
+    assert not isinstance(error, PtraceError)
+    assert re.search(r"^tile \d+ .* of pass 0 .* failed: ZeroDivisionError: planted bug$",
+                     str(error)), str(error)
+    assert isinstance(error.__cause__, ZeroDivisionError)
+    text = "".join(traceback.format_exception(error))
+    assert "in broken" in text and "in tile_task" in text   # the worker's frames came back
+    assert "The above exception was the direct cause" in text
+
+
+def test_the_cli_reports_a_bug_in_a_task_as_an_internal_error(client, monkeypatch, capsys,
+                                                               tmp_path):
+    """Through ptrace.cli.main, on this module's cluster (its connect patched to return it):
+    exit 1, the tile and pass in the first line, the worker's cause in the traceback."""
+    monkeypatch.setattr(distributed, "connect", lambda address: client)
+    monkeypatch.setattr(distributed, "shutdown", lambda client, cluster=None: None)
+    repair = break_builds_on_the_workers(client, ZeroDivisionError("planted bug"))
+    try:
+        code = cli.main(["--scheduler", "tcp://unused:1", "-q", "-r", "8", "6", "-f",
+                         str(tmp_path / "x.png"), str(SHIPPED)])
+    finally:
+        repair()
+    err = capsys.readouterr().err
+    assert code == 1, err
+    first = [line for line in err.splitlines() if line.startswith("ptrace: internal error")]
+    assert len(first) == 1 and re.search(r"TileTaskError: tile \d+ .* of pass 0 .* failed: "
+                                         r"ZeroDivisionError: planted bug", first[0]), err
+    assert "ZeroDivisionError: planted bug\n" in err and "in broken" in err
+    assert not (tmp_path / "x.png").exists()
 
 
 def test_the_bvh_split_reaches_the_workers(client):
@@ -125,29 +179,36 @@ def test_the_bvh_split_reaches_the_workers(client):
 
 
 def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypatch):
+    """A worker killed (SIGKILL) while it holds a task, after it has finished one: the render
+    recovers (Dask reruns the lost tasks) and gives the in-process image. Each worker, after
+    its first tile, holds its next task until the test says go, so the kill lands in the
+    middle of the render whatever the speed; the waits are on Dask events, not on time."""
     monkeypatch.setattr(distributed, "TASK_RAYS", 20000)
     scene = ptrace.load(course_scene("sky/CBspheres_lambertian.dae"))
     options = dict(spp=16, light_samples=2, max_depth=3, resolution=(64, 48), seed=3)
     alone = ptrace.render(scene, **options)
     client, cluster = distributed.local_client(2)
+    go = dd.Event(f"ptrace-test-go-{uuid.uuid4().hex}", client=client)
     try:
         pids = client.run(os.getpid)
+        holding = {address: dd.Event(f"ptrace-test-holding-{pid}", client=client)
+                   for address, pid in pids.items()}
 
-        def slow_tasks():
-            # every task waits 0.5 s first and counts itself when done, so the render outlasts
-            # the kill however fast the tracing gets (it ended before the kill once renders
-            # became 2x faster); finished tiles are merged and released at once, so the
-            # scheduler cannot be asked how many finished
+        def hold_after_the_first_tile(go_name):
             from ptrace import tiles
             trace = tiles.TileWork.trace
+            state = {"finished": 0}
 
-            def slow(*args, **kwargs):
-                time.sleep(0.5)
+            def held(*args, **kwargs):
+                if state["finished"] >= 1:
+                    dd.Event(f"ptrace-test-holding-{os.getpid()}").set()
+                    if not dd.Event(go_name).wait(timeout=600):
+                        raise RuntimeError("the test never said go")
                 counts = trace(*args, **kwargs)
-                tiles.finished_tiles = getattr(tiles, "finished_tiles", 0) + 1
+                state["finished"] += 1
                 return counts
-            tiles.TileWork.trace = slow
-        client.run(slow_tasks)
+            tiles.TileWork.trace = held
+        client.run(hold_after_the_first_tile, go.name)
         result = {}
 
         def render():
@@ -155,21 +216,19 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
                 result["image"] = ptrace.render(scene, client=client, stats=result, **options)
             except BaseException as error:   # surfaced in the main thread below
                 result["error"] = error
-        worker = threading.Thread(target=render)
-        worker.start()
-
-        def finished_tiles():
-            from ptrace import tiles
-            return getattr(tiles, "finished_tiles", 0)
-        deadline = time.monotonic() + 120
-        while sum(client.run(finished_tiles).values()) < 2 and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert worker.is_alive(), "the render ended before a worker could be killed"
+        renderer = threading.Thread(target=render)
+        renderer.start()
+        for address, event in holding.items():   # both workers finished a tile and hold one
+            assert event.wait(timeout=300), f"{address} never finished its first tile"
+        assert renderer.is_alive() and "error" not in result, result.get("error")
         os.kill(next(iter(pids.values())), signal.SIGKILL)
-        worker.join(timeout=300)
+        go.set()
+        renderer.join(timeout=300)
+        assert not renderer.is_alive(), "the render did not recover from the lost worker"
         assert "error" not in result, result.get("error")
         assert np.array_equal(alone, result["image"])
     finally:
+        go.set()
         client.close()
         cluster.close()
 
@@ -194,22 +253,17 @@ def test_cli_workers_writes_the_in_process_image(tmp_path):
 
 
 def test_cli_ctrl_c_cancels_and_writes_what_was_merged(tmp_path):
-    output = tmp_path / "box.png"
-    process = subprocess.Popen(ptrace_command() + ["--workers", "2", "-s", "1000000", "-m", "3",
-                                                   "-r", "32", "24", "-f", str(output),
-                                                   str(SHIPPED)],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen = []   # the CLI says when the cluster is up and the render starts
-    while not any("rendering on 2 Dask workers" in line for line in seen) and len(seen) < 50:
-        line = process.stderr.readline()
-        assert line, "".join(seen)
-        seen.append(line)
-    time.sleep(8)
-    process.send_signal(signal.SIGINT)
-    stdout, stderr = process.communicate(timeout=120)
-    assert process.returncode == 130, stderr
-    assert "interrupted" in stderr and "Traceback" not in stderr
-    assert read_image(output).max() > 0
+    """Ctrl-C once the progress bar shows merged samples: the tasks are cancelled, exit 130,
+    and the image is the same-seed in-process render of exactly the samples merged (tiles are
+    merged in order, so a prefix of the pixels has one pass more than the rest)."""
+    output = tmp_path / "box.exr"
+    resolution = (64, 48)
+    code, stdout, stderr = interrupt_once_rendering(
+        ["--workers", 2, "-s", INTERRUPTED_SPP, "-m", 3, "-r", *resolution, "-f", output,
+         SHIPPED])
+    assert code == 130, stderr
+    assert "rendering on 2 Dask workers" in stderr and "workers 2" in stdout
+    check_interrupted_render(output, INTERRUPTED_SPP, resolution, 3, stdout, stderr)
 
 
 def test_default_mode_never_imports_dask():
@@ -250,10 +304,10 @@ def test_tile_pixels_targets_work_per_task():
     assert distributed.tile_pixels(1, 17, 16, 8) == 1
 
 
-
 def test_only_the_sync_cancel_race_is_dropped_from_tornado_logs():
     """The NameError distributed.utils.sync's cancel callback raises when Ctrl-C comes before
-    its coroutine assigned `future` is not shown; other tornado errors still are."""
+    its coroutine assigned `future` is not shown while a render (or the CLI) asks for it;
+    other tornado errors still are, and outside that scope nothing is dropped."""
     import logging
 
     def record(error):
@@ -267,5 +321,31 @@ def test_only_the_sync_cancel_race_is_dropped_from_tornado_logs():
     race = record(NameError("cannot access free variable 'future' where it is not associated "
                             "with a value in enclosing scope"))
     other = record(NameError("name 'x' is not defined"))
-    assert not logger.filter(race)
-    assert logger.filter(other) and logger.filter(record(RuntimeError("boom")))
+    before = list(logger.filters)
+    assert logger.filter(race)   # importing ptrace.distributed installed nothing
+    with distributed.dropping_the_sync_cancel_race():
+        assert not logger.filter(race)
+        assert logger.filter(other) and logger.filter(record(RuntimeError("boom")))
+    assert logger.filter(race) and logger.filters == before
+
+
+def test_a_distributed_render_scopes_its_log_filter_to_itself(client, monkeypatch):
+    """The filter is on the tornado logger while render_passes runs and gone after: a library
+    call leaves the process's logging as it found it."""
+    import logging
+    loggers = [logging.getLogger(name) for name in
+               ("", "tornado", "tornado.application", "distributed", "dask")]
+
+    def configuration():
+        return [(lg.level, list(lg.filters), list(lg.handlers), lg.propagate) for lg in loggers]
+    before = configuration()
+    seen = []
+    inner = distributed._render_passes
+
+    def watched(*args, **kwargs):
+        seen.append([type(f).__name__ for f in logging.getLogger("tornado.application").filters])
+        return inner(*args, **kwargs)
+    monkeypatch.setattr(distributed, "_render_passes", watched)
+    assert ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6)).max() > 0
+    assert seen == [["_DropSyncCancelRace"]]
+    assert configuration() == before

@@ -1,14 +1,15 @@
-"""Over 200 generated malformed scene files: each ends in one line, exit code 2, within 2 s and
-bounded memory, and leaves no output file. In-process through ptrace.cli.main for the corpus,
-and through the real console script for a sample of it."""
+"""Over 200 generated malformed scene files: each ends in one line, exit code 2, with bounded
+memory and before any rendering starts (work counts, not wall-clock limits: speed lives in
+benchmarks/), and leaves no output file. In-process through ptrace.cli.main for the corpus, and
+through the real console script for a sample of it."""
 import pathlib
 import subprocess
 import sys
-import time
 import tracemalloc
 
 import pytest
 
+import ptrace
 from ptrace.cli import main
 
 from malformed_corpus import corpus
@@ -26,33 +27,45 @@ def cases(scenes_dir):
 
 
 @pytest.mark.slow
-def test_every_malformed_file_fails_cleanly(tmp_path, cases, capsys):
+def test_every_malformed_file_fails_cleanly(tmp_path, cases, capsys, monkeypatch):
     assert len(cases) >= 200
-    slowest = (0.0, "")
+    loads, renders = [], []
+    load = ptrace.load
+
+    def counted_load(path, *args, **kwargs):
+        loads.append(path)
+        return load(path, *args, **kwargs)
+
+    def no_render(scene, **options):   # a malformed file must be refused before this
+        renders.append(scene.path)
+        raise RuntimeError("a malformed scene reached the renderer")
+    monkeypatch.setattr(ptrace, "load", counted_load)   # what ptrace.cli.run calls
+    monkeypatch.setattr(ptrace, "render", no_render)
+    largest = (0, "")
     for name, text in cases:
         scene = tmp_path / f"{name}.dae"
         scene.write_text(text)
         output = tmp_path / "out.png"
         arguments = ["-q", "--integrator", "normals", "-r", "8", "6", "-f", str(output), str(scene)]
-        start = time.perf_counter()
-        code = main(arguments)
-        seconds = time.perf_counter() - start
+        del loads[:]
+        tracemalloc.start()
+        try:
+            code = main(arguments)
+            _, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
         captured = capsys.readouterr()
+        assert len(loads) == 1 and renders == [], (name, loads, renders, captured.err)
         lines = captured.err.strip().splitlines()
-        tracemalloc.start()     # a second run for memory: tracemalloc slows what it watches
-        main(arguments)
-        _, peak = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
-        capsys.readouterr()
         assert code == 2, f"{name}: exit {code}, stderr {captured.err!r}"
         assert len(lines) == 1 and lines[0].startswith("ptrace: error: "), f"{name}: {lines}"
         assert "Traceback" not in captured.err
-        assert seconds < 2.0, f"{name}: {seconds:.2f} s"
         assert peak < MEMORY_LIMIT, f"{name}: {peak / 2 ** 20:.0f} MiB"
         assert not output.exists() and not list(tmp_path.glob("*.png")), name
-        slowest = max(slowest, (seconds, name))
+        largest = max(largest, (peak, name))
         scene.unlink()
-    print(f"{len(cases)} malformed files, slowest {slowest[1]} in {slowest[0]:.3f} s")
+    print(f"{len(cases)} malformed files, largest peak {largest[1]} at "
+          f"{largest[0] / 2 ** 20:.1f} MiB")
 
 
 @pytest.mark.slow
@@ -64,9 +77,8 @@ def test_a_sample_through_the_console_script(tmp_path, cases):
     for name, text in sample:
         scene = tmp_path / f"{name}.dae"
         scene.write_text(text)
-        start = time.perf_counter()
         result = subprocess.run([sys.executable, "-m", "ptrace", "--info", str(scene)],
-                                capture_output=True, text=True, timeout=60)
+                                capture_output=True, text=True, timeout=300)   # a hang guard
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(lines) == 1, (name, result.stderr)
-        assert time.perf_counter() - start < 10   # process start-up included
+        assert lines[0].startswith("ptrace: error: ") and result.stdout == "", (name, result)
