@@ -36,9 +36,10 @@ def moller_trumbore(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z, ox, oy, oz, dx,
     """Möller–Trumbore on the triangle (p0, p1, p2): (t, u, v); t = MISS (NaN) on a miss.
 
     Edges are inclusive (u, v, 1-u-v in [0, 1]); no determinant epsilon and no back-face
-    culling (CS184.md 4.2). A ray parallel to the plane (determinant exactly 0) misses. Not
-    watertight: u and v are computed per triangle from its own edge vectors, so a ray through a
-    shared edge can round outside both triangles (benchmarks/results/stability.md, section 2).
+    culling (docs/course.md#intersections). A ray parallel to the plane (determinant exactly 0)
+    misses. Not watertight: u and v are computed per triangle from its own edge vectors, so a
+    ray through a shared edge can round outside both triangles (benchmarks/results/stability.md,
+    section 2).
     """
     e1x = p1x - p0x
     e1y = p1y - p0y

@@ -46,7 +46,8 @@ RESOLUTION = (480, 360)
 QUICK_RESOLUTION = (120, 90)
 QUICK_SPP_SCALE = 16
 
-# the course's normal-shading figures (CS184.md section 5: student logs, thread counts unknown)
+# the course's normal-shading figures (docs/course.md#course-scenes: student logs, thread counts
+# unknown)
 NORMALS = {
     "meshedit/cow.dae": "students: naive 43.8 s, BVH 0.116 s (378x); the seed's full cow "
                         "render: 116x",

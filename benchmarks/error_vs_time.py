@@ -5,8 +5,8 @@
 Scenes: the course's CBspheres_lambertian, CBbunny and CBspheres (mirror and glass) at -m 5, the
 whole 480x360 frame, 2 threads. Each is rendered WITHOUT its emissive quad, by both renderers
 (benchmarks.mitsuba_reference.without_emissive_primitives: the quad is the <light>'s visible
-face in ptrace, which Mitsuba cannot reproduce; CS184.md 1.6), so both see one scene: the
-<light> as a one-sided area light hidden from camera rays. Mapping:
+face in ptrace, which Mitsuba cannot reproduce; docs/course.md#light-faces), so both see one
+scene: the <light> as a one-sided area light hidden from camera rays. Mapping:
 benchmarks.mitsuba_reference.mitsuba_scene with ptrace's Schlick glass (register_schlick_glass;
 Mitsuba's `dielectric` has the exact Fresnel equations). The timed Mitsuba curves use its `path`
 integrator (its standard one, the issue's), the references `volpath`: `path` counts crossing

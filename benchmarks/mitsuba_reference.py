@@ -6,7 +6,7 @@
 
 The scene is mapped from ptrace's loaded Scene, so both renderers see the same numbers:
 - each material's triangles -> one OBJ mesh with ptrace's own vertex normals (the area-weighted
-  ones of CS184.md 1.3, so curved meshes shade smoothly in both) and a `twosided` BSDF (the
+  ones of docs/course.md#meshes, so curved meshes shade smoothly in both) and a `twosided` BSDF (the
   course's walls face out of the box and are lit from inside: ptrace is two-sided too);
 - CGL spheres -> Mitsuba `sphere` shapes with the same centre and radius;
 - BSDFs: diffuse -> `diffuse` (reflectance = albedo); mirror -> `conductor` with `material:
@@ -23,8 +23,8 @@ The scene is mapped from ptrace's loaded Scene, so both renderers see the same n
   the light's centre with half-edges E_x/2, E_y/2 and normal N (one-sided, like ptrace), and a
   `null` BSDF (ptrace's area light is no geometry: rays pass it); the integrator's
   `hide_emitters` keeps emitters out of camera rays, as ptrace does for area lights;
-- the course camera (CS184.md 1.7) -> a `perspective` sensor at the same position and target,
-  +Y up, with the same horizontal field of view for the requested window;
+- the course camera (docs/course.md#orbit-camera) -> a `perspective` sensor at the same
+  position and target, +Y up, with the same horizontal field of view for the requested window;
 - ptrace's -m 5 (direct light at up to 5 vertices) -> Mitsuba max_depth 6 (Mitsuba counts
   segments: max_depth 2 is direct light only), with the `volpath` integrator (no media: on
   surfaces it is Mitsuba's path tracer) because Mitsuba's `path` counts a crossing of the light
@@ -85,8 +85,8 @@ PIXEL_CASES = {
 
 def without_emissive_primitives(scene):
     """The scene without its emissive triangles and spheres (the sp19 CB files' light quad,
-    CS184.md 1.6): geometry and material_index lose them; vertices, vertex normals (the quad
-    shares no vertex with other faces), materials, lights and camera are kept."""
+    docs/course.md#light-faces): geometry and material_index lose them; vertices, vertex
+    normals (the quad shares no vertex with other faces), materials, lights and camera are kept."""
     from accel import Geometry
     from ptrace.scene import EMISSION
     emissive = scene.materials.kind[scene.material_index] == EMISSION
@@ -170,7 +170,7 @@ def mitsuba_bsdf(materials, m):
 
 
 def register_schlick_glass(mi):
-    """Register `schlick_glass`, a Python Mitsuba BSDF that is ptrace's glass (CS184.md 4.8,
+    """Register `schlick_glass`, a Python Mitsuba BSDF that is ptrace's glass (docs/course.md#bsdfs,
     ptrace.bsdf): Schlick's Fresnel R = R0 + (1 - R0)(1 - |cos theta_o|)^5 on the side the ray
     comes from, inside or out, total internal reflection where sin^2 theta_t >= 1; reflect with
     probability R (weight = reflectance), else refract (weight = transmittance / eta^2). Used

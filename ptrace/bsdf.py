@@ -3,7 +3,7 @@
 Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine
 term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction) return from sample()
 the weight f / pdf already folded into f with pdf = 1 and `delta = True`; eval() of a delta BSDF
-is 0. Semantics follow CS184.md 4.8, with the textbook Smith Lambda for Beckmann (sqrt(pi),
+is 0. Semantics follow docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi),
 where the course's starter has pi).
 """
 import math
@@ -23,7 +23,7 @@ def is_delta(kind):
 
 @njit(cache=True, inline="always")
 def cosine_hemisphere(u1, u2):
-    """Cosine-weighted direction about +z (CS184.md 4.8): r = sqrt(u1), z = sqrt(1 - u1)."""
+    """Cosine-weighted direction about +z (docs/course.md#bsdfs): r = sqrt(u1), z = sqrt(1 - u1)."""
     r = math.sqrt(u1)
     phi = 2.0 * math.pi * u2
     return r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u1))
@@ -62,7 +62,7 @@ def smith_lambda(alpha, cos_w):
 
 @njit(cache=True, inline="always")
 def conductor_fresnel(eta, k, cos_i):
-    """Unpolarised conductor Fresnel for one channel (CS184.md 4.8)."""
+    """Unpolarised conductor Fresnel for one channel (docs/course.md#bsdfs)."""
     c2 = cos_i * cos_i
     ek = eta * eta + k * k
     rs = (ek - 2.0 * eta * cos_i + c2) / (ek + 2.0 * eta * cos_i + c2)

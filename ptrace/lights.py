@@ -1,4 +1,4 @@
-"""Lights: the file's lights (sample_light, sample_L of CS184.md 4.4, as a numba function of one
+"""Lights: the file's lights (sample_light, sample_L, docs/course.md#sample-light, as a numba function of one
 light index) and emissive geometry as one more light (emitter_arrays, sample_emitter).
 
 The course applies no distance falloff to point and directional lights (their colour is used as
@@ -86,7 +86,7 @@ def _face_of(scene, prims, lights):
     """The file light whose visible face these emissive primitives are, or -1.
 
     The course's Cornell-box files lay an emissive quad exactly in the plane of their area light
-    (CS184.md 1.6; in CBempty on the point light): the quad is what the camera and mirrors see of
+    (docs/course.md#light-faces; in CBempty on the point light): the quad is what the camera and mirrors see of
     the light, not a second light. A group of emissive triangles is a light's face when it is
     planar, the light's centre (or point) lies in its plane and inside its bounding box, and an
     area light faces along the group's normal."""

@@ -60,7 +60,7 @@ class Materials:
 
 @dataclass(eq=False)
 class Lights:
-    """L lights as parallel arrays (see CS184.md section 1.6 for the placement rules).
+    """L lights as parallel arrays (docs/course.md#lights has the placement rules).
 
     point/spot: position; directional: direction (unit, toward the light);
     area: position (centre), direction (unit facing normal), edge_x, edge_y (unnormalised), area;
@@ -119,7 +119,7 @@ class CameraSpec:
 class Scene:
     path: str
     geometry: accel.Geometry
-    vertex_normals: np.ndarray      # (V, 3) unit, area-weighted (CS184.md 1.3); 0 where undefined
+    vertex_normals: np.ndarray      # (V, 3) unit, area-weighted (docs/course.md#meshes); 0 where undefined
     material_index: np.ndarray      # (F + S,) int32 into materials
     materials: Materials
     lights: Lights
@@ -148,7 +148,7 @@ class Scene:
 def area_weighted_normals(vertices, faces):
     """Per-vertex sum of cross(p_j - p_i, p_k - p_i) over incident faces, normalised.
 
-    CS184.md 1.3: file normals are ignored and these are recomputed. A vertex whose sum is zero
+    docs/course.md#meshes: file normals are ignored and these are recomputed. A vertex whose sum is zero
     (unused, or only in zero-area faces) gets a zero normal.
     """
     normals = np.zeros_like(vertices)

@@ -1,4 +1,4 @@
-"""load_collada: the course's COLLADA dialect (CS184.md section 1) into a flat Scene."""
+"""load_collada: the course's COLLADA dialect (docs/course.md#dialect) into a flat Scene."""
 import numpy as np
 
 import accel
@@ -9,7 +9,7 @@ from .collada_document import ColladaDocument
 from .collada_geometry import read_mesh, sphere_radius
 from .collada_shading import MaterialTable, apply, read_camera, read_light
 
-# Pre-multiplied onto the whole scene so that the renderer works Y-up (CS184.md 1.1).
+# Pre-multiplied onto the whole scene so that the renderer works Y-up (docs/course.md#up-axis).
 UP_AXIS_MATRICES = {
     "Y_UP": np.eye(4),
     "Z_UP": np.array([[-1, 0, 0, 0], [0, 0, 1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=float),

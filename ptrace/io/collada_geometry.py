@@ -1,4 +1,4 @@
-"""COLLADA geometry in the course dialect (CS184.md 1.3, 1.4): meshes and CGL spheres.
+"""COLLADA geometry in the course dialect (docs/course.md#meshes, #spheres): meshes and CGL spheres.
 
 Meshes come back in their own (local) coordinates; the caller applies the node transform.
 """

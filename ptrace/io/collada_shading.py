@@ -1,4 +1,4 @@
-"""COLLADA materials, lights and cameras in the course dialect (CS184.md 1.5-1.7)."""
+"""COLLADA materials, lights and cameras in the course dialect (docs/course.md#materials to #camera)."""
 import math
 
 import numpy as np
