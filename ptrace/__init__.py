@@ -1,8 +1,10 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
+from .camera import Camera, course_camera
 from .errors import PtraceError, SceneError
 from .io import load
 from .renderer import render
 from .settings import Settings
 from .scene import Scene
 
-__all__ = ["PtraceError", "SceneError", "Scene", "Settings", "load", "render"]
+__all__ = ["Camera", "PtraceError", "SceneError", "Scene", "Settings", "course_camera", "load",
+           "render"]

@@ -1,4 +1,5 @@
-"""The course's camera (CS184.md 1.7), its settings file (3.3), and camera rays (4.1).
+"""The course's camera (docs/course.md#camera), its settings file (#camera-file), and
+camera rays (#camera-rays).
 
 The course ignores where the camera node is. It takes d, the direction from the world origin to
 one unit in front of the camera, and places an orbit camera at the centre of the scene's bounding
@@ -14,6 +15,7 @@ from numba import njit, prange
 from .errors import PtraceError, SceneError
 
 BASE_WIDTH, BASE_HEIGHT = 800, 600
+FOCAL_DISTANCE = 4.7   # the course's default -d (its -b defaults to 0.25 in 3-2; ours to 0)
 
 
 @dataclass(frozen=True)
@@ -26,6 +28,28 @@ class Camera:
     height: int
     znear: float
     zfar: float
+    # the thin lens (the course's -b and -d, Project 3-2 Part 4): rays leave a disc of this
+    # radius about the position and meet on the plane focal_distance in front; 0 is a pinhole
+    lens_radius: float = 0.0
+    focal_distance: float = FOCAL_DISTANCE
+
+    def __post_init__(self):
+        radius, distance = float(self.lens_radius), float(self.focal_distance)
+        if not radius >= 0.0 or not np.isfinite(radius):
+            raise PtraceError(f"the lens radius (-b) must be a finite number >= 0, got "
+                              f"{self.lens_radius!r}")
+        if not distance > 0.0 or not np.isfinite(distance):
+            raise PtraceError(f"the focal distance (-d) must be a finite number > 0, got "
+                              f"{self.focal_distance!r}")
+        object.__setattr__(self, "lens_radius", radius)
+        object.__setattr__(self, "focal_distance", distance)
+
+    def with_lens(self, lens_radius=None, focal_distance=None):
+        """This camera with a thin lens of that radius focused at that distance (either kept as
+        it is when None)."""
+        return replace(self, lens_radius=self.lens_radius if lens_radius is None else lens_radius,
+                       focal_distance=self.focal_distance if focal_distance is None
+                       else focal_distance)
 
     @property
     def hfov(self):
@@ -36,11 +60,12 @@ class Camera:
         return float(np.degrees(2 * np.arctan(self.height / (2 * self.screen_dist))))
 
     def resized(self, width, height):
-        """Same focal length in pixels, another window (CS184.md 1.7 step 5)."""
+        """Same focal length in pixels, another window (docs/course.md#focal-length)."""
         return replace(self, width=int(width), height=int(height))
 
     def directions(self, px, py):
-        """World directions (unit) through image points (px, py); y counted from the bottom."""
+        """World directions (unit) through image points (px, py); y counted from the bottom
+        (the pinhole's: from the position, whatever the lens)."""
         px = np.ascontiguousarray(px, dtype=np.float64)
         py = np.ascontiguousarray(py, dtype=np.float64)
         out = np.empty(px.shape + (3,))
@@ -93,7 +118,7 @@ def widen_to_base_aspect(hfov_degrees, vfov_degrees):
 
 
 def course_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT):
-    """The camera the course builds for this scene (CS184.md 1.7)."""
+    """The camera the course builds for this scene (docs/course.md#orbit-camera)."""
     spec = scene.camera
     bounds = scene.bounds()
     if spec is None:
@@ -120,7 +145,7 @@ def course_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT):
 
 
 def load_camera_settings(path, width, height):
-    """Read the course's camera settings file (the `D` key's dump, CS184.md 3.3)."""
+    """Read the course's camera settings file (the `D` key's dump, docs/course.md#camera-file)."""
     try:
         with open(path) as handle:
             numbers = np.array(handle.read().split(), dtype=np.float64)
@@ -140,5 +165,11 @@ def load_camera_settings(path, width, height):
     screen_dist = numbers[27]
     if not screen_dist > 0:
         raise PtraceError(f"{path}: screenDist must be positive, found {screen_dist}")
-    return Camera(position, target, rotation, float(screen_dist), int(width), int(height),
-                  float(near), float(far))
+    lens = {}
+    if numbers.size >= 30:   # focalDistance lensRadius (every dump has them; 3-2 uses them)
+        lens = dict(focal_distance=float(numbers[28]), lens_radius=float(numbers[29]))
+    try:
+        return Camera(position, target, rotation, float(screen_dist), int(width), int(height),
+                      float(near), float(far), **lens)
+    except PtraceError as error:
+        raise PtraceError(f"{path}: {error}") from None

@@ -94,7 +94,14 @@ def build_parser():
              "default SCENE_NAME.png in the current directory")
     add("-p", "--crop", nargs=4, type=_nonnegative_int("crop"), metavar=("X", "Y", "DX", "DY"),
         default=None, help="render only this cell (y counted from the bottom) and save just it")
-    add("-c", "--camera", default=None, metavar="FILE", help="the course's camera settings file")
+    add("-c", "--camera", default=None, metavar="FILE",
+        help="the course's camera settings file (its focalDistance and lensRadius included)")
+    add("-b", "--lens-radius", type=float, default=None, metavar="R",
+        help="thin-lens aperture radius (the course's 3-2 -b; default 0: a pinhole, or the -c "
+             "file's lensRadius)")
+    add("-d", "--focal-distance", type=float, default=None, metavar="D",
+        help="thin-lens focal distance along the view axis (the course's -d; default 4.7, or "
+             "the -c file's focalDistance)")
     add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
         help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
@@ -164,7 +171,7 @@ def _notice(text):
 
 def run(argv):
     from . import load, render
-    from .camera import load_camera_settings
+    from .camera import course_camera, load_camera_settings
     from .errors import PtraceError
     from .image import FORMATS, rate_colours, rate_path, write_image
     args = build_parser().parse_args(argv)
@@ -187,6 +194,9 @@ def run(argv):
         return 0
     width, height = args.resolution
     camera = load_camera_settings(args.camera, width, height) if args.camera else None
+    if args.lens_radius is not None or args.focal_distance is not None:
+        camera = (course_camera(scene, width, height) if camera is None else camera).with_lens(
+            args.lens_radius, args.focal_distance)
     if args.dashboard and args.workers is None:
         raise PtraceError("--dashboard needs --workers (a local cluster)")
     stats = {}

@@ -10,8 +10,9 @@ array and no kernel launch between bounces.
 Direct light is estimated by multiple importance sampling (the default; pbrt-v4's and
 Mitsuba's path integrators do the same): -l samples of each light, and the BSDF sample that
 continues the path, each weighted by the power heuristic, so that emission a BSDF-sampled ray
-finds counts too (emission_found). With --direct light it is the course's estimator (CS184.md
-4.5-4.6): light samples alone, and a bounce ray's emission counts only after a delta bounce.
+finds counts too (emission_found). With --direct light it is the course's estimator
+(docs/course.md#direct-light): light samples alone, and a bounce ray's emission counts only after
+a delta bounce.
 -H is the course's uniform hemisphere sampling. The lights are the file's lights plus, as one
 more light, the emissive primitives that are not a file light's face (ptrace.lights). Random
 numbers come from the Sobol' sampler (stratified) or the independent one (ptrace.sampling).
@@ -47,6 +48,7 @@ RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, m
 RR_DEPTH = 5
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
+DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 are the pixel jitter
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
@@ -60,7 +62,8 @@ LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direct
                                          "edge_y", "area", "faced", "emitter_prims",
                                          "emitter_cdf", "prim_pdf", "findable"])
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
-                                           "screen_dist", "znear", "zfar", "width"])
+                                           "screen_dist", "znear", "zfar", "width",
+                                           "lens_radius", "focal_distance"])
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
                                  "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
                                  "sampler"])
@@ -104,7 +107,8 @@ def scene_records(scene):
 def camera_record(camera):
     return CameraArrays(_f64(camera.position), _f64(camera.camera_to_world),
                         0.5 * camera.width, 0.5 * camera.height, float(camera.screen_dist),
-                        float(camera.znear), float(camera.zfar), int(camera.width))
+                        float(camera.znear), float(camera.zfar), int(camera.width),
+                        float(camera.lens_radius), float(camera.focal_distance))
 
 
 @njit(cache=True)
@@ -222,8 +226,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
     """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
     Light sampling: -l samples of each area, ambient or emissive-geometry light and one of each
-    delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear (CS184.md
-    4.5); with multiple importance sampling each non-delta sample also carries its power
+    delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear
+    (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also carries its power
     heuristic weight against the BSDF sample that trace_path takes next. With -H: -l uniform
     hemisphere samples per light, each weighted f cos / (pdf n) times the emission its ray
     finds."""
@@ -481,12 +485,30 @@ def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
 
 
+@njit(cache=True, inline="always")
+def concentric_disk(u1, u2):
+    """A point of the unit disc from [0, 1)^2 by Shirley and Chiu's concentric map (as pbrt's
+    SampleUniformDiskConcentric): uniform over the disc like the course's (sqrt(u1), 2 pi u2),
+    and it keeps the sampler's strata together (nearby (u1, u2), nearby points)."""
+    a, b = 2.0 * u1 - 1.0, 2.0 * u2 - 1.0
+    if a == 0.0 and b == 0.0:
+        return 0.0, 0.0
+    if abs(a) > abs(b):
+        r, phi = a, 0.25 * math.pi * (b / a)
+    else:
+        r, phi = b, 0.5 * math.pi - 0.25 * math.pi * (a / b)
+    return r * math.cos(phi), r * math.sin(phi)
+
+
 @njit(cache=True, _nrt=False, forceinline=True)
 def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
-    """Direction (unit) of a camera ray through the pixel: its centre when spp is 1, else a
-    jitter uniform over the pixel (CS184.md 4.1; stratified over the pixel's samples by the
-    Sobol sampler). (x - W/2) / screen_dist rather than (2u - 1) tan(hfov/2):
-    a pixel of a W x H window gets bit-identical rays to the same pixel of the 800 x 600 view."""
+    """Origin and direction (unit) of a camera ray through the pixel: its centre when spp is 1,
+    else a jitter uniform over the pixel (docs/course.md#camera-rays; stratified over the
+    pixel's samples by the Sobol sampler). (x - W/2) / screen_dist rather than
+    (2u - 1) tan(hfov/2): a pixel of a W x H window gets bit-identical rays to the same pixel of
+    the 800 x 600 view. With a thin lens (the course's 3-2 Part 4) the ray leaves a point of the
+    lens disc, uniform over it, toward where the pinhole ray meets the focal plane (at the focal
+    distance along the optical axis); a lens of radius 0 is the pinhole, bit for bit."""
     if options.spp == 1:
         sx, sy = pixel_x + 0.5, pixel_y + 0.5
     else:
@@ -495,11 +517,27 @@ def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
     sx = (sx - camera.half_width) / camera.screen_dist
     sy = (sy - camera.half_height) / camera.screen_dist
     m = camera.to_world
-    x = sx * m[0, 0] + sy * m[0, 1] - m[0, 2]
-    y = sx * m[1, 0] + sy * m[1, 1] - m[1, 2]
-    z = sx * m[2, 0] + sy * m[2, 1] - m[2, 2]
+    ox, oy, oz = camera.position[0], camera.position[1], camera.position[2]
+    if camera.lens_radius > 0.0:
+        u1, u2 = sample_2d(options, pixel, sample, sample, DIM_LENS, DIM_LENS)
+        lx, ly = concentric_disk(u1, u2)
+        lx *= camera.lens_radius
+        ly *= camera.lens_radius
+        d = camera.focal_distance
+        ox += lx * m[0, 0] + ly * m[0, 1]
+        oy += lx * m[1, 0] + ly * m[1, 1]
+        oz += lx * m[2, 0] + ly * m[2, 1]
+        # camera space: from (lx, ly, 0) to (sx d, sy d, -d) on the focal plane
+        sx, sy = sx * d - lx, sy * d - ly
+        x = sx * m[0, 0] + sy * m[0, 1] - d * m[0, 2]
+        y = sx * m[1, 0] + sy * m[1, 1] - d * m[1, 2]
+        z = sx * m[2, 0] + sy * m[2, 1] - d * m[2, 2]
+    else:
+        x = sx * m[0, 0] + sy * m[0, 1] - m[0, 2]
+        y = sx * m[1, 0] + sy * m[1, 1] - m[1, 2]
+        z = sx * m[2, 0] + sy * m[2, 1] - m[2, 2]
     norm = np.sqrt(x * x + y * y + z * z)
-    return x / norm, y / norm, z / norm
+    return ox, oy, oz, x / norm, y / norm, z / norm
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -518,7 +556,6 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
     per path and per vertex."""
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
     width = camera.width
-    cx, cy, cz = camera.position[0], camera.position[1], camera.position[2]
     dropped = 0
     rays = 0
     for k in range(pixel_x.shape[0]):
@@ -526,7 +563,8 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
         r = g = b = lum = lum2 = 0.0
         n = 0
         for sample in range(first_sample, first_sample + pass_n):
-            dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel, sample)
+            cx, cy, cz, dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel,
+                                                sample)
             if options.mode == NORMALS:
                 x, y, z = normal_colour(shapes, record, scratch, cx, cy, cz, dx, dy, dz,
                                         camera.znear, camera.zfar)

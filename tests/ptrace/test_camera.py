@@ -1,11 +1,17 @@
-"""The course camera (CS184.md 1.7) against the table of CS184.md 2.2, and its crop rule."""
+"""The course camera (docs/course.md#orbit-camera) against the course's table
+(docs/course.md#camera-table), and its crop rule."""
+import math
+
 import numpy as np
 import pytest
 
 import ptrace
 from ptrace.camera import course_camera, load_camera_settings
+from ptrace.scene import DIFFUSE
 
-# file: (target, R, camera position, hfov, vfov, screen_dist, near, far) from CS184.md 2.2
+from scenes_by_hand import make_scene
+
+# file: (target, R, camera position, hfov, vfov, screen_dist, near, far) from the course's table
 TABLE = {
     "sky/bunny.dae": ((0, 0.3824, 0), 3.4953, (0, 1.4877, 3.3160), 49.134, 37.849, 875.0, 0.1, 100),
     "meshedit/cow.dae": ((0, -0.0394, -0.0930), 3.3465, (0, -0.0394, 3.2536), 39.598, 30.219, 1111.1, 0.01, 10000),
@@ -80,7 +86,7 @@ def test_camera_settings_file_round_trip(tmp_path, scenes_dir):
     camera = course_camera(scene)
     numbers = [camera.hfov, camera.vfov, 4 / 3, camera.znear, camera.zfar,
                *camera.position, *camera.target, 0, 0, 4.8, 1, 10,
-               *camera.camera_to_world.reshape(-1), 800, 600, camera.screen_dist, 4.7, 0.25]
+               *camera.camera_to_world.reshape(-1), 800, 600, camera.screen_dist, 4.7, 0.0]
     path = tmp_path / "cam.txt"
     path.write_text(" ".join(repr(float(x)) for x in numbers))
     loaded = load_camera_settings(path, 800, 600)
@@ -91,3 +97,31 @@ def test_camera_settings_file_round_trip(tmp_path, scenes_dir):
     path.write_text("1 2 3")
     with pytest.raises(ptrace.PtraceError, match="28 numbers"):
         load_camera_settings(path, 800, 600)
+
+
+def test_a_hand_written_course_camera_dump_places_a_known_point(tmp_path):
+    """A camera file written by hand as the course's `D` key writes it (docs/course.md#camera-file: hFov vFov
+    aspect near far / pos target / phi theta r minR maxR / the camera-to-world rotation, row
+    major / screenW screenH screenDist / focalDistance lensRadius): at (5, 0, 0) looking down
+    -x with +y up, so the camera's right is world -z, and a 60 degree vertical field of view. A
+    small sphere at (0, 0, -1) is 1 right of the axis at depth 5: its image centre is pixel x =
+    400 + 0.2 * screenDist, y = 300 (from the bottom)."""
+    screen_dist = 300 / math.tan(math.radians(30))
+    rotation = [0, 0, 1, 0, 1, 0, -1, 0, 0]      # columns: right (0,0,-1), up, back (1,0,0)
+    numbers = [73.7, 60, 4 / 3, 0.01, 100, 5, 0, 0, 0, 0, 0, 1.5708, 1.5708, 5, 1, 50,
+               *rotation, 800, 600, screen_dist, 5, 0]
+    path = tmp_path / "hand_cam_settings.txt"
+    lines = [numbers[:5], numbers[5:11], numbers[11:16], numbers[16:25], numbers[25:28],
+             numbers[28:]]
+    path.write_text("".join(" ".join(str(x) for x in line) + "\n" for line in lines))
+    camera = load_camera_settings(path, 800, 600)
+    np.testing.assert_allclose(camera.position, [5, 0, 0])
+    scene = make_scene(centers=[[0.0, 0.0, -1.0]], radii=[0.05],
+                       materials=[dict(kind=DIFFUSE, albedo=(0.5,) * 3)], material_index=[0])
+    image = ptrace.render(scene, integrator="normals", resolution=(800, 600), camera=camera)
+    rows, cols = np.nonzero(image.sum(axis=2) > 0)
+    assert 50 < rows.size < 5000
+    x = (cols + 0.5).mean()
+    y = (600 - (rows + 0.5)).mean()
+    assert x == pytest.approx(400 + 0.2 * screen_dist, abs=0.5)
+    assert y == pytest.approx(300, abs=0.5)
