@@ -110,7 +110,8 @@ def build_parser():
     add("--integrator", choices=INTEGRATORS, default="path",
         help="path (light transport) or normals (the course's normal shading)")
     add("--info", action="store_true", help="print a JSON summary of the scene and exit")
-    add("-q", "--quiet", action="store_true", help="no progress bar")
+    add("-q", "--quiet", action="store_true",
+        help="no progress bar, compile notice or notes of what the loader ignored or assumed")
     dist = parser.add_argument_group("distributed rendering (needs: pip install \"ptrace[dist]\")")
     where = dist.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_positive_int("workers"), default=None, metavar="N",
@@ -150,7 +151,24 @@ def scene_info(scene):
                    "hfov": camera.hfov, "vfov": camera.vfov, "screen_dist": camera.screen_dist,
                    "znear": camera.znear, "zfar": camera.zfar},
         "bounds": None if bounds is None else [bounds[0].tolist(), bounds[1].tolist()],
+        "notes": grouped_notes(scene.notes),
     }
+
+
+def grouped_notes(notes):
+    """The loader's notes, one line per kind: a note '<element ...>: what' names where, and notes
+    that say the same `what` in several places become one line with the count and the first."""
+    kinds = {}
+    for note in notes:
+        where, _, what = note.partition(": ") if note.startswith("<") else ("", "", note)
+        kinds.setdefault(what, []).append(where)
+    lines = []
+    for what, places in kinds.items():
+        if len(places) == 1:
+            lines.append(f"{places[0]}: {what}" if places[0] else what)
+        else:
+            lines.append(f"{what} ({len(places)} places, the first {places[0]})")
+    return lines
 
 
 def _one_line_warnings():
@@ -189,6 +207,9 @@ def run(argv):
     if not args.info and not (os.path.isdir(out_dir) and os.access(out_dir, os.W_OK)):
         raise PtraceError(f"{output}: cannot write to directory {out_dir}")
     scene = load(args.scene)
+    if not args.quiet and not args.info:
+        for line in grouped_notes(scene.notes):   # what the loader ignored, changed or assumed
+            print(f"ptrace: note: {line}", file=sys.stderr)
     if args.info:
         print(json.dumps(scene_info(scene), indent=2))
         return 0

@@ -157,6 +157,8 @@ def read_light(document, light, node, world):
     elif record["kind"] == SPOT:
         record.update(position=centre,
                       direction=_unit(document, node, front - centre, "spot light direction"))
+        document.notes.append(f"{document.describe(node)}: a spot light contributes no light "
+                              f"(as in the course, whose spot lights return nothing)")
     values = np.concatenate([np.ravel(value) for key, value in record.items() if key != "kind"])
     if not np.isfinite(values).all():
         document.fail(f"{document.describe(node)}: light placement overflows to infinity")

@@ -26,12 +26,17 @@ def load_mesh(path):
         raise SceneError(path, "no such file")
     if os.path.isdir(path):
         raise SceneError(path, "is a directory, not a scene file")
-    vertices, faces = _read_triangles(path)
+    vertices, faces, non_finite = _read_triangles(path)
+    if non_finite and len(faces) == 0:
+        raise SceneError(path, f"every face ({non_finite}) has NaN or infinite vertex "
+                               f"coordinates")
     if len(faces) == 0:
         raise SceneError(path, "the file contains no triangles")
     if not np.isfinite(vertices).all():
         raise SceneError(path, "NaN or infinite vertex coordinates")
-    notes = [
+    notes = [f"mesh file: dropped {non_finite} face(s) with NaN or infinite vertex coordinates"] \
+        if non_finite else []
+    notes += [
         f"mesh file: one diffuse material, albedo {DEFAULT_ALBEDO}",
         f"mesh file: one ambient light, radiance {AMBIENT_RADIANCE}",
         "mesh file: camera on +Z looking toward -Z (view_point (0, 0, 1)), "
@@ -55,12 +60,25 @@ def load_mesh(path):
 
 
 def _read_triangles(path):
-    """(vertices (V, 3) float64, faces (F, 3) int64); every geometry of a file's scene
-    concatenated with its node transform baked in."""
+    """(vertices (V, 3) float64, faces (F, 3) int64, faces dropped for NaN or infinite
+    coordinates); every geometry of a file's scene concatenated with its node transform baked
+    in. The file is read unprocessed first, to count the faces trimesh's processing would drop
+    without a word, then each geometry is processed as trimesh's loader would (merged vertices,
+    non-finite faces removed)."""
     import trimesh     # imported here: only mesh files need it
 
     try:
-        mesh = trimesh.load_scene(path).to_mesh()
+        scene = trimesh.load_scene(path, process=False)
+        raw = scene.to_mesh()
+        raw_faces = np.asarray(raw.faces, dtype=np.int64).reshape(-1, 3)
+        raw_vertices = np.asarray(raw.vertices, dtype=np.float64).reshape(-1, 3)
+        non_finite = 0
+        if raw_faces.size and raw_faces.min() >= 0 and raw_faces.max() < len(raw_vertices):
+            non_finite = int((~np.isfinite(raw_vertices[raw_faces]).all(axis=(1, 2))).sum())
+        for geometry in scene.geometry.values():
+            if hasattr(geometry, "process"):
+                geometry.process()
+        mesh = scene.to_mesh()
         vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
         faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
     except SceneError:
@@ -70,4 +88,4 @@ def _read_triangles(path):
             from error
     if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
         raise SceneError(path, "face indices out of range")
-    return vertices, faces
+    return vertices, faces, non_finite

@@ -1,0 +1,76 @@
+"""The user hears what the loader ignored, changed or assumed (issue 15: "tell the user"):
+`ptrace: note: ...` on stderr once per kind, in --info, silenced by -q; a face with NaN
+coordinates is dropped with a note that says NaN, never silently."""
+import json
+import subprocess
+import sys
+
+import pytest
+
+import ptrace
+from ptrace.cli import grouped_notes
+
+PLY = """ply
+format ascii 1.0
+element vertex 6
+property float x
+property float y
+property float z
+element face {faces}
+property list uchar int vertex_indices
+end_header
+0 0 0
+1 0 0
+0 1 0
+nan 0 0
+1 1 0
+0 1 1
+{face_lines}"""
+
+
+def ply(tmp_path, faces):
+    path = tmp_path / "nan.ply"
+    path.write_text(PLY.format(faces=len(faces), face_lines="".join(f"3 {f}\n" for f in faces)))
+    return path
+
+
+def test_a_face_with_nan_is_dropped_with_a_note_that_says_nan(tmp_path):
+    scene = ptrace.load(ply(tmp_path, ["0 1 2", "3 4 5"]))
+    assert scene.triangle_count == 1
+    assert any("dropped 1 face(s) with NaN" in note for note in scene.notes), scene.notes
+
+
+def test_a_file_whose_only_face_has_nan_says_nan(tmp_path):
+    with pytest.raises(ptrace.SceneError, match="NaN") as caught:
+        ptrace.load(ply(tmp_path, ["3 4 5"]))
+    assert "nan.ply" in str(caught.value) and "no triangles" not in str(caught.value)
+
+
+def test_notes_of_one_kind_become_one_line_with_a_count():
+    notes = ['<polylist> in <geometry id="a">: fan-triangulated 2 polygon(s)',
+             '<polylist> in <geometry id="b">: fan-triangulated 2 polygon(s)',
+             "no lights in the scene"]
+    assert grouped_notes(notes) == [
+        'fan-triangulated 2 polygon(s) (2 places, the first <polylist> in <geometry id="a">)',
+        "no lights in the scene"]
+    assert grouped_notes(notes[:1]) == [notes[0]]
+
+
+def run(*args):
+    return subprocess.run([sys.executable, "-m", "ptrace", *map(str, args)], capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_the_command_line_prints_the_notes_and_quiet_silences_them(tmp_path):
+    mesh = ply(tmp_path, ["0 1 2", "3 4 5"])
+    out = tmp_path / "out.png"
+    loud = run("-s", "1", "-r", "8", "6", "-f", out, mesh)
+    assert loud.returncode == 0, loud.stderr
+    lines = [line for line in loud.stderr.splitlines() if line.startswith("ptrace: note: ")]
+    assert any("NaN" in line for line in lines), loud.stderr
+    assert any("one diffuse material" in line for line in lines), loud.stderr
+    assert len(lines) == len(set(lines))
+    quiet = run("-q", "-s", "1", "-r", "8", "6", "-f", out, mesh)
+    assert quiet.returncode == 0 and "note" not in quiet.stderr, quiet.stderr
+    info = json.loads(run("--info", mesh).stdout)
+    assert any("NaN" in note for note in info["notes"])
