@@ -1,1 +1,59 @@
-"""Benchmark scripts. Each writes a Markdown report (and charts) into benchmarks/results/."""
+"""Benchmark scripts. Each writes a Markdown report (and charts) into benchmarks/results/.
+
+BENCHMARKS is the registry that `python -m benchmarks` (benchmarks/__main__.py) reads: every
+benchmark module, in the order `all` runs them, with a line saying what it measures and how
+`all --quick` runs it. A new benchmark module is added here (tests/test_benchmarks_quick.py
+checks that every module of the package is either here or in HELPERS). Nothing is imported
+until a benchmark runs.
+"""
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """One benchmark module's entry: `description` (one line, for the runner's help); `quick`,
+    the arguments `all --quick` passes to its main(argv) (a tuple, or a function of the
+    imported module that returns the list), or None if `all --quick` skips it (`quick_skip`
+    says why); `requires`, a module that must be importable for `all` to run it; `in_all`,
+    False for modules that run only by name."""
+    description: str
+    quick: object = ("--quick",)
+    quick_skip: str = ""
+    requires: str = None
+    in_all: bool = True
+
+
+def _seed_commands_quick(module):
+    """seed_commands has no --quick: its first two commands, -s divided by 64, bvh and embree."""
+    return ["--spp-scale", "64", "--backends", "bvh", "embree", "--only", *list(module.COMMANDS)[:2]]
+
+
+BENCHMARKS = {
+    "accel_rays": Benchmark("rays per second of every backend on course meshes and a synthetic "
+                            "series, BVH builds, compile times"),
+    "first_images": Benchmark("normal-shading render time per backend and CLI start-up",
+                              quick=("--repeats", "1")),
+    "seed_commands": Benchmark("wall time and rays per second of the seed's command lines per "
+                               "backend", quick=_seed_commands_quick),
+    "mitsuba_reference": Benchmark("renders course scenes with Mitsuba 3 as references for "
+                                   "ptrace", quick=None, requires="mitsuba",
+                                   quick_skip="it rewrites benchmarks/references/"),
+    "stability": Benchmark("where methods fail: the inputs that defeat each method, and what "
+                           "ptrace does there"),
+    "course_comparison": Benchmark("the course's headline comparisons: normal shading, the "
+                                   "seed's full commands, naive against BVH"),
+    "distributed": Benchmark("the price of a local Dask cluster and a model of scaling"),
+    "error_vs_time": Benchmark("relative MSE against wall time per estimator and backend, and "
+                               "Mitsuba 3's"),
+    "paths_per_second": Benchmark("camera paths per second of ptrace's backends and Mitsuba 3"),
+    "profile_render": Benchmark("where a render's wall time goes: phases, the path loop by "
+                                "differencing, the accelerator's share"),
+    "spheres_vs_meshes": Benchmark("an analytic sphere against tessellated ones"),
+    "stability_light": Benchmark("the light-transport half of the stability report",
+                                 in_all=False),
+    "side_by_side": Benchmark("issue 12's targets: an older checkout against this tree",
+                              quick=None, in_all=False),
+}
+
+# modules of the package that are not benchmarks
+HELPERS = ("__main__", "report", "synthetic", "templating")

@@ -8,12 +8,13 @@ which ptrace.tiles.TileWork.trace hands blocks of pixels to a pool of Python thr
 running ptrace.integrator.render_pixels (nogil) that carries every path from the camera to its
 end, calling the accelerator's compiled face per ray; no Python runs between bounces. So:
 
-1. Wall time (measured). ptrace.tiles.render_pixels is replaced at Python level by a wrapper
-   that records each call's start and end (put back in a `finally`); the render's stats give
-   accel.build's and the passes' seconds. The wall time splits, exactly, into the build, setup
-   and image assembly outside the executor, the passes' time with no render_pixels call
-   running, the time inside the calls' span when a thread is idle, and the calls' own seconds
-   (thread-seconds / threads).
+1. Wall time (measured). The render's own phases (stats["phases"], ptrace.executors.Phases):
+   setup, compile, build, records, render (the passes) and image. ptrace.tiles.render_pixels is
+   replaced at Python level by a wrapper that records each call's start and end (put back in a
+   `finally`), which splits the passes further. The wall time splits, exactly, into the build,
+   compiling, the kernel records, setup and image assembly, the passes' time with no
+   render_pixels call running, the time inside the calls' span when a thread is idle, and the
+   calls' own seconds (thread-seconds / threads).
 2. Inside the loop (measured, by differencing): the same command rendered with less work, on
    the same pixels, samples and backend: normal shading (camera rays and closest hit only),
    -m 0 (plus the surface and its emission), -m 1 (plus direct light at the first vertex) and
@@ -68,11 +69,13 @@ BATCH_SECONDS, QUICK_BATCH_SECONDS = 0.3, 0.05   # least timing per replayed bat
 
 # wall-time phases (section 1), in the order of the table
 BUILD = "acceleration structure build (accel.build)"
+COMPILE = "numba compiling or loading kernels from its cache (0 after the warm-up)"
+RECORDS = "kernel records: scene, lights, camera, backend (ptrace.tiles.TileWork)"
 SETUP = "render setup and image: settings, camera, pixel grid, sums, final image"
-OUTSIDE = "passes with no render_pixels call running: scene records, pool hand-out, pass ends"
+OUTSIDE = "passes with no render_pixels call running: pool hand-out, pass ends"
 IDLE = "threads idle inside the calls' span: per-block Python, last blocks of a pass"
 LOOP = "inside render_pixels (the compiled path loop), thread-seconds / threads"
-WALL_PHASES = (BUILD, SETUP, OUTSIDE, IDLE, LOOP)
+WALL_PHASES = (BUILD, COMPILE, RECORDS, SETUP, OUTSIDE, IDLE, LOOP)
 
 # ray kinds the counting face tells apart
 CAMERA, BOUNCE, SHADOW = 0, 1, 2
@@ -159,11 +162,15 @@ class Run:
         return int(self.stats["rays"])
 
     def phases(self):
-        """{phase: seconds} of section 1; they add up to the wall time exactly."""
-        build, passes = self.stats["build_seconds"], self.stats["render_seconds"]
+        """{phase: seconds} of section 1, from the render's phases (stats["phases"]) and the
+        render_pixels calls; they add up to the wall time exactly. Setup also takes the
+        microseconds of the call outside the render's clock. (A call that compiles would put
+        its compile seconds in both COMPILE and the calls' span: every timed render is warm.)"""
+        timed = self.stats["phases"]
         span, loop = self.span, self.thread_seconds / self.threads
-        return {BUILD: build, SETUP: self.wall - build - passes, OUTSIDE: passes - span,
-                IDLE: span - loop, LOOP: loop}
+        setup = self.wall - sum(timed.values()) + timed["setup"] + timed["image"]
+        return {BUILD: timed["build"], COMPILE: timed["compile"], RECORDS: timed["records"],
+                SETUP: setup, OUTSIDE: timed["render"] - span, IDLE: span - loop, LOOP: loop}
 
     @property
     def busy(self):
@@ -677,8 +684,9 @@ def command_section(name, profile):
 
 def summary_table(results):
     lines = ["## Summary", "",
-             "Shares of wall time. Build, glue (setup, passes outside the calls, idle threads) "
-             "and loop are measured; the accelerator's share of the loop is an estimate.", "",
+             "Shares of wall time. Build, glue (compiling, kernel records, setup, passes outside "
+             "the calls, idle threads) and loop are measured; the accelerator's share of the "
+             "loop is an estimate.", "",
              "| command | backend | wall s | build % | glue % | loop % | accelerator % of loop "
              "(estimate) | threads busy % |", "|---|---|---:|---:|---:|---:|---:|---:|"]
     for name, profile in results.items():
@@ -689,7 +697,7 @@ def summary_table(results):
             continue
         run, est = profile.full, profile.estimate
         phases = run.phases()
-        glue = phases[SETUP] + phases[OUTSIDE] + phases[IDLE]
+        glue = sum(phases[phase] for phase in (COMPILE, RECORDS, SETUP, OUTSIDE, IDLE))
         accelerator = "" if est is None else f"{_pct(est.traversal, run.thread_seconds):.1f}"
         lines.append(f"| {command} | {backend} | {run.wall:.3f} | "
                      f"{_pct(phases[BUILD], run.wall):.1f} | {_pct(glue, run.wall):.1f} | "
@@ -699,15 +707,16 @@ def summary_table(results):
 
 
 METHOD = (
-    "Method. Measured: the wall time of ptrace.render; accel.build's and the passes' seconds "
-    "(the render's stats); the start and end of every ptrace.tiles.render_pixels call, from a "
-    "Python-level wrapper that is put back afterwards (library code is unchanged). The calls "
-    "run on {threads} Python threads at once, so the wall time splits exactly into: build; "
-    "setup and image assembly outside the executor; passes with no call running; the calls' "
-    "span minus their thread-seconds / threads (threads idle); and the calls' thread-seconds / "
-    "threads (the loop). Measured by differencing: the same command as normal shading, -m 0, "
-    "-m 1 and in full, on the same pixels, samples and backend (a path's first vertices do not "
-    "depend on -m, so each variant does a prefix of the next one's work); each row is a "
+    "Method. Measured: the wall time of ptrace.render; its phases (stats['phases']: setup, "
+    "compile, build, records, render, image); the start and end of every "
+    "ptrace.tiles.render_pixels call, from a Python-level wrapper that is put back afterwards "
+    "(library code is unchanged). The calls run on {threads} Python threads at once, so the "
+    "wall time splits exactly into: build; compiling; kernel records; setup and image assembly; "
+    "passes with no call running; the calls' span minus their thread-seconds / threads "
+    "(threads idle); and the calls' thread-seconds / threads (the loop). Measured by "
+    "differencing: the same command as normal shading, -m 0, -m 1 and in full, on the same "
+    "pixels, samples and backend (a path's first vertices do not depend on -m, so each "
+    "variant does a prefix of the next one's work); each row is a "
     "difference of median loop thread-seconds and of the exact rays traced (stats). "
     "Estimated: the accelerator's thread-seconds. One more render of the command runs copies "
     "of the loop's compiled functions whose ray queries go through a counting face (the "

@@ -14,7 +14,7 @@ import numpy as np
 
 from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
 from .errors import PtraceError
-from .executors import render_in_process
+from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
 from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
@@ -57,34 +57,45 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
     (default True; False runs every path to max_depth, for comparisons: the course has no such
     flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
-    if a dict, receives build and render seconds, rays traced, per-pixel sample counts ("samples", (H, W)), the number of non-finite samples dropped, and whether Ctrl-C
-    interrupted the render. client renders on a Dask cluster; notice, if given, is called with
-    a one-line message when the kernels must be compiled first (a cold numba cache).
+    if a dict, receives build and render seconds, rays traced, per-pixel sample counts
+    ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C interrupted
+    the render, "phases" ({phase: wall seconds} of ptrace.executors.IN_PROCESS_PHASES, or
+    DASK_PHASES with a client: they cover this call without overlapping) and "counts" (passes
+    and kernel calls in-process, functions numba compiled; tasks on Dask). client renders on a
+    Dask cluster; notice, if given, is called with a one-line message when the kernels must be
+    compiled first (a cold numba cache).
     """
-    settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
-                                     **options)
-    width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
-    _check_frame(width, height, crop)
-    previous_threads = numba.get_num_threads()
-    worker_threads = None
-    if client is not None:   # threads applies on the workers, not here
-        if threads is not None and threads < 1:
-            raise PtraceError(f"threads must be at least 1, got {threads}")
-        worker_threads, threads = threads, None
-    if threads is not None:
-        if not 1 <= threads <= numba.config.NUMBA_NUM_THREADS:
-            raise PtraceError(f"threads must be between 1 and {numba.config.NUMBA_NUM_THREADS}, "
-                              f"got {threads}")
-        numba.set_num_threads(threads)
+    phases = Phases(IN_PROCESS_PHASES if client is None else DASK_PHASES)
+    phases.enter("setup")
     try:
-        return _render(scene, settings, width, height, crop, camera, progress, stats, client,
-                       worker_threads, notice)
+        settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
+                                         **options)
+        width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
+        _check_frame(width, height, crop)
+        previous_threads = numba.get_num_threads()
+        worker_threads = None
+        if client is not None:   # threads applies on the workers, not here
+            if threads is not None and threads < 1:
+                raise PtraceError(f"threads must be at least 1, got {threads}")
+            worker_threads, threads = threads, None
+        if threads is not None:
+            if not 1 <= threads <= numba.config.NUMBA_NUM_THREADS:
+                raise PtraceError(f"threads must be between 1 and "
+                                  f"{numba.config.NUMBA_NUM_THREADS}, got {threads}")
+            numba.set_num_threads(threads)
+        try:
+            return _render(scene, settings, width, height, crop, camera, progress, stats,
+                           client, worker_threads, notice, phases)
+        finally:
+            numba.set_num_threads(previous_threads)
     finally:
-        numba.set_num_threads(previous_threads)
+        phases.stop()
+        if stats is not None:
+            stats.update(phases=dict(phases.seconds), counts=dict(phases.counts))
 
 
 def _render(scene, settings, width, height, crop, camera, progress, stats, client,
-            worker_threads, notice):
+            worker_threads, notice, phases):
     camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
     for message in scene_warnings(scene, settings):
@@ -103,14 +114,20 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
     try:
         if client is not None:
             from . import distributed
+            phases.enter("render")
             outcome = distributed.render_passes(client, scene, settings, camera, pixel_x,
                                                 pixel_y, passes, worker_threads)
+            # the executor's first seconds were the scatter (timed by it)
+            phases.seconds["render"] -= outcome["scatter_seconds"]
+            phases.seconds["scatter"] += outcome["scatter_seconds"]
+            phases.count("tasks", outcome["tasks"])
         else:
             outcome = render_in_process(scene, settings, camera, pixel_x, pixel_y, passes,
-                                        notice)
+                                        phases, notice)
     finally:
         if bar is not None:
             bar.close()
+    phases.enter("image")
     sum_rgb, count = sums[0], sums[3]
     image = np.where(count[:, None] > 0, sum_rgb / np.maximum(count, 1)[:, None], 0.0)
     if stats is not None:

@@ -1,11 +1,13 @@
-"""The render profile benchmark: its helpers on tiny renders (the wall-time phases add up, the
-wrapper is put back, the counting face counts every ray and changes no pixel, the differencing
-rows add up), and a tiny quick run's report, with a failing embree backend skipped.
+"""The render profile benchmark: the render's own phases that it reads (stats["phases"] and
+stats["counts"], ptrace.executors.Phases), its helpers on tiny renders (the wall-time phases add
+up, the wrapper is put back, the counting face counts every ray and changes no pixel, the
+differencing rows add up), and a tiny quick run's report, with a failing embree backend skipped.
 
 Reports go to a temporary directory, never into benchmarks/results/.
 """
 import pathlib
 import re
+import time
 
 import numba
 import numpy as np
@@ -13,6 +15,7 @@ import pytest
 
 import accel
 import ptrace
+import ptrace.executors
 import ptrace.tiles
 from benchmarks import profile_render as pr
 from benchmarks import report
@@ -25,6 +28,58 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def cow(course_scene):
     return ptrace.load(course_scene("meshedit/cow.dae"))
+
+
+def test_the_render_reports_its_phases(cow):
+    ptrace.render(cow, threads=2, accel="bvh", **TINY)    # compiled (or loaded) already
+    stats = {}
+    start = time.perf_counter()
+    ptrace.render(cow, threads=2, accel="bvh", stats=stats, **dict(TINY, spp=20))
+    wall = time.perf_counter() - start
+    phases = stats["phases"]
+    assert list(phases) == list(ptrace.executors.IN_PROCESS_PHASES)
+    assert min(phases.values()) >= 0 and phases["render"] > 0, phases
+    assert sum(phases.values()) <= wall, (phases, wall)
+    assert phases["build"] <= stats["build_seconds"] + 1e-3
+    assert phases["records"] + phases["render"] <= stats["render_seconds"] + 1e-3
+    # passes of 16 and 4 samples (2 + 1 kernel calls at 24x18); nothing left to compile
+    assert stats["counts"] == {"compiled": 0, "passes": 2, "kernel_calls": 3}
+    assert pr.planned_blocks(PIXELS, 20) == 3
+    assert phases["compile"] < 0.05 * wall, phases
+
+
+def test_compiling_goes_to_the_compile_phase(cow, monkeypatch):
+    """numba compiling inside a phase (here a fresh, uncached function in accel.build) is
+    counted in "compile", not in the phase; the compiler events are listened to only during
+    the call, a failing one included."""
+    from numba import njit
+    from numba.core import event
+    build, listening = accel.build, []
+
+    def compiling_build(*args, **kwargs):
+        njit(lambda x: x + 1)(1)    # a new function each time: compiled, never cached
+        return build(*args, **kwargs)
+
+    for name, step in (("register", 1), ("unregister", -1)):
+        def counted(kind, listener, original=getattr(event, name), step=step):
+            listening.append(step)
+            return original(kind, listener)
+        monkeypatch.setattr(event, name, counted)
+    monkeypatch.setattr(accel, "build", compiling_build)
+    stats = {}
+    start = time.perf_counter()
+    ptrace.render(cow, threads=2, accel="bvh", stats=stats, **TINY)
+    wall = time.perf_counter() - start
+    phases = stats["phases"]
+    assert stats["counts"]["compiled"] >= 1
+    assert phases["compile"] > phases["build"] and phases["compile"] > 0.01, phases
+    assert phases["compile"] + phases["build"] <= stats["build_seconds"] + 1e-3
+    assert sum(phases.values()) <= wall and min(phases.values()) >= 0
+    assert listening and sum(listening) == 0
+    stats = {}
+    with pytest.raises(ptrace.PtraceError):
+        ptrace.render(cow, threads=0, stats=stats, **TINY)
+    assert sum(listening) == 0 and stats["phases"]["render"] == 0
 
 
 def test_union_seconds():
@@ -46,6 +101,7 @@ def test_wall_phases_add_up_to_the_wall_time(cow):
     assert sum(phases.values()) == pytest.approx(run.wall, rel=1e-9)
     assert min(phases.values()) >= -1e-6, phases     # the calls lie inside the passes
     assert run.calls == pr.planned_blocks(PIXELS, TINY["spp"]) == 1
+    assert run.calls == run.stats["counts"]["kernel_calls"]
     assert 0 < run.thread_seconds <= 2 * run.span + 1e-6
     assert run.rays > PIXELS * TINY["spp"]
 

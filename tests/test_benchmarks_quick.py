@@ -3,12 +3,18 @@
 The report and chart go to a temporary directory, never into benchmarks/results/.
 """
 import argparse
+import contextlib
+import dataclasses
+import importlib
+import io
 import json
+import pkgutil
 import struct
 
 import numba
 import pytest
 
+import benchmarks
 from benchmarks import __main__ as runner
 from benchmarks import accel_rays, report, synthetic
 
@@ -140,6 +146,52 @@ def test_accel_rays_smallest_mode(tmp_path, monkeypatch, scenes_dir):
     width, height = struct.unpack(">II", chart[16:24])
     assert width > 200 and height > 200
     assert not list(output.parent.glob("*.tmp*"))
+
+
+def test_the_registry_names_every_module_and_its_quick_mode():
+    """Every module of the package is a registered benchmark or a helper; `all` runs them in
+    the registry's order; a module registered with --quick has it on its command line (its
+    --help lists it; every module in `all` parses its arguments before doing anything) and one
+    registered otherwise does not."""
+    modules = {m.name for m in pkgutil.iter_modules(benchmarks.__path__)}
+    assert modules == set(benchmarks.BENCHMARKS) | set(benchmarks.HELPERS)
+    assert runner.names() == ["accel_rays", "first_images", "seed_commands", "mitsuba_reference",
+                              "stability", "course_comparison", "distributed", "error_vs_time",
+                              "paths_per_second", "profile_render", "spheres_vs_meshes"]
+    for name in runner.names():
+        entry = benchmarks.BENCHMARKS[name]
+        assert entry.description and (entry.quick is not None or entry.quick_skip), name
+        module = importlib.import_module(f"benchmarks.{name}")
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exit_:
+            module.main(["--help"])
+        assert exit_.value.code == 0, name
+        assert ("--quick" in out.getvalue()) == (entry.quick == ("--quick",)), name
+    seed = importlib.import_module("benchmarks.seed_commands")
+    assert runner.quick_args("seed_commands", seed) == [
+        "--spp-scale", "64", "--backends", "bvh", "embree", "--only", *list(seed.COMMANDS)[:2]]
+    assert runner.quick_args("first_images", None) == ["--repeats", "1"]
+
+
+def test_runner_skips_what_the_registry_says(tmp_path, monkeypatch, capsys):
+    calls = []
+    monkeypatch.setattr(runner, "names", lambda: ["accel_rays"])
+    monkeypatch.setattr(accel_rays, "main", calls.append)
+    entry = benchmarks.BENCHMARKS["accel_rays"]
+    for changed, argv, line in (
+            (dict(quick=None, quick_skip="a reason"), ["--quick"], "skipped in --quick (a reason)"),
+            (dict(requires="no_such_module_here"), [], "skipped (no_such_module_here is not "
+                                                       "installed)")):
+        monkeypatch.setitem(benchmarks.BENCHMARKS, "accel_rays",
+                            dataclasses.replace(entry, **changed))
+        assert runner.main(["all", *argv, "--output-dir", str(tmp_path)]) == 0
+        assert f"--- accel_rays: {line}" in capsys.readouterr().out
+    assert calls == []
+    monkeypatch.setitem(benchmarks.BENCHMARKS, "accel_rays", entry)
+    assert runner.main(["all", "--quick", "--output-dir", str(tmp_path)]) == 0
+    assert calls == [["--quick"]]
+    mitsuba = benchmarks.BENCHMARKS["mitsuba_reference"]
+    assert mitsuba.quick is None and mitsuba.requires == "mitsuba"
 
 
 def test_runner_rejects_unknown_names(capsys):
