@@ -1,10 +1,11 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
 from .camera import Camera, course_camera
+from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError
 from .io import load
 from .renderer import render
 from .settings import Settings
 from .scene import Scene
 
-__all__ = ["Camera", "PtraceError", "SceneError", "Scene", "Settings", "course_camera", "load",
-           "render"]
+__all__ = ["Camera", "Environment", "PtraceError", "SceneError", "Scene", "Settings",
+           "course_camera", "load", "load_environment", "render"]

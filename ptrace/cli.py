@@ -96,6 +96,9 @@ def build_parser():
         default=None, help="render only this cell (y counted from the bottom) and save just it")
     add("-c", "--camera", default=None, metavar="FILE",
         help="the course's camera settings file (its focalDistance and lensRadius included)")
+    add("-e", "--environment", default=None, metavar="FILE|R,G,B",
+        help="an environment light (the course's -e): an image OpenImageIO reads (.exr, .hdr, "
+             "...), lat-long with +Y up, or a constant colour such as 0.5,0.5,0.5")
     add("-b", "--lens-radius", type=float, default=None, metavar="R",
         help="thin-lens aperture radius (the course's 3-2 -b; default 0: a pinhole, or the -c "
              "file's lensRadius)")
@@ -125,11 +128,11 @@ def build_parser():
 
 def scene_info(scene):
     from .camera import course_camera
-    from .scene import LIGHT_NAMES
+    from .scene import KIND_NAMES
     lights = scene.lights
     entries = []
     for i in range(len(lights)):
-        kind = LIGHT_NAMES[lights.kind[i]]
+        kind = KIND_NAMES[lights.kind[i]]
         entry = {"type": kind, "radiance": lights.radiance[i].tolist()}
         if kind in ("point", "spot", "area"):
             entry["position"] = lights.position[i].tolist()
@@ -207,6 +210,9 @@ def run(argv):
     if not args.info and not (os.path.isdir(out_dir) and os.access(out_dir, os.W_OK)):
         raise PtraceError(f"{output}: cannot write to directory {out_dir}")
     scene = load(args.scene)
+    if args.environment is not None:
+        from .environment import load_environment
+        scene = scene.with_environment(load_environment(args.environment))
     if not args.quiet and not args.info:
         for line in grouped_notes(scene.notes):   # what the loader ignored, changed or assumed
             print(f"ptrace: note: {line}", file=sys.stderr)

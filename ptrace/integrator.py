@@ -32,10 +32,12 @@ from numba import njit
 from accel.compiled import any_hit, closest_hit
 
 from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
+from .environment import (LUMINANCE, environment_arrays, environment_pdf, environment_radiance,
+                          environment_sample)
 from .lights import EMITTER, area_light_hit, emitter_arrays, light_is_delta, sample_emitter, \
     sample_light
 from .sampling import sobol_1d, sobol_2d, uniform
-from .scene import AMBIENT, AREA, EMISSION, GLASS, REFRACTION
+from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, REFRACTION
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
@@ -52,7 +54,6 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
                                          "vertex_normals", "material_index", "scale"])
@@ -60,7 +61,8 @@ MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance"
                                                "ior", "alpha", "eta", "k"])
 LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
                                          "edge_y", "area", "faced", "emitter_prims",
-                                         "emitter_cdf", "prim_pdf", "findable"])
+                                         "emitter_cdf", "prim_pdf", "findable", "env_image",
+                                         "env_marginal", "env_conditional", "env_table"])
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width",
                                            "lens_radius", "focal_distance"])
@@ -100,7 +102,9 @@ def scene_records(scene):
                         np.full(extra, EMITTER, dtype=np.int64)]),
         pad(lights.radiance), pad(lights.position), pad(lights.direction), pad(lights.edge_x),
         pad(lights.edge_y), pad(lights.area), np.concatenate([faced, np.zeros(extra, np.int64)]),
-        prims, cdf, prim_pdf, bool(extra or np.isin(lights.kind, [AREA, AMBIENT]).any()))
+        prims, cdf, prim_pdf,
+        bool(extra or np.isin(lights.kind, [AREA, AMBIENT, ENVIRONMENT]).any()),
+        *environment_arrays(scene.environment))
     return shapes, materials, light_arrays
 
 
@@ -225,12 +229,12 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                  woz, tr, tg, tb):
     """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
-    Light sampling: -l samples of each area, ambient or emissive-geometry light and one of each
-    delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear
-    (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also carries its power
-    heuristic weight against the BSDF sample that trace_path takes next. With -H: -l uniform
-    hemisphere samples per light, each weighted f cos / (pdf n) times the emission its ray
-    finds."""
+    Light sampling: -l samples of each area, ambient, environment or emissive-geometry light and
+    one of each delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear
+    (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also
+    carries its power heuristic weight against the BSDF sample that trace_path takes next. With
+    -H: -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the
+    emission its ray finds (or the environment's radiance where it escapes)."""
     kind = materials.kind[m]
     base = vertex * DIMS_PER_VERTEX
     r = g = b = 0.0
@@ -254,6 +258,11 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             rays += 1
             t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, wx, wy, wz, 0.0, math.inf)
             if prim < 0:
+                if lights.env_image.shape[0] > 0:
+                    er, eg, eb = environment_radiance(lights.env_image, wx, wy, wz)
+                    r += tr * (fr * scale) * er
+                    g += tg * (fg * scale) * eg
+                    b += tb * (fb * scale) * eb
                 continue
             e = shapes.material_index[prim]
             if materials.kind[e] != EMISSION:
@@ -279,6 +288,11 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                     shapes.vertices, shapes.faces, shapes.centers, shapes.radii,
                     materials.emission, shapes.material_index, lights.emitter_prims,
                     lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
+            elif light_kind == ENVIRONMENT:
+                wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
+                                                     lights.env_table, u1, u2)
+                lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
+                dist = math.inf
             else:
                 lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
                     light_kind, lights.radiance, lights.position, lights.direction,
@@ -327,9 +341,9 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
 
     After a delta bounce (mirror, glass), which light sampling cannot follow, everything it
     sees counts whole: emissive geometry (a light's face included), area lights without a face,
-    and the ambient light if it escapes. After a non-delta bounce, only with multiple importance
+    and the ambient light and the environment if it escapes. After a non-delta bounce, only with multiple importance
     sampling: the area lights (faced or not; the face itself then does not count again), the
-    ambient light and the emissive primitives that are lights, each with its power heuristic
+    ambient light, the environment and the emissive primitives that are lights, each with its power heuristic
     weight against the light sampling that direct_light did at q (bsdf_pdf_ is this ray's
     density). Area lights are transparent, as in the course: a ray passes on through them."""
     r = g = b = 0.0
@@ -354,6 +368,15 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
             r += weight * lights.radiance[light, 0]
             g += weight * lights.radiance[light, 1]
             b += weight * lights.radiance[light, 2]
+        elif kind == ENVIRONMENT and prim < 0:
+            weight = 1.0
+            if not delta:
+                weight = power_heuristic(bsdf_pdf_, n * environment_pdf(lights.env_table, dx, dy,
+                                                                        dz))
+            er, eg, eb = environment_radiance(lights.env_image, dx, dy, dz)
+            r += weight * er
+            g += weight * eg
+            b += weight * eb
         elif kind == AMBIENT and prim < 0 and dy > 0.0:
             weight = 1.0 if delta else power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
             r += weight * lights.radiance[light, 0]
@@ -388,6 +411,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
                                                             t, prim, u, v)
     r = g = b = 0.0
     if m < 0:
+        if lights.env_image.shape[0] > 0:   # the environment is the background
+            r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
         return r, g, b, rays
     if kinds[m] == EMISSION:
         r, g, b = materials.emission[m, 0], materials.emission[m, 1], materials.emission[m, 2]

@@ -70,7 +70,7 @@ def sample_light(kind, radiance, position, direction, edge_x, edge_y, area, i,
 
 # -- emissive geometry as a light ------------------------------------------------------------------
 
-EMITTER = 5      # not a file's light kind: the integrator's one light over emissive primitives
+EMITTER = 99     # not a scene's light kind: the integrator's one light over emissive primitives
 PAIR_TOLERANCE = 1e-4   # relative to the emitter group's size: "lies on the light"
 
 

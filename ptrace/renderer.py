@@ -38,10 +38,10 @@ def scene_warnings(scene, settings):
     if settings.integrator == "path" and not emitters and len(scene.lights) == 0:
         out.append("the scene has no light and no emissive surface: the image will be black")
     elif settings.integrator == "path" and settings.hemisphere and settings.max_depth >= 1:
-        if not emitters:
-            out.append("hemisphere sampling (-H) sees only emissive geometry and this scene has "
-                       "none (its lights are point, directional, ambient or area lights without "
-                       "a mesh): direct light will be black")
+        if not emitters and scene.environment is None:
+            out.append("hemisphere sampling (-H) sees only emissive geometry and an environment "
+                       "and this scene has neither (its lights are point, directional, ambient "
+                       "or area lights without a mesh): direct light will be black")
     return out
 
 

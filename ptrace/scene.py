@@ -9,9 +9,11 @@ import accel
 DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET = range(6)
 BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet")
 
-# Light kinds (Lights.kind). The codes index LIGHT_NAMES.
-AMBIENT, DIRECTIONAL, POINT, AREA, SPOT = range(5)
+# Light kinds (Lights.kind). The codes index KIND_NAMES; LIGHT_NAMES are those a scene file
+# may name. ENVIRONMENT is added by Scene.with_environment (the course's -e), never by a file.
+AMBIENT, DIRECTIONAL, POINT, AREA, SPOT, ENVIRONMENT = range(6)
 LIGHT_NAMES = ("ambient", "directional", "point", "area", "spot")
+KIND_NAMES = LIGHT_NAMES + ("environment",)
 
 
 @dataclass(eq=False)
@@ -93,7 +95,7 @@ class Lights:
         """{"area": 1, ...}: how many lights of each kind."""
         out = {}
         for code in self.kind:
-            name = LIGHT_NAMES[code]
+            name = KIND_NAMES[code]
             out[name] = out.get(name, 0) + 1
         return out
 
@@ -125,6 +127,20 @@ class Scene:
     lights: Lights
     camera: CameraSpec = None
     notes: list = field(default_factory=list)   # what the loader decided (e.g. defaults given)
+    environment: object = None      # a ptrace.environment.Environment, with an ENVIRONMENT light
+
+    def with_environment(self, environment):
+        """This scene lit also by an environment (the course's -e): one more light, of kind
+        ENVIRONMENT, sampled by the image's luminance and seen by every ray that escapes. It
+        replaces an environment the scene had."""
+        import dataclasses
+        keep = self.lights.kind != ENVIRONMENT
+        lights = Lights(**{f.name: getattr(self.lights, f.name)[keep]
+                           for f in dataclasses.fields(Lights)})
+        one = Lights.from_records([{"kind": ENVIRONMENT, "radiance": (1.0, 1.0, 1.0)}])
+        joined = Lights(**{f.name: np.concatenate([getattr(lights, f.name), getattr(one, f.name)])
+                           for f in dataclasses.fields(Lights)})
+        return dataclasses.replace(self, lights=joined, environment=environment)
 
     @property
     def triangle_count(self):
