@@ -35,8 +35,15 @@ import numpy as np
 from numba import njit, prange
 
 from . import compiled
-from .kernels import (NO_HIT, better, row_triangle_hit, shear_setup, slab_setup, sphere_hit,
-                      triangle_test)
+from .kernels import (
+    NO_HIT,
+    better,
+    row_triangle_hit,
+    shear_setup,
+    slab_setup,
+    sphere_hit,
+    triangle_test,
+)
 from .types import Hits
 
 STACK_SIZE = 128

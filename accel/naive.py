@@ -10,8 +10,15 @@ import numpy as np
 from numba import njit
 
 from . import compiled
-from .kernels import (NO_HIT, better, mesh_triangle_hit, shear_setup, spheres_any,
-                      spheres_closest, triangle_test)
+from .kernels import (
+    NO_HIT,
+    better,
+    mesh_triangle_hit,
+    shear_setup,
+    spheres_any,
+    spheres_closest,
+    triangle_test,
+)
 from .types import Hits
 
 NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii", "triangle"])

@@ -79,6 +79,7 @@ def relative_mse(image, reference):
 def test_scene(name):
     """The loaded course scene without its emissive quad: what both renderers render."""
     import ptrace
+
     from .mitsuba_reference import without_emissive_primitives
     return without_emissive_primitives(ptrace.load(os.path.join(scenes_dir(), SCENES[name])))
 
@@ -101,7 +102,9 @@ class Mitsuba:
     def render(self, scene, spp, sampler="independent", seed=0, repeats=1, integrator="path"):
         """(image, seconds of the fastest of `repeats` timed renders, actual spp)."""
         import drjit as dr
+
         from ptrace.camera import course_camera
+
         from .mitsuba_reference import mitsuba_scene, register_schlick_glass
         mi = self.mi
         if not self.schlick:

@@ -238,6 +238,7 @@ def mitsuba_scene(scene, camera, max_depth, spp, seed, workdir, emissive=False,
     glass to register_schlick_glass's BSDF (register it first) instead of `dielectric`;
     integrator "volpath" does not count the light rectangle's null BSDF as a bounce."""
     import mitsuba as mi
+
     from ptrace.scene import AREA, EMISSION, LIGHT_NAMES
     materials = scene.materials
     used = np.unique(scene.material_index)
@@ -314,6 +315,7 @@ def mitsuba_scene(scene, camera, max_depth, spp, seed, workdir, emissive=False,
 def pixel_reference(name, spp, batches, variant, threads, glass="dielectric"):
     """Render per-pixel case `name` in Mitsuba: (arrays to save, seconds)."""
     import drjit as dr
+
     from .paths_per_second import import_mitsuba, set_variant
     mi, libllvm, note = import_mitsuba()
     if mi is None:

@@ -224,6 +224,7 @@ def measure_mitsuba(mi, variant, scene, scene_name, spp, resolution, repeats, ma
     """Time `repeats` Mitsuba renders of the mapped scene (seed r for repeat r) in the current
     variant; on llvm variants one untimed render first (JIT compilation)."""
     import drjit as dr
+
     from ptrace.camera import course_camera
     camera = course_camera(scene, *resolution)
     with tempfile.TemporaryDirectory() as workdir:

@@ -10,7 +10,13 @@ threads, kernels compiled beforehand), and the README's render cold (an empty nu
 warm (median of 3), beside `ptrace --info` (interpreter, imports and loading alone). These
 machines are noisy and their speed changes from day to day: quote the ratios.
 """
-import json, os, subprocess, sys, tempfile, time
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
 S = os.environ.get('PTRACE_SCENES', os.path.join(os.path.dirname(__file__), '..', '..', 'shared', 'scenes', 'cs184')) + '/'
 SHIPPED = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'scenes', 'cornell.dae')
 NEW = dict(os.environ)

@@ -42,7 +42,7 @@ from accel.embree import EmbreeAccelerator
 from ptrace.integrator import OFFSET
 
 from . import report
-from .templating import blocks, fill, join, pinned_ids, output_path, plain, save_json
+from .templating import blocks, fill, join, output_path, pinned_ids, plain, save_json
 
 REPRODUCE = "python -m benchmarks.stability"
 AXIS = np.array([1.0, 0.7, 0.3]) / np.linalg.norm([1.0, 0.7, 0.3])   # direction of every offset

@@ -45,8 +45,17 @@ import ptrace
 from ptrace import integrator, tiles
 from ptrace.camera import Camera, course_camera
 from ptrace.integrator import LUMINANCE
-from ptrace.scene import (AREA, DIFFUSE, EMISSION, POINT, CameraSpec, Lights, Materials, Scene,
-                          area_weighted_normals)
+from ptrace.scene import (
+    AREA,
+    DIFFUSE,
+    EMISSION,
+    POINT,
+    CameraSpec,
+    Lights,
+    Materials,
+    Scene,
+    area_weighted_normals,
+)
 from ptrace.settings import Settings
 from ptrace.tiles import TileWork, new_sums
 

@@ -4,8 +4,8 @@ from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError
 from .io import load
 from .renderer import render
-from .settings import Settings
 from .scene import Scene
+from .settings import Settings
 
 __all__ = ["Camera", "Environment", "PtraceError", "SceneError", "Scene", "Settings",
            "course_camera", "load", "load_environment", "render"]

@@ -63,6 +63,7 @@ def _positive_float(name):
 
 def build_parser():
     import accel
+
     from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")

@@ -32,10 +32,21 @@ from numba import njit
 from accel.compiled import any_hit, closest_hit
 
 from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
-from .environment import (LUMINANCE, environment_arrays, environment_pdf, environment_radiance,
-                          environment_sample)
-from .lights import EMITTER, area_light_hit, emitter_arrays, light_is_delta, sample_emitter, \
-    sample_light
+from .environment import (
+    LUMINANCE,
+    environment_arrays,
+    environment_pdf,
+    environment_radiance,
+    environment_sample,
+)
+from .lights import (
+    EMITTER,
+    area_light_hit,
+    emitter_arrays,
+    light_is_delta,
+    sample_emitter,
+    sample_light,
+)
 from .sampling import sobol_1d, sobol_2d, uniform
 from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, REFRACTION
 

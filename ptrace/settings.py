@@ -7,8 +7,8 @@ import numpy as np
 import accel
 
 from .errors import PtraceError
-from .lights import emitter_arrays
 from .integrator import INDEPENDENT, NORMALS, PATH, RR_CAP, RR_DEPTH, SOBOL, Options
+from .lights import emitter_arrays
 from .scene import DIRECTIONAL, POINT
 
 INTEGRATORS = ("path", "normals")

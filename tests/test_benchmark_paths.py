@@ -110,6 +110,7 @@ def test_mitsuba_rows_agree_with_ptrace(tmp_path, monkeypatch, scenes_dir):
 @pytest.mark.skipif(importlib.util.find_spec("mitsuba") is None, reason="mitsuba not installed")
 def test_emissive_quad_maps_to_a_black_non_emitter(tmp_path, spheres):
     import mitsuba as mi
+
     from ptrace.camera import course_camera
     from ptrace.scene import EMISSION
     mi.set_variant("scalar_rgb")

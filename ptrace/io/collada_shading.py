@@ -3,8 +3,21 @@ import math
 
 import numpy as np
 
-from ..scene import (AMBIENT, AREA, DIFFUSE, DIRECTIONAL, EMISSION, GLASS, LIGHT_NAMES,
-                     MICROFACET, MIRROR, POINT, REFRACTION, SPOT, CameraSpec)
+from ..scene import (
+    AMBIENT,
+    AREA,
+    DIFFUSE,
+    DIRECTIONAL,
+    EMISSION,
+    GLASS,
+    LIGHT_NAMES,
+    MICROFACET,
+    MIRROR,
+    POINT,
+    REFRACTION,
+    SPOT,
+    CameraSpec,
+)
 from .collada_geometry import cgl_techniques
 
 DEFAULT_ALBEDO = (0.5, 0.5, 0.5)

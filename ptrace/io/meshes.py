@@ -65,7 +65,7 @@ def _read_triangles(path):
     in. The file is read unprocessed first, to count the faces trimesh's processing would drop
     without a word, then each geometry is processed as trimesh's loader would (merged vertices,
     non-finite faces removed)."""
-    import trimesh     # imported here: only mesh files need it
+    import trimesh  # imported here: only mesh files need it
 
     try:
         scene = trimesh.load_scene(path, process=False)

@@ -6,10 +6,9 @@ import numpy as np
 import pytest
 
 import accel
+import ptrace
 from accel import raygen
 from accel.bvh import STACK_SIZE
-
-import ptrace
 
 COURSE_MESHES = ["meshedit/cow.dae", "meshedit/teapot.dae", "sky/CBbunny.dae",
                  "sky/CBspheres.dae", "meshedit/maxplanck.dae"]

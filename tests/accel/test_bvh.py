@@ -3,10 +3,9 @@ import numpy as np
 import pytest
 
 import accel
+import ptrace
 from accel import raygen
 from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, WIDTH
-
-import ptrace
 
 
 def check_invariants(bvh):

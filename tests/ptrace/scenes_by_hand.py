@@ -3,8 +3,17 @@ import numpy as np
 
 import accel
 from ptrace.camera import Camera
-from ptrace.scene import (AMBIENT, DIFFUSE, DIRECTIONAL, POINT, CameraSpec, Lights, Materials,
-                          Scene, area_weighted_normals)
+from ptrace.scene import (
+    AMBIENT,
+    DIFFUSE,
+    DIRECTIONAL,
+    POINT,
+    CameraSpec,
+    Lights,
+    Materials,
+    Scene,
+    area_weighted_normals,
+)
 
 
 def make_scene(vertices=None, faces=None, centers=None, radii=None, materials=(),

@@ -10,8 +10,13 @@ import pytest
 import ptrace
 from ptrace.image import course_8bit, read_image
 
-from console import (INTERRUPTED_SPP, SHIPPED, check_interrupted_render, interrupt_once_rendering,
-                     run)
+from console import (
+    INTERRUPTED_SPP,
+    SHIPPED,
+    check_interrupted_render,
+    interrupt_once_rendering,
+    run,
+)
 
 
 def test_help():

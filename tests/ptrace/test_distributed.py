@@ -9,7 +9,7 @@ import threading
 import time
 import uuid
 
-import cloudpickle   # comes with dask[distributed], which the test extra installs
+import cloudpickle  # comes with dask[distributed], which the test extra installs
 import dask.distributed as dd
 import numpy as np
 import pytest
@@ -19,8 +19,13 @@ from ptrace import cli, distributed
 from ptrace.errors import PtraceError
 from ptrace.image import read_image
 
-from console import (INTERRUPTED_SPP, SHIPPED, check_interrupted_render, interrupt_once_rendering,
-                     run)
+from console import (
+    INTERRUPTED_SPP,
+    SHIPPED,
+    check_interrupted_render,
+    interrupt_once_rendering,
+    run,
+)
 
 pytestmark = pytest.mark.slow
 # functions below run on workers and the scheduler: send them by value (tests/ is not a package
@@ -290,7 +295,7 @@ def test_missing_dask_says_how_to_install(tmp_path):
 
 
 def test_local_cluster_listens_on_loopback_only(client):
-    import psutil   # comes with dask[distributed]
+    import psutil  # comes with dask[distributed]
     me = psutil.Process()
     listening = [c.laddr for p in [me] + me.children(recursive=True)
                  for c in p.net_connections(kind="inet") if c.status == psutil.CONN_LISTEN]

@@ -11,8 +11,14 @@ from scipy import stats
 
 import ptrace
 from ptrace.camera import Camera
-from ptrace.environment import (Environment, environment_arrays, environment_pdf,
-                                environment_radiance, environment_sample, load_environment)
+from ptrace.environment import (
+    Environment,
+    environment_arrays,
+    environment_pdf,
+    environment_radiance,
+    environment_sample,
+    load_environment,
+)
 from ptrace.scene import DIFFUSE
 
 from scenes_by_hand import make_scene

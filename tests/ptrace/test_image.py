@@ -1,7 +1,7 @@
 """Output files are written whole or not at all (the README's promise): a write that fails
 leaves the previous file byte-identical and no temporary behind; one that succeeds replaces it."""
-import OpenImageIO as oiio
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 
 from ptrace.errors import PtraceError

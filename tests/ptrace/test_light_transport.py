@@ -8,8 +8,16 @@ import pytest
 import ptrace
 from ptrace.scene import AREA
 
-from scenes_by_hand import (ambient_light, directional_light, floor_plane, furnace, looking_down,
-                            make_scene, pixel_hits_on_floor, point_light)
+from scenes_by_hand import (
+    ambient_light,
+    directional_light,
+    floor_plane,
+    furnace,
+    looking_down,
+    make_scene,
+    pixel_hits_on_floor,
+    point_light,
+)
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 

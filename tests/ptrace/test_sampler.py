@@ -12,8 +12,15 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from ptrace.sampling import (_reverse_bits32, _sobol_y, sobol_1d, sobol_1d_array, sobol_2d,
-                             sobol_2d_array, uniform_array)
+from ptrace.sampling import (
+    _reverse_bits32,
+    _sobol_y,
+    sobol_1d,
+    sobol_1d_array,
+    sobol_2d,
+    sobol_2d_array,
+    uniform_array,
+)
 
 # -- pure-Python reference -------------------------------------------------------------------------
 M32 = (1 << 32) - 1
