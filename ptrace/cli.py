@@ -214,9 +214,6 @@ def run(argv):
     if args.environment is not None:
         from .environment import load_environment
         scene = scene.with_environment(load_environment(args.environment))
-    if not args.quiet and not args.info:
-        for line in grouped_notes(scene.notes):   # what the loader ignored, changed or assumed
-            print(f"ptrace: note: {line}", file=sys.stderr)
     if args.info:
         print(json.dumps(scene_info(scene), indent=2))
         return 0
@@ -266,6 +263,10 @@ def run(argv):
           f"{where}accel {args.accel}{split} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
+    if not args.quiet:   # what the loader ignored, changed or assumed (after the render, so that
+        # an error stays the one line it promises to be)
+        for line in grouped_notes(scene.notes):
+            print(f"ptrace: note: {line}", file=sys.stderr)
     if stats["interrupted"]:
         print("ptrace: interrupted: wrote the samples rendered so far", file=sys.stderr)
         return EXIT_INTERRUPTED
