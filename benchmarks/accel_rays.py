@@ -461,16 +461,10 @@ def main(argv=None):
     parser.add_argument("--output", default="accel_rays.md",
                         help="report path (relative: inside benchmarks/results/); the chart "
                              "goes beside it with the extension .png")
-    args = parser.parse_args(argv)
+    args = report.quick_defaults(
+        parser.parse_args(argv), rays=(20_000, 1_000_000), naive_budget=(1e7, 1e8),
+        repeats=(1, 3), synthetic=(list(synthetic.QUICK_SERIES), list(synthetic.SERIES)))
     quick = args.quick
-    if args.rays is None:
-        args.rays = 20_000 if quick else 1_000_000
-    if args.naive_budget is None:
-        args.naive_budget = 1e7 if quick else 1e8
-    if args.repeats is None:
-        args.repeats = 1 if quick else 3
-    if args.synthetic is None:
-        args.synthetic = list(synthetic.QUICK_SERIES if quick else synthetic.SERIES)
     args.threads = sorted(set(args.threads))
     numba.set_num_threads(max(args.threads))
     started = time.perf_counter()
@@ -482,8 +476,7 @@ def main(argv=None):
         results.append(measure(label, geometry, light, args))
 
     load_after = os.getloadavg()[0]
-    report_path = report.RESULTS / args.output      # an absolute --output stays as it is
-    report_path.parent.mkdir(parents=True, exist_ok=True)
+    report_path = report.destination(args.output)
     chart_path = chart(results, args, report_path.with_suffix(".png"))
     cold = ("numba compile with an empty cache (fresh process): "
             + ", ".join(f"{k} {v:.1f} s" for k, v in cold_seconds.items()) + "; "

@@ -529,23 +529,14 @@ def main(argv=None):
     parser.add_argument("--output", default="course_comparison.md",
                         help="report path (relative: inside benchmarks/results/); the chart "
                              "goes beside it with the extension .png")
-    args = parser.parse_args(argv)
+    args = report.quick_defaults(
+        parser.parse_args(argv), repeats=(1, 3), naive_shrink=(1, 4), commands=(QUICK, FULL),
+        torus=([1024, 4096, 16384], list(synthetic.SERIES)), rays=(50_000, 1_000_000),
+        naive_budget=(1e7, 1e8))
     quick = args.quick
-    if args.repeats is None:
-        args.repeats = 1 if quick else 3
-    if args.naive_shrink is None:
-        args.naive_shrink = 1 if quick else 4
-    if args.commands is None:
-        args.commands = QUICK if quick else FULL
     unknown = [name for name in args.commands if name not in ALL_COMMANDS]
     if unknown:
         raise SystemExit(f"unknown command(s) {unknown}; choose from {list(ALL_COMMANDS)}")
-    if args.torus is None:
-        args.torus = [1024, 4096, 16384] if quick else list(synthetic.SERIES)
-    if args.rays is None:
-        args.rays = 50_000 if quick else 1_000_000
-    if args.naive_budget is None:
-        args.naive_budget = 1e7 if quick else 1e8
     resolution = QUICK_RESOLUTION if quick else RESOLUTION
     spp_scale = QUICK_SPP_SCALE if quick else 1
 
@@ -564,8 +555,7 @@ def main(argv=None):
     minutes = (time.perf_counter() - start) / 60
     load_after = os.getloadavg()[0]
 
-    report_path = report.RESULTS / args.output       # an absolute --output stays as it is
-    report_path.parent.mkdir(parents=True, exist_ok=True)
+    report_path = report.destination(args.output)
     chart_path = chart(rows, f, report_path.with_suffix(".png")) if f else None
     lines = [report.header("The course's comparisons: normal shading, the seed's commands, "
                            "and the speedup's growth"),

@@ -1,4 +1,6 @@
-"""The header every benchmark report starts with: machine, date, versions, exact command."""
+"""The header every benchmark report starts with (machine, date, versions, exact command),
+where reports go (RESULTS: `destination`, `write`) and the defaults --quick picks
+(`quick_defaults`)."""
 import datetime
 import os
 import platform
@@ -37,6 +39,23 @@ def header(title):
         f"- date: {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}",
         f"- python {platform.python_version()}; " + ", ".join(versions),
         f"- command: `{command}`", "", ""])
+
+
+def destination(name):
+    """RESULTS / name (an absolute name stays as it is), its folder made: where a report that
+    saves files beside it goes."""
+    path = RESULTS / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def quick_defaults(args, **defaults):
+    """Fill in the arguments of args left None: defaults[name] is (its value with --quick,
+    its value without), chosen by args.quick. Returns args."""
+    for name, (quick, full) in defaults.items():
+        if getattr(args, name) is None:
+            setattr(args, name, quick if args.quick else full)
+    return args
 
 
 def write(name, text):

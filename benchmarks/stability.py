@@ -24,7 +24,6 @@ entries, checked to exist in their files when the report is written. The geometr
 
 tests/test_benchmark_stability_geometry.py pins the claims of the report with the helpers below.
 """
-import argparse
 import inspect
 import math
 import os
@@ -41,8 +40,8 @@ from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, BVHAccelerator
 from accel.embree import EmbreeAccelerator
 from ptrace.integrator import OFFSET
 
-from . import report
-from .templating import blocks, fill, join, output_path, pinned_ids, plain, save_json
+from . import templating
+from .templating import blocks, fill, join, pinned_ids, pins_by_file, plain
 
 REPRODUCE = "python -m benchmarks.stability"
 AXIS = np.array([1.0, 0.7, 0.3]) / np.linalg.norm([1.0, 0.7, 0.3])   # direction of every offset
@@ -51,34 +50,36 @@ COW_SEED = 3        # section 3's rays
 TEMPLATE = "stability.md"
 GEOMETRY_TESTS = "tests/test_benchmark_stability_geometry.py"
 STABILITY_TESTS = "tests/ptrace/test_stability.py"
-# claim -> (test file, test function): the tests the report quotes, by the field names of the
-# template (`{test[claim]}` prints file::function, `{short[claim]}` ::function)
-PINS = {
-    "bounded": (GEOMETRY_TESTS, "test_bvh_build_is_bounded_and_exact"),
-    "coincident": (GEOMETRY_TESTS, "test_coincident_centroids_give_a_balanced_count_split_tree"),
-    "few_visits": (GEOMETRY_TESTS, "test_bvh_visits_few_nodes_where_the_split_still_works"),
-    "overlap": (GEOMETRY_TESTS, "test_bvh_gains_nothing_when_all_boxes_overlap"),
-    "watertight": (GEOMETRY_TESTS, "test_the_watertight_test_never_leaks_on_closed_meshes"),
-    "crack_bound": (GEOMETRY_TESTS, "test_moller_trumbore_leaks_stay_bounded"),
-    "embree_closed": (GEOMETRY_TESTS, "test_embree_never_leaks_on_closed_meshes"),
-    "random": (GEOMETRY_TESTS, "test_random_rays_do_not_leak"),
-    "not_watertight": (GEOMETRY_TESTS, "test_moller_trumbore_is_not_watertight"),
-    "far": (GEOMETRY_TESTS, "test_embree_agrees_with_bvh_far_from_origin"),
-    "far_camera": ("tests/accel/test_embree_far_camera.py",
-                   "test_a_far_camera_agrees_with_bvh_on_the_cow"),
-    "far_camera_teeth": ("tests/accel/test_embree_far_camera.py",
-                         "test_without_the_clipping_a_far_camera_disagrees"),
-    "outliers": (GEOMETRY_TESTS, "test_embree_recentring_survives_far_outliers"),
-    "self_hit": (STABILITY_TESTS, "test_spawned_rays_never_rehit_their_own_triangle"),
-    "spheres": (STABILITY_TESTS, "test_spawned_rays_leave_spheres"),
-    "quad_shadow": ("tests/ptrace/test_light_transport.py",
-                    "test_the_quad_on_the_area_light_does_not_shadow_it"),
-    "wide_floor": ("tests/test_benchmark_stability_light.py",
-                   "test_emitter_on_the_light_does_not_shadow_a_wide_floor"),
-    "non_finite": (STABILITY_TESTS, "test_no_non_finite_pixel_in_any_course_scene"),
-    "malformed": ("tests/ptrace/test_malformed_corpus.py",
-                  "test_every_malformed_file_fails_cleanly"),
-}
+# claim -> (test file, test function), written file by file: the tests the report quotes, by
+# the field names of the template (`{test[claim]}` prints file::function, `{short[claim]}`
+# ::function)
+PINS = pins_by_file({
+    GEOMETRY_TESTS: {
+        "bounded": "test_bvh_build_is_bounded_and_exact",
+        "coincident": "test_coincident_centroids_give_a_balanced_count_split_tree",
+        "few_visits": "test_bvh_visits_few_nodes_where_the_split_still_works",
+        "overlap": "test_bvh_gains_nothing_when_all_boxes_overlap",
+        "watertight": "test_the_watertight_test_never_leaks_on_closed_meshes",
+        "crack_bound": "test_moller_trumbore_leaks_stay_bounded",
+        "embree_closed": "test_embree_never_leaks_on_closed_meshes",
+        "random": "test_random_rays_do_not_leak",
+        "not_watertight": "test_moller_trumbore_is_not_watertight",
+        "far": "test_embree_agrees_with_bvh_far_from_origin",
+        "outliers": "test_embree_recentring_survives_far_outliers"},
+    "tests/accel/test_embree_far_camera.py": {
+        "far_camera": "test_a_far_camera_agrees_with_bvh_on_the_cow",
+        "far_camera_teeth": "test_without_the_clipping_a_far_camera_disagrees"},
+    STABILITY_TESTS: {
+        "self_hit": "test_spawned_rays_never_rehit_their_own_triangle",
+        "spheres": "test_spawned_rays_leave_spheres",
+        "non_finite": "test_no_non_finite_pixel_in_any_course_scene"},
+    "tests/ptrace/test_light_transport.py": {
+        "quad_shadow": "test_the_quad_on_the_area_light_does_not_shadow_it"},
+    "tests/test_benchmark_stability_light.py": {
+        "wide_floor": "test_emitter_on_the_light_does_not_shadow_a_wide_floor"},
+    "tests/ptrace/test_malformed_corpus.py": {
+        "malformed": "test_every_malformed_file_fails_cleanly"},
+})
 
 
 # -- shared helpers ----------------------------------------------------------------------------
@@ -137,6 +138,16 @@ def save_chart(plt, figure, chart_dir, name):
     figure.savefig(Path(chart_dir) / name, dpi=100)
     plt.close(figure)
     return name
+
+
+def rate_axis(axis, xlabel, ylabel):
+    """A chart of rates against sizes: log x, y from 0 to 1.5 on a symlog scale (linear below
+    1e-3, so a rate of 0 shows)."""
+    axis.set_xscale("log")
+    axis.set_yscale("symlog", linthresh=1e-3)
+    axis.set_ylim(0, 1.5)
+    axis.set_xlabel(xlabel)
+    axis.set_ylabel(ylabel)
 
 
 def exponent(x):
@@ -584,11 +595,7 @@ def chart_cracks(chart_dir, data):
             xs.append(ratio)
             ys.append(np.mean(cells))
         by_ratio.plot(xs, ys, style, label=label)
-    by_scale.set_xscale("log")
-    by_scale.set_yscale("symlog", linthresh=1e-3)
-    by_scale.set_ylim(0, 1.5)
-    by_scale.set_xlabel("scale s (mean over |d|)")
-    by_scale.set_ylabel("leak rate (icosphere + cube)")
+    rate_axis(by_scale, "scale s (mean over |d|)", "leak rate (icosphere + cube)")
     by_ratio.set_xscale("log")
     by_ratio.set_xlabel("offset / scale, |d|/s (mean over cells)")
     by_ratio.legend()
@@ -723,11 +730,7 @@ def chart_far(chart_dir, data):
               label="cow at origin, ray origins R away (not clipped: before)")
     axes.plot(data["distances"], [r["any"] for r in data["camera"]], "-D",
               label="cow at origin, ray origins R away (clipped to the box: ptrace)")
-    axes.set_xscale("log")
-    axes.set_yscale("symlog", linthresh=1e-3)
-    axes.set_ylim(0, 1.5)
-    axes.set_xlabel("distance from the origin m (or R)")
-    axes.set_ylabel("fraction of rays disagreeing with bvh")
+    rate_axis(axes, "distance from the origin m (or R)", "fraction of rays disagreeing with bvh")
     axes.set_title("Embree (float32) vs bvh (float64), cow")
     axes.legend(fontsize=8)
     return save_chart(plt, figure, chart_dir, "stability_far.png")
@@ -782,36 +785,21 @@ def report_text(data, chart_dir):
     busy = run["niceness"] > 0 or run["load"] > 0.5
     notes = ([text["intro_quick"]] if run["quick"] else []) + \
         ([fill(text["intro_busy"], run)] if busy else [])
-    intro = fill(text["intro"], run, reproduce=REPRODUCE, notes="".join(n + " " for n in notes),
-                 quick_flag=" --quick" if run["quick"] else "")
     sections = [write(data.get(name), chart_dir) for name, _, write in SECTIONS]
-    return "\n".join([report.header(text["title"]), intro, "", "\n\n".join(sections), "",
-                      fill(text["total"], run), ""])
+    return templating.study_text(text, run, REPRODUCE, "".join(n + " " for n in notes), sections)
 
 
 def write_report(data, output="stability.md"):
     """Write data's report to output (relative to report.RESULTS, or absolute), its charts
     beside it and data itself as JSON beside it (same name, .json); return the report's path."""
-    path = report.RESULTS / output
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = report_text(data, path.parent)
-    save_json(path, data)
-    return report.write(path, text)
+    return templating.write_study(data, output, report_text)
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="fewer triangles and rays")
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--output", default=None,
-                        help="report path (relative to benchmarks/results/; default "
-                             "stability.md, or a temporary directory with --quick); charts "
-                             "and stability.json go beside it")
-    args = parser.parse_args(argv)
-    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    args = templating.study_arguments(argv, __doc__.splitlines()[0],
+                                      "fewer triangles and rays", "stability.md")
     pyplot()
-    output = output_path(args.output, args.quick, "stability.md")
-    path = write_report(measure(args.quick, numba.get_num_threads()), output)
+    path = write_report(measure(args.quick, numba.get_num_threads()), args.output)
     print(f"wrote {path} and {path.with_suffix('.json').name} beside it")
     return 0
 

@@ -28,7 +28,6 @@ direct="mis", RR and FIREFLY options).
 
 tests/test_benchmark_stability_light.py pins the claims of the report with the helpers below.
 """
-import argparse
 import dataclasses
 import json
 import math
@@ -59,8 +58,8 @@ from ptrace.scene import (
 from ptrace.settings import Settings
 from ptrace.tiles import TileWork, new_sums
 
-from . import report
-from .templating import blocks, fill, join, output_path, pinned_ids, plain, save_json
+from . import templating
+from .templating import blocks, fill, join, pinned_ids, plain
 
 REPRODUCE = "python -m benchmarks.stability_light"
 REPRODUCE_ALL = "python -m benchmarks.stability"
@@ -267,6 +266,15 @@ def save_chart(plt, figure, chart_dir, name):
     return name
 
 
+def label_log_axis(axis, xlabel, ylabel, title):
+    """Labels, title, legend and a grid on every decade, for a chart on log axes."""
+    axis.set_xlabel(xlabel)
+    axis.set_ylabel(ylabel)
+    axis.set_title(title)
+    axis.legend()
+    axis.grid(True, which="both", alpha=0.3)
+
+
 def settings_text(options):
     """The direct-light estimator and sampler that `options` render with, as render()'s
     keywords (`direct="light", sampler="independent"`), defaults filled in from Settings."""
@@ -414,11 +422,8 @@ def chart_hemisphere(chart_dir, sweep):
     axis.loglog(areas, [r["light"]["relvar"] for r in sweep], "s-", label="light sampling")
     a0, v0 = areas[0], sweep[0]["hemisphere"]["relvar"]
     axis.loglog(areas, [v0 * a0 / a for a in areas], ":", color="grey", label="1 / area")
-    axis.set_xlabel("light area (constant emitted power)")
-    axis.set_ylabel("per-sample variance / mean^2")
-    axis.set_title("Direct light on a floor: variance against light size")
-    axis.legend()
-    axis.grid(True, which="both", alpha=0.3)
+    label_log_axis(axis, "light area (constant emitted power)", "per-sample variance / mean^2",
+                   "Direct light on a floor: variance against light size")
     return save_chart(plt, figure, chart_dir, "stability_light_hemisphere.png")
 
 
@@ -682,23 +687,23 @@ def chart_roulette(chart_dir, runs, ref):
     left.errorbar(depths, [fixed[d]["mean"] for d in depths],
                   yerr=[2 * fixed[d]["stderr"] for d in depths], fmt="o-", label="no RR, fixed m")
     rr = [r for r in runs if r["rule"] != "off" and r["max_depth"] == 100]
-    for r, colour in zip(rr, [f"C{i}" for i in range(1, 9)]):
-        left.axhline(r["mean"], color=colour, linestyle="--", label=r["name"])
-    left.set_xscale("log", base=2)
-    left.set_xlabel("max depth (vertices)")
-    left.set_ylabel("image mean illuminance (+-2 s.e.)")
-    left.legend(fontsize=7)
-    left.grid(True, alpha=0.3)
+    depth_axis(left, rr, "mean", "image mean illuminance (+-2 s.e.)")
     right.plot(depths, [fixed[d]["rays"] for d in depths], "o-", label="no RR: rays / sample")
-    for r, colour in zip(rr, [f"C{i}" for i in range(1, 9)]):
-        right.axhline(r["rays"], color=colour, linestyle="--", label=r["name"])
-    right.set_xscale("log", base=2)
-    right.set_xlabel("max depth (vertices)")
-    right.set_ylabel("rays per sample")
-    right.legend(fontsize=7)
-    right.grid(True, alpha=0.3)
+    depth_axis(right, rr, "rays", "rays per sample")
     figure.suptitle("Cornell box: fixed depth against Russian roulette")
     return save_chart(plt, figure, chart_dir, "stability_light_roulette.png")
+
+
+def depth_axis(axis, rr, key, ylabel):
+    """One panel of the roulette chart, over the fixed-depth series already drawn on it: each
+    roulette run's `key` as a dashed line, log2 depths, labels, legend and grid."""
+    for r, colour in zip(rr, [f"C{i}" for i in range(1, 9)]):
+        axis.axhline(r[key], color=colour, linestyle="--", label=r["name"])
+    axis.set_xscale("log", base=2)
+    axis.set_xlabel("max depth (vertices)")
+    axis.set_ylabel(ylabel)
+    axis.legend(fontsize=7)
+    axis.grid(True, alpha=0.3)
 
 
 CLAMPS = (3, 10, 30, 100, 300, 1000)   # clamp thresholds, in multiples of the image mean
@@ -794,11 +799,8 @@ def chart_fireflies(chart_dir, stats):
                   label="energy lost (bias), %")
     axis.semilogx(ks, [100 * c["variance"] for c in stats["clamps"]], "s-",
                   label="variance kept, %")
-    axis.set_xlabel("clamp threshold (x image mean)")
-    axis.set_ylabel("%")
-    axis.set_title("CBspheres: what a per-sample clamp would cost")
-    axis.legend()
-    axis.grid(True, which="both", alpha=0.3)
+    label_log_axis(axis, "clamp threshold (x image mean)", "%",
+                   "CBspheres: what a per-sample clamp would cost")
     return save_chart(plt, figure, chart_dir, "stability_light_fireflies.png")
 
 
@@ -832,40 +834,23 @@ def report_text(data, chart_dir):
     """The stand-alone report of data ({"run": ..., section name: data})."""
     text = blocks(TEMPLATE)
     run = data["run"]
-    intro = fill(text["intro"], run, reproduce=REPRODUCE,
-                 notes=text["intro_quick"] + " " if run["quick"] else "",
-                 quick_flag=" --quick" if run["quick"] else "")
-    return "\n".join([report.header(text["title"]), intro, "",
-                      "\n\n".join(write_sections(data, chart_dir)), "",
-                      fill(text["total"], run), ""])
+    notes = text["intro_quick"] + " " if run["quick"] else ""
+    return templating.study_text(text, run, REPRODUCE, notes, write_sections(data, chart_dir))
 
 
 def write_report(data, output="stability_light.md"):
-    """Write data's report to output (relative to report.RESULTS, or absolute), its charts
-    beside it and data itself as JSON beside it (same name, .json); return the report's path."""
-    path = report.RESULTS / output
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = report_text(data, path.parent)
-    save_json(path, data)
-    return report.write(path, text)
+    """Write data's stand-alone report to output, its charts and JSON beside it (write_study)."""
+    return templating.write_study(data, output, report_text)
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="smaller images, fewer samples")
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--output", default=None,
-                        help="report path (relative to benchmarks/results/; default "
-                             "stability_light.md, or a temporary directory with --quick); "
-                             "charts and stability_light.json go beside it")
-    args = parser.parse_args(argv)
-    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
-    output = output_path(args.output, args.quick, "stability_light.md")
+    args = templating.study_arguments(argv, __doc__.splitlines()[0],
+                                      "smaller images, fewer samples", "stability_light.md")
     start = time.perf_counter()
     data = {"run": dict(quick=args.quick, threads=numba.get_num_threads())}
     data.update(measure(args.quick))
     data["run"]["seconds"] = time.perf_counter() - start
-    path = write_report(plain(data), output)
+    path = write_report(plain(data), args.output)
     print(f"wrote {path} and {path.with_suffix('.json').name} beside it")
     return 0
 

@@ -11,8 +11,14 @@ into the ids the report prints after checking that each function is defined in i
 renamed test stops the report from being written and fails the tests that write it.
 `quoted_tests` finds every test id a written report names, for the tests to check.
 
+A study's PINS may be written file by file (`pins_by_file`). Its main(argv) reads its command
+line with `study_arguments` (--quick, --threads, --output); `study_text` puts its report
+together (header, intro, sections, total) and `write_study` writes the report, its charts and
+its JSON side by side.
+
 Not a benchmark: it has no main(argv).
 """
+import argparse
 import ast
 import json
 import math
@@ -20,6 +26,7 @@ import re
 import tempfile
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from . import report
@@ -105,6 +112,13 @@ def defined_tests(path):
             if isinstance(node, ast.FunctionDef) and node.name.startswith("test_")}
 
 
+def pins_by_file(files):
+    """{claim: (test file, test function)}, a study's PINS, from {test file: {claim: test
+    function}}: the pins written file by file."""
+    return {claim: (path, function)
+            for path, claims in files.items() for claim, function in claims.items()}
+
+
 def pinned_ids(pins):
     """pins: {claim: (test file relative to the repository, test function)} -> the template
     fields {"test": {claim: "file::function"}, "short": {claim: "::function"}}, after checking
@@ -143,3 +157,40 @@ def output_path(output, quick, default):
     if quick and Path(report.RESULTS).resolve() == committed:
         return Path(tempfile.mkdtemp(prefix="ptrace-benchmarks-")) / default
     return report.RESULTS / default
+
+
+def study_arguments(argv, description, quick_help, default):
+    """A study's command line: --quick (quick_help says what it shrinks), --threads (2; numba
+    is set to it, at most to numba's maximum) and --output, which comes back as the report's
+    path (`output_path`: `default` unless given)."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--output", default=None,
+                        help=f"report path (relative to benchmarks/results/; default {default}, "
+                             "or a temporary directory with --quick); charts and "
+                             f"{Path(default).stem}.json go beside it")
+    args = parser.parse_args(argv)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    args.output = output_path(args.output, args.quick, default)
+    return args
+
+
+def study_text(text, run, reproduce, notes, sections):
+    """A study's whole report from its template's blocks `text`: the header (report.header of
+    text["title"]), the intro (text["intro"] filled from run, reproduce, notes and the run's
+    --quick flag), the sections (Markdown strings) and text["total"] filled from run."""
+    intro = fill(text["intro"], run, reproduce=reproduce, notes=notes,
+                 quick_flag=" --quick" if run["quick"] else "")
+    return "\n".join([report.header(text["title"]), intro, "", "\n\n".join(sections), "",
+                      fill(text["total"], run), ""])
+
+
+def write_study(data, output, report_text):
+    """Write the report report_text(data, chart folder) returns to output (relative to
+    report.RESULTS, or absolute), the charts it saves beside it and data itself as JSON beside
+    it (same name, .json); return the report's path."""
+    path = report.destination(output)
+    text = report_text(data, path.parent)
+    save_json(path, data)
+    return report.write(path, text)

@@ -10,11 +10,8 @@ the writer on made-up data and check that the text follows the numbers and that 
 names (stability.PINS) is defined, here or in the other test files it quotes.
 """
 import copy
-import json
 import math
-import re
 
-import numba
 import numpy as np
 import pytest
 
@@ -22,6 +19,8 @@ import accel
 from accel import raygen
 from accel.bvh import STACK_SIZE
 from benchmarks import report, stability, templating
+
+import study_checks as check
 
 N = 4000            # triangles per distribution (the report's --quick size)
 RAYS = 1000
@@ -233,6 +232,9 @@ def synthetic_data():
                               for kind in stability.FAR_KINDS})}
 
 
+GEOMETRY_CHARTS = ["stability_distributions.png", "stability_cracks.png", "stability_far.png"]
+
+
 @pytest.fixture
 def geometry_only(monkeypatch, tmp_path):
     """stability's report without the light-transport sections, written into tmp_path."""
@@ -240,58 +242,34 @@ def geometry_only(monkeypatch, tmp_path):
     monkeypatch.setattr(report, "RESULTS", tmp_path)
 
 
-def cells(row):
-    """The cells of a Markdown table row (an escaped pipe, \\|, is inside a cell)."""
-    return re.split(r"(?<!\\)\|", row.strip().strip("|"))
-
-
-def check_tables(text):
-    """Every table row has as many cells as its header."""
-    for table in re.findall(r"(?:^\|.*\|\n)+", text + "\n", re.M):
-        lines = table.strip().splitlines()
-        assert all(len(cells(line)) == len(cells(lines[0])) for line in lines), table
-
-
-def check_quoted_tests(text):
-    quoted = templating.quoted_tests(text)
-    assert quoted
-    for path, function in quoted:
-        assert function in templating.defined_tests(path), (path, function)
-    return quoted
-
-
 def test_report_follows_the_data(geometry_only, tmp_path):
     data = synthetic_data()
-    assert templating.plain(data) == json.loads(json.dumps(data)) == data
-    path = stability.write_report(data, "stability.md")
-    text = path.read_text()
-    assert json.loads(path.with_suffix(".json").read_text()) == data
-    for chart in ("stability_distributions.png", "stability_cracks.png", "stability_far.png"):
-        assert (tmp_path / chart).stat().st_size > 1000
-    check_tables(text)
-    quoted = check_quoted_tests(text)
+    _, text = check.written(stability.write_report, data, "stability.md")
+    check.charts(tmp_path, GEOMETRY_CHARTS)
+    check.tables(text)
+    quoted = check.quoted_tests(text)
     assert set(quoted) == set(stability.PINS.values())    # every pinned test is quoted
     # the figures are the data's
-    assert "| identical | the whole scene | 50% | bvh-mean | 0.013 | 1,999 | 700 | 12 |" in text
-    assert "the mean split ran at 2.0x and 50.0x naive's speed on them" in text
-    assert "leaked 0.03% of the rays aimed at the icosphere's edges" in text
-    assert "at most 3.0% in one cell, 1 of 110 cells" in text
-    assert "They leaked 2 rays in the whole grid" in text
-    assert "all in cells where |d|/s >= 1e+09" in text
-    assert "reached 0.1% at 1e4, 1.0% at 1e5 and 100.0% at 1e7" in text
-    assert "a camera R = 1e5 away from the cow disagreed on 0.1% of rays, at 1e7 on 10.0%" in text
-    assert "With the clipping a camera 1e5 away disagrees on 0.00% of rays" in text
-    assert "Total time 12 s." in text and "Quick mode (--quick)" in text
+    check.says(text,
+               "| identical | the whole scene | 50% | bvh-mean | 0.013 | 1,999 | 700 | 12 |",
+               "the mean split ran at 2.0x and 50.0x naive's speed on them",
+               "leaked 0.03% of the rays aimed at the icosphere's edges",
+               "at most 3.0% in one cell, 1 of 110 cells",
+               "They leaked 2 rays in the whole grid",
+               "all in cells where |d|/s >= 1e+09",
+               "reached 0.1% at 1e4, 1.0% at 1e5 and 100.0% at 1e7",
+               "a camera R = 1e5 away from the cow disagreed on 0.1% of rays, at 1e7 on 10.0%",
+               "With the clipping a camera 1e5 away disagrees on 0.00% of rays",
+               "Total time 12 s.", "Quick mode (--quick)")
     # ... and a changed number changes the report
     changed = copy.deepcopy(data)
     changed["distributions"]["results"]["identical"]["bvh-mean"]["rays_per_second"] = 3000.0
     changed["far"]["moved"]["embree-not-recentred"][5]["any"] = 0.6
     changed["cracks"]["grids"]["icosphere"]["naive-mt"]["leaked"][2][3] = 50
     again = stability.write_report(changed, "changed.md").read_text()
-    assert "the mean split ran at 3.0x and 50.0x" in again
-    assert "| identical | the whole scene | 50% | bvh-mean |" in again
-    assert "reached 0.1% at 1e4, 60.0% at 1e5" in again
-    assert "at most 5.0% in one cell" in again
+    check.says(again, "the mean split ran at 3.0x and 50.0x",
+               "| identical | the whole scene | 50% | bvh-mean |",
+               "reached 0.1% at 1e4, 60.0% at 1e5", "at most 5.0% in one cell")
     assert "identical grids" not in text             # the watertight naive != bvh in the data
     grids = changed["cracks"]["grids"]
     grids["cube"]["bvh"]["leaked"][0][0] = 0
@@ -300,36 +278,23 @@ def test_report_follows_the_data(geometry_only, tmp_path):
 
 
 def test_a_renamed_test_stops_the_report(geometry_only, monkeypatch):
-    monkeypatch.setitem(stability.PINS, "bounded",
-                        (stability.GEOMETRY_TESTS, "test_that_was_renamed"))
-    with pytest.raises(LookupError, match="test_that_was_renamed"):
-        stability.write_report(synthetic_data(), "stability.md")
+    check.renamed_pin_stops(monkeypatch, stability.PINS, "bounded",
+                            lambda: stability.write_report(synthetic_data(), "stability.md"))
 
 
 @pytest.mark.slow
 def test_quick_report_writes_markdown_json_and_charts(tmp_path, monkeypatch):
-    threads = numba.get_num_threads()
-    try:
-        assert stability.main(["--quick", "--output", str(tmp_path / "stability.md")]) == 0
-    finally:
-        numba.set_num_threads(threads)
-    text = (tmp_path / "stability.md").read_text()
+    text = check.quick_run(stability.main, tmp_path / "stability.md")
     for heading in ("## 1.", "## 2.", "## 3.", "## Hemisphere", "## Adaptive",
                     "## Russian roulette", "## Fireflies", "## Studied in the tests"):
         assert heading in text
     assert "NOT all exact" not in text and "DID NOT REPRODUCE" not in text
-    for chart in ("stability_distributions.png", "stability_cracks.png", "stability_far.png",
-                  "stability_light_hemisphere.png", "stability_light_adaptive.png",
-                  "stability_light_roulette.png", "stability_light_fireflies.png"):
-        assert (tmp_path / chart).stat().st_size > 1000
-    check_tables(text)
-    check_quoted_tests(text)
+    check.charts(tmp_path, GEOMETRY_CHARTS + [f"stability_light_{name}.png" for name in (
+        "hemisphere", "adaptive", "roulette", "fireflies")])
+    check.tables(text)
+    check.quoted_tests(text)
     # the report is a function of the JSON beside it: written again from it, the same text
-    data = json.loads((tmp_path / "stability.json").read_text())
+    data = check.written_again(monkeypatch, stability.write_report, tmp_path / "stability.md",
+                               skip=("- date", "- command"))
     assert data["run"]["quick"] and set(data) >= {"distributions", "cracks", "far", "light"}
-    monkeypatch.setattr(report, "RESULTS", tmp_path / "again")
-    again = stability.write_report(data, "stability.md").read_text()
-    body = [line for line in text.splitlines() if not line.startswith(("- date", "- command"))]
-    assert [line for line in again.splitlines()
-            if not line.startswith(("- date", "- command"))] == body
     assert not list(tmp_path.glob("*.tmp"))

@@ -12,19 +12,19 @@ writer on made-up data and check that the text follows the numbers and that ever
 (study.PINS) is defined here.
 """
 import copy
-import json
 import math
 import pathlib
-import re
 
 import numpy as np
 import pytest
 
 import ptrace
-from benchmarks import report, templating
+from benchmarks import report
 from benchmarks import stability_light as study
 from ptrace import integrator
 from ptrace.integrator import LUMINANCE
+
+import study_checks as check
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[1] / "scenes" / "cornell.dae"
 SIZE = (16, 12)
@@ -313,79 +313,56 @@ def synthetic_data():
                                   "CBspheres_lambertian.dae": firefly(2.4)})}
 
 
-def cells(row):
-    """The cells of a Markdown table row (an escaped pipe, \\|, is inside a cell)."""
-    return re.split(r"(?<!\\)\|", row.strip().strip("|"))
-
-
 def check_report(text):
-    """Every table row has as many cells as its header; every test named is one of PINS."""
-    for table in re.findall(r"(?:^\|.*\|\n)+", text + "\n", re.M):
-        lines = table.strip().splitlines()
-        assert all(len(cells(line)) == len(cells(lines[0])) for line in lines), table
-    quoted = templating.quoted_tests(text)
-    assert set(quoted) == set(study.PINS.values())
-    for path, function in quoted:
-        assert function in templating.defined_tests(path), (path, function)
+    """Every table row has as many cells as its header; the tests named are those of PINS."""
+    check.tables(text)
+    assert set(check.quoted_tests(text)) == set(study.PINS.values())
 
 
 def test_report_follows_the_data(tmp_path, monkeypatch):
     monkeypatch.setattr(report, "RESULTS", tmp_path)
     data = synthetic_data()
-    assert templating.plain(data) == json.loads(json.dumps(data)) == data
-    path = study.write_report(data, "light.md")
-    text = path.read_text()
-    assert json.loads(path.with_suffix(".json").read_text()) == data
-    for chart in ("hemisphere", "adaptive", "roulette", "fireflies"):
-        assert (tmp_path / f"stability_light_{chart}.png").stat().st_size > 1000
+    _, text = check.written(study.write_report, data, "light.md")
+    check.charts(tmp_path, [f"stability_light_{chart}.png"
+                            for chart in ("hemisphere", "adaptive", "roulette", "fireflies")])
     check_report(text)
     # the figures are the data's
-    assert "over a 100x smaller area -H's relvar grew 100x" in text
-    assert 'light samples alone with independent random numbers (`direct="light", ' \
-        'sampler="independent"`)' in text
-    assert "with batches of 16 it left 30% (*reflector*) and 30% (*hemisphere*)" in text
-    assert "-16.7% at 4 vertices, -10.00% at 8 in this box" in text
-    assert "(`direct=\"mis\", sampler=\"independent\"`: the standard errors" in text
-    assert "given explicitly, 0.95 reproduced the default run to the bit" in text
-    assert "Caps 0.95 and 0.8 gave the same image" in text
-    assert "on CBspheres the largest sample was 367x the mean" in text
-    assert "a clamp at 30x keeps 30% of it" in text and "1.0% at 30x here" in text
-    assert "| 1000 x mean | 0.03% | 1.00 | never |" in text
-    assert "Total time 7 s." in text
+    check.says(text,
+               "over a 100x smaller area -H's relvar grew 100x",
+               'light samples alone with independent random numbers (`direct="light", '
+               'sampler="independent"`)',
+               "with batches of 16 it left 30% (*reflector*) and 30% (*hemisphere*)",
+               "-16.7% at 4 vertices, -10.00% at 8 in this box",
+               "(`direct=\"mis\", sampler=\"independent\"`: the standard errors",
+               "given explicitly, 0.95 reproduced the default run to the bit",
+               "Caps 0.95 and 0.8 gave the same image",
+               "on CBspheres the largest sample was 367x the mean",
+               "a clamp at 30x keeps 30% of it", "1.0% at 30x here",
+               "| 1000 x mean | 0.03% | 1.00 | never |",
+               "Total time 7 s.")
     # ... and a changed number changes the report
     changed = copy.deepcopy(data)
     changed["adaptive"]["cases"]["reflector"]["table"][1]["course"]["false"] = 0.5
     changed["fireflies"]["scenes"]["CBspheres.dae"]["max"] = 30.0
     changed["roulette"]["runs"][7]["mean"] = 0.0602       # the default cap given explicitly
     again = study.write_report(changed, "changed.md").read_text()
-    assert "with batches of 16 it left 50% (*reflector*) and 30% (*hemisphere*)" in again
-    assert "on CBspheres the largest sample was 500x the mean" in again
-    assert "GIVEN EXPLICITLY, 0.95 DID NOT REPRODUCE the default run (mean 0.06020 against " \
-        "0.06010)" in again
+    check.says(again, "with batches of 16 it left 50% (*reflector*) and 30% (*hemisphere*)",
+               "on CBspheres the largest sample was 500x the mean",
+               "GIVEN EXPLICITLY, 0.95 DID NOT REPRODUCE the default run (mean 0.06020 against "
+               "0.06010)")
     assert "Caps 0.95 and 0.8" not in again
 
 
 def test_a_renamed_test_stops_the_report(tmp_path, monkeypatch):
-    monkeypatch.setitem(study.PINS, "replay", (study.TEST, "test_that_was_renamed"))
-    with pytest.raises(LookupError, match="test_that_was_renamed"):
-        study.write_sections(synthetic_data(), tmp_path)
+    check.renamed_pin_stops(monkeypatch, study.PINS, "replay",
+                            lambda: study.write_sections(synthetic_data(), tmp_path))
 
 
 @pytest.mark.slow
 def test_quick_report_writes_markdown_json_and_charts(tmp_path, monkeypatch):
-    import numba
-    threads = numba.get_num_threads()
-    try:
-        assert study.main(["--quick", "--output", str(tmp_path / "light.md")]) == 0
-    finally:
-        numba.set_num_threads(threads)
-    text = (tmp_path / "light.md").read_text()
+    text = check.quick_run(study.main, tmp_path / "light.md")
     check_report(text)
     assert "DID NOT REPRODUCE" not in text and "NO WARNING" not in text
-    data = json.loads((tmp_path / "light.json").read_text())
-    assert set(data) == {"run", *(name for name, _, _ in study.SECTIONS)}
     # the report is a function of the JSON beside it: written again from it, the same text
-    monkeypatch.setattr(report, "RESULTS", tmp_path / "again")
-    again = study.write_report(data, "light.md").read_text()
-    assert [line for line in again.splitlines() if not line.startswith("- date")] == \
-        [line for line in text.splitlines() if not line.startswith("- date")]
+    data = check.written_again(monkeypatch, study.write_report, tmp_path / "light.md")
+    assert set(data) == {"run", *(name for name, _, _ in study.SECTIONS)}
