@@ -48,8 +48,12 @@ def interrupt_once_rendering(args, timeout=600):
     master, slave = pty.openpty()
     # a terminal of 0 columns (a fresh pty's size) makes tqdm draw nothing
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+    # SIGINT back to its default in the child: a process started in the background (`cmd &`)
+    # ignores SIGINT and its children inherit that, and Python does not turn an ignored SIGINT
+    # into KeyboardInterrupt, so Ctrl-C would be lost and the render run to its end
     process = subprocess.Popen(ptrace_command() + [str(a) for a in args],
-                               stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave)
+                               stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=slave,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     os.close(slave)
     deadline = time.monotonic() + timeout
     terminal = b""
