@@ -18,10 +18,9 @@ count[n] is 0 for an interior node and the number of primitives for a leaf.
 Traversal does not walk that binary tree: after the build, `_collapse` folds it into a 4-wide
 tree (each wide node takes its binary node's two children, then keeps opening the interior child
 of largest surface area until it has four), which halves the nodes a ray visits and so the chain
-of dependent memory loads (measured side by side with the binary traversal, 2 threads, 1M rays,
-on cow, CBbunny and maxplanck: closest-hit random rays 1.17-1.31x faster, secondary rays
-1.18-1.24x, camera rays 0.99-1.07x; any-hit 1.13-2.9x. A prototype 8-wide tree was no faster on
-random rays and slower on camera rays; float32 boxes were slower). A wide node is one row of 32
+of dependent memory loads (the README's BVH departure gives the side-by-side figures against the
+binary traversal, and benchmarks/results/accel_rays.md the rays per second of today's; an 8-wide
+tree and float32 boxes were tried and were not faster). A wide node is one row of 32
 floats (256 bytes, 64-byte aligned): for each of the six planes lower x, y, z, upper x, y, z the
 value of its 4 children, then the 4 children's links, then their counts. A link is a wide node's
 row when its count is 0 and the first entry in `order` of a leaf otherwise; an unused slot has an

@@ -149,6 +149,7 @@ BAD_CALLS = {
 
 @pytest.mark.parametrize("name", list(BAD_CALLS))
 def test_errors_are_one_line_and_exit_2(tmp_path, name):
+    """The README's promise: any error a user can cause prints one line and exits with code 2."""
     args, fragment = BAD_CALLS[name]
     result = run(*args, SHIPPED, cwd=tmp_path)
     assert result.returncode == 2, (result.stdout, result.stderr)
@@ -159,6 +160,7 @@ def test_errors_are_one_line_and_exit_2(tmp_path, name):
 
 
 def test_scene_errors_are_one_line_and_exit_2(tmp_path):
+    """The README's promise: a bad scene file is one line naming the file, exit 2."""
     for content, fragment in [(None, "bad.dae"), ("<COLLADA><asset/>", "bad.dae"),
                               ("<notcollada/>", "COLLADA")]:
         path = tmp_path / "bad.dae"
@@ -172,7 +174,8 @@ def test_scene_errors_are_one_line_and_exit_2(tmp_path):
 
 
 def test_ctrl_c_writes_what_was_rendered(tmp_path):
-    """Ctrl-C (once the progress bar shows samples done) writes the samples summed so far and
+    """The README's promise (Ctrl-C, exit 130).
+    Ctrl-C (once the progress bar shows samples done) writes the samples summed so far and
     exits 130: the image is the same-seed render of exactly those samples."""
     output = tmp_path / "box.exr"
     resolution = (64, 48)
@@ -184,7 +187,8 @@ def test_ctrl_c_writes_what_was_rendered(tmp_path):
 
 @pytest.mark.slow
 def test_a_cold_cache_says_it_is_compiling_and_a_warm_one_does_not(tmp_path):
-    """With an empty numba cache the first render prints one line saying that it compiles (the
+    """The README's promise (the first run says it compiles).
+    With an empty numba cache the first render prints one line saying that it compiles (the
     first run used to sit at 0% for half a minute without a word); the next run loads the cache
     and says nothing."""
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))

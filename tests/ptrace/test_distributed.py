@@ -50,6 +50,7 @@ def both(scene, client, **options):
 
 
 def test_path_render_is_bit_identical(client, course_scene):
+    """The README's promise: a Dask render is bit-identical to an in-process one with the same seed."""
     scene = ptrace.load(course_scene("sky/CBspheres_lambertian.dae"))
     alone, spread, stats = both(scene, client, spp=4, light_samples=2, max_depth=5,
                                 resolution=(48, 36), seed=7)
@@ -87,6 +88,7 @@ def test_normals_and_adaptive_renders_are_bit_identical(client, course_scene):
 
 
 def test_each_worker_builds_once_per_scene(client, monkeypatch):
+    """The README's promise: each worker builds its BVH once per scene."""
     monkeypatch.setattr(distributed, "TASK_RAYS", 2000)   # many small tasks
     scene = ptrace.load(SHIPPED)
     before = client.run(lambda: distributed.builds)
@@ -117,7 +119,8 @@ def break_builds_on_the_workers(client, error):
 
 
 def test_a_user_error_in_a_task_names_the_tile_and_pass(client):
-    """A PtraceError on a worker (the user's: here, a backend the worker cannot build) comes
+    """The README's promise: an error inside a task names the tile and pass.
+    A PtraceError on a worker (the user's: here, a backend the worker cannot build) comes
     back as a PtraceError, one line naming the tile and the pass."""
     repair = break_builds_on_the_workers(client, PtraceError("no accelerator today"))
     try:
@@ -184,7 +187,8 @@ def test_the_bvh_split_reaches_the_workers(client):
 
 
 def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypatch):
-    """A worker killed (SIGKILL) while it holds a task, after it has finished one: the render
+    """The README's promise: a worker that dies mid-render costs only time.
+    A worker killed (SIGKILL) while it holds a task, after it has finished one: the render
     recovers (Dask reruns the lost tasks) and gives the in-process image. Each worker, after
     its first tile, holds its next task until the test says go, so the kill lands in the
     middle of the render whatever the speed; the waits are on Dask events, not on time."""
@@ -258,7 +262,9 @@ def test_cli_workers_writes_the_in_process_image(tmp_path):
 
 
 def test_cli_ctrl_c_cancels_and_writes_what_was_merged(tmp_path):
-    """Ctrl-C once the progress bar shows merged samples: the tasks are cancelled, exit 130,
+    """The README's promise (Ctrl-C cancels what is outstanding and writes what has been
+    merged).
+    Ctrl-C once the progress bar shows merged samples: the tasks are cancelled, exit 130,
     and the image is the same-seed in-process render of exactly the samples merged (tiles are
     merged in order, so a prefix of the pixels has one pass more than the rest)."""
     output = tmp_path / "box.exr"
@@ -272,6 +278,7 @@ def test_cli_ctrl_c_cancels_and_writes_what_was_merged(tmp_path):
 
 
 def test_default_mode_never_imports_dask():
+    """The README's promise: without the dask flags ptrace never imports dask."""
     code = ("import sys, ptrace; from ptrace import cli; "
             f"ptrace.render(ptrace.load({str(SHIPPED)!r}), spp=1, resolution=(8, 6)); "
             f"cli.main(['--info', {str(SHIPPED)!r}]); "
@@ -295,6 +302,7 @@ def test_missing_dask_says_how_to_install(tmp_path):
 
 
 def test_local_cluster_listens_on_loopback_only(client):
+    """The README's promise: --workers binds everything to 127.0.0.1."""
     import psutil  # comes with dask[distributed]
     me = psutil.Process()
     listening = [c.laddr for p in [me] + me.children(recursive=True)

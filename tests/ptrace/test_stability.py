@@ -5,7 +5,7 @@ import pytest
 
 import accel
 import ptrace
-from ptrace.integrator import OFFSET
+from ptrace.integrator import OFFSET, spawn
 
 SEED_FLAGS = [
     dict(max_depth=0), dict(max_depth=1), dict(max_depth=1, hemisphere=True),
@@ -50,8 +50,15 @@ def spawned_rays(scale, count=4000, seed=0):
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     direction *= np.sign(np.sum(direction * normal * side, axis=1))[:, None]
     magnitude = np.maximum(np.abs(points).max(axis=1), np.abs(corners).max(axis=(1, 2)))
-    origins = points + side * (OFFSET * magnitude)[:, None] * normal
-    return geometry, accel.Rays(origins, direction), np.arange(count)
+    return geometry, accel.Rays(spawned(points, normal, OFFSET * magnitude, direction),
+                                direction), np.arange(count)
+
+
+def spawned(points, normals, offsets, directions):
+    """The path loop's own spawn (ptrace.integrator.spawn: along the geometric normal, on the
+    side of the new direction) of each ray."""
+    return np.array([spawn(*p, *g, e, *w) for p, g, e, w in zip(points, normals, offsets,
+                                                                  directions)])
 
 
 @pytest.mark.parametrize("kind", accel.KINDS)
@@ -79,7 +86,7 @@ def test_spawned_rays_leave_spheres(kind):
         direction = rng.normal(size=(500, 3))
         direction *= np.sign(np.sum(direction * normal * side, axis=1))[:, None]
         magnitude = np.maximum(np.abs(points).max(axis=1), np.abs(centres).max(axis=1) + radii)
-        origins = points + side * (OFFSET * magnitude)[:, None] * normal
+        origins = spawned(points, normal, OFFSET * magnitude, direction)
         hits = accel.build(kind, geometry).intersect(accel.Rays(origins, direction))
         own = np.arange(500)
         # leaving outward: never the own sphere; leaving inward: the own sphere's far side only
