@@ -5,7 +5,9 @@ Four kinds, each deterministic for a given seed:
 - camera_rays: a pinhole camera outside the bounds looking at the centre, one ray per pixel;
 - surface_rays: from random points on random triangles, in random directions, with a small tmin;
 - shadow_rays: segments from surface_rays' points to random points on a small square light above
-  the bounds (or a given parallelogram light), for any-hit (occluded) queries.
+  the bounds (or a given parallelogram light), for any-hit (occluded) queries;
+- distant_rays: from random points on a sphere of a given (large) radius around the bounds'
+  centre toward random points inside: a camera far from the geometry.
 """
 import numpy as np
 
@@ -32,6 +34,16 @@ def sphere_rays(geometry, n, seed=0):
     centre, radius = _frame(geometry)
     origins = centre + 1.5 * radius * _unit_vectors(rng, n)
     lower, upper = geometry.bounds() if geometry.primitive_count else (centre - 1, centre + 1)
+    targets = lower + rng.random((n, 3)) * (upper - lower)
+    return Rays(origins, targets - origins)
+
+
+def distant_rays(geometry, n, distance, seed=0):
+    """n rays from a sphere of radius `distance` about the bounds' centre, each aimed at a
+    random point of the bounds; seed may be a numpy Generator (draws continue from it)."""
+    rng = np.random.default_rng(seed)
+    lower, upper = geometry.bounds()
+    origins = 0.5 * (lower + upper) + distance * _unit_vectors(rng, n)
     targets = lower + rng.random((n, 3)) * (upper - lower)
     return Rays(origins, targets - origins)
 

@@ -154,6 +154,19 @@ class Hits:
     u: np.ndarray
     v: np.ndarray
 
+    def disagreement(self, reference, t_tolerance=1e-4):
+        """Fractions of rays on which these hits differ from reference's: hit against miss,
+        another primitive, t off by more than t_tolerance relative, and any of the three (to
+        compare a float32 backend with a float64 one, in tests and benchmarks)."""
+        hit_miss = (reference.prim >= 0) != (self.prim >= 0)
+        both = (reference.prim >= 0) & (self.prim >= 0)
+        other_prim = both & (reference.prim != self.prim)
+        relative = np.zeros(len(reference.prim))
+        relative[both] = np.abs(self.t[both] - reference.t[both]) / np.abs(reference.t[both])
+        far_t = both & (relative > t_tolerance)
+        return {"hit_miss": float(hit_miss.mean()), "prim": float(other_prim.mean()),
+                "t": float(far_t.mean()), "any": float((hit_miss | other_prim | far_t).mean())}
+
     @classmethod
     def empty(cls, n):
         return cls(np.full(n, np.inf), np.full(n, -1, dtype=np.int64), np.zeros(n), np.zeros(n))

@@ -609,16 +609,10 @@ T_TOLERANCE = 1e-4
 
 
 def disagreement(reference, hits):
-    """Fractions of rays where hits differ from reference: hit vs miss, another primitive, t
-    off by more than T_TOLERANCE relative, and any of the three."""
-    hit_miss = (reference.prim >= 0) != (hits.prim >= 0)
-    both = (reference.prim >= 0) & (hits.prim >= 0)
-    other_prim = both & (reference.prim != hits.prim)
-    relative = np.zeros(len(reference))
-    relative[both] = np.abs(hits.t[both] - reference.t[both]) / np.abs(reference.t[both])
-    far_t = both & (relative > T_TOLERANCE)
-    return {"hit_miss": float(hit_miss.mean()), "prim": float(other_prim.mean()),
-            "t": float(far_t.mean()), "any": float((hit_miss | other_prim | far_t).mean())}
+    """Fractions of rays where hits differ from reference (accel.Hits.disagreement at
+    T_TOLERANCE): hit vs miss, another primitive, t off by more than T_TOLERANCE relative, and
+    any of the three."""
+    return hits.disagreement(reference, T_TOLERANCE)
 
 
 def moved_geometry_rays(geometry, rays, magnitude):
@@ -656,17 +650,11 @@ def distant_camera_disagreement(geometry, rays_count, distances, seed=0, clip=Tr
     points of its box: what re-centring cannot fix (the ray origin itself is far), and what
     clipping each ray to the triangles' box does (clip=False: embree without it)."""
     rng = np.random.default_rng(seed)
-    lower, upper = geometry.bounds()
-    centre = 0.5 * (lower + upper)
     bvh = accel.build("bvh", geometry)
     embree = accel.build("embree", geometry, clip_to_bounds=clip)
     out = []
     for distance in distances:
-        unit = rng.normal(size=(rays_count, 3))
-        unit /= np.linalg.norm(unit, axis=1, keepdims=True)
-        origins = centre + distance * unit
-        targets = lower + rng.random((rays_count, 3)) * (upper - lower)
-        rays = accel.Rays(origins, targets - origins)
+        rays = raygen.distant_rays(geometry, rays_count, distance, rng)
         out.append(disagreement(bvh.intersect(rays), embree.intersect(rays)))
     return out
 
