@@ -2,10 +2,11 @@
 from .camera import Camera, course_camera
 from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError
+from .image import show
 from .io import load
 from .renderer import render
 from .scene import Scene
 from .settings import Settings
 
 __all__ = ["Camera", "Environment", "PtraceError", "SceneError", "Scene", "Settings",
-           "course_camera", "load", "load_environment", "render"]
+           "course_camera", "load", "load_environment", "render", "show"]

@@ -84,3 +84,30 @@ def read_image(path):
     if buffer.has_error:
         raise PtraceError(f"{path}: cannot read image ({buffer.geterror()})")
     return buffer.get_pixels(oiio.FLOAT)
+
+
+class Shown:
+    """An image that shows itself in Jupyter (IPython calls _repr_png_): the course's 8-bit
+    curve of linear radiance times 2**exposure. ptrace.show(image) makes one; ptrace.render
+    keeps returning the plain array."""
+
+    def __init__(self, radiance, exposure=0.0):
+        self.radiance = np.asarray(radiance, dtype=np.float32) * np.float32(2.0 ** exposure)
+
+    def png(self):
+        """The PNG file's bytes (written whole through write_image, then read back)."""
+        with tempfile.TemporaryDirectory(prefix="ptrace-show-") as directory:
+            path = os.path.join(directory, "image.png")
+            write_image(path, self.radiance)
+            with open(path, "rb") as handle:
+                return handle.read()
+
+    def _repr_png_(self):
+        return self.png()
+
+
+def show(radiance, exposure=0.0):
+    """An object that displays `radiance` ((H, W, 3) linear, top row first) in a notebook with
+    the course's curve, exposure in stops; in plain Python, .png() gives the PNG's bytes."""
+    return Shown(radiance, exposure)
+

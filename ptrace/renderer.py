@@ -107,7 +107,8 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
     sums = new_sums(n_pixels)
     bar = None
     if progress:
-        from tqdm import tqdm
+        # tqdm.auto: the notebook's widget under Jupyter, the terminal's bar elsewhere
+        from tqdm.auto import tqdm
         bar = tqdm(total=n_pixels * settings.spp, unit="spl", unit_scale=True, leave=False,
                    file=sys.stderr)
     passes = Passes(settings, sums, bar)
