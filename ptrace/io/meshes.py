@@ -69,15 +69,15 @@ def _read_triangles(path):
 
     try:
         scene = trimesh.load_scene(path, process=False)
-        raw = scene.to_mesh()
-        raw_faces = np.asarray(raw.faces, dtype=np.int64).reshape(-1, 3)
-        raw_vertices = np.asarray(raw.vertices, dtype=np.float64).reshape(-1, 3)
         non_finite = 0
-        if raw_faces.size and raw_faces.min() >= 0 and raw_faces.max() < len(raw_vertices):
-            non_finite = int((~np.isfinite(raw_vertices[raw_faces]).all(axis=(1, 2))).sum())
-        for geometry in scene.geometry.values():
-            if hasattr(geometry, "process"):
-                geometry.process()
+        for geometry in scene.geometry.values():   # each geometry as the file holds it
+            if not hasattr(geometry, "process"):
+                continue
+            raw_faces = np.asarray(geometry.faces, dtype=np.int64).reshape(-1, 3)
+            raw_vertices = np.asarray(geometry.vertices, dtype=np.float64).reshape(-1, 3)
+            if raw_faces.size and raw_faces.min() >= 0 and raw_faces.max() < len(raw_vertices):
+                non_finite += int((~np.isfinite(raw_vertices[raw_faces]).all(axis=(1, 2))).sum())
+            geometry.process()
         mesh = scene.to_mesh()
         vertices = np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3)
         faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
