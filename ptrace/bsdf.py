@@ -71,7 +71,7 @@ def conductor_fresnel(eta, k, cos_i):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     if woz <= 0.0 or wiz <= 0.0:
         return 0.0, 0.0, 0.0
     hx, hy, hz = wox + wix, woy + wiy, woz + wiz
@@ -79,7 +79,6 @@ def _microfacet_f(materials_alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
     if norm == 0.0:
         return 0.0, 0.0, 0.0
     hz /= norm
-    alpha = materials_alpha[m]
     d = beckmann_d(alpha, hz)
     g = 1.0 / (1.0 + smith_lambda(alpha, wiz) + smith_lambda(alpha, woz))
     scale = d * g / (4.0 * woz * wiz)
@@ -105,11 +104,12 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
 # -- the interface ---------------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
-    """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters."""
+def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+    """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters. (ar, ag, ab) and alpha
+    are material m's albedo and roughness at the shading point (ptrace.textures)."""
     if kind == DIFFUSE:
         if woz > 0.0 and wiz > 0.0:
-            return albedo[m, 0] * INV_PI, albedo[m, 1] * INV_PI, albedo[m, 2] * INV_PI
+            return ar * INV_PI, ag * INV_PI, ab * INV_PI
         return 0.0, 0.0, 0.0
     if kind == MICROFACET:
         return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
@@ -117,17 +117,18 @@ def bsdf_eval(kind, albedo, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_pdf(kind, alpha, m, wox, woy, woz, wix, wiy, wiz):
+def bsdf_pdf(kind, alpha, wox, woy, woz, wix, wiy, wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise."""
     if kind == DIFFUSE:
         return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
     if kind == MICROFACET:
-        return _microfacet_pdf(alpha[m], wox, woy, woz, wix, wiy, wiz)
+        return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
     return 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, woz, u1, u2, u3):
+def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, m, wox, woy, woz, u1, u2,
+                u3):
     """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
 
     For delta BSDFs f carries the whole weight divided by |cos theta_i| and pdf is the discrete
@@ -140,17 +141,16 @@ def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, wo
         x, y, z = cosine_hemisphere(u1, u2)
         if z <= 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        return x, y, z, albedo[m, 0] * INV_PI, albedo[m, 1] * INV_PI, albedo[m, 2] * INV_PI, \
-            z * INV_PI
+        return x, y, z, ar * INV_PI, ag * INV_PI, ab * INV_PI, z * INV_PI
     if kind == MIRROR:
         if woz == 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
         c = abs(woz)
-        return -wox, -woy, woz, albedo[m, 0] / c, albedo[m, 1] / c, albedo[m, 2] / c, 1.0
+        return -wox, -woy, woz, ar / c, ag / c, ab / c, 1.0
     if kind == MICROFACET:
         if woz <= 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        a = alpha[m]
+        a = alpha
         tan2 = -a * a * math.log(max(1.0 - u1, 1e-300))
         cos_h = 1.0 / math.sqrt(1.0 + tan2)
         sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
@@ -173,8 +173,7 @@ def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, wo
         if sin2_t >= 1.0:   # total internal reflection
             if kind == REFRACTION:
                 return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-            return -wox, -woy, woz, albedo[m, 0] / cos_o, albedo[m, 1] / cos_o, \
-                albedo[m, 2] / cos_o, 1.0
+            return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
         cos_t = math.sqrt(1.0 - sin2_t)
         tz = -cos_t if entering else cos_t
         tx, ty = -eta_ratio * wox, -eta_ratio * woy
@@ -188,7 +187,7 @@ def bsdf_sample(kind, albedo, transmittance, ior, alpha, eta, k, m, wox, woy, wo
         reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
         if u3 < reflect:
             s = reflect / cos_o
-            return -wox, -woy, woz, albedo[m, 0] * s, albedo[m, 1] * s, albedo[m, 2] * s, reflect
+            return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
         s = (1.0 - reflect) * radiance_scale / cos_t
         return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
             transmittance[m, 2] * s, 1.0 - reflect

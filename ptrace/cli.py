@@ -129,12 +129,21 @@ def build_parser():
 
 def scene_info(scene):
     from .camera import course_camera
-    from .scene import KIND_NAMES
+    from .scene import KIND_NAMES, PHYSICAL
     lights = scene.lights
     entries = []
     for i in range(len(lights)):
         kind = KIND_NAMES[lights.kind[i]]
         entry = {"type": kind, "radiance": lights.radiance[i].tolist()}
+        if kind in ("point", "spot"):
+            physical = lights.model[i] == PHYSICAL
+            entry["model"] = ("physical: radiance / distance^2" + (
+                ", a cone" if kind == "spot" else "")) if physical else (
+                "course: no falloff" if kind == "point" else "course: contributes nothing")
+            if kind == "spot" and physical:
+                entry["cone_degrees"] = [
+                    float(np.degrees(np.arccos(np.clip(lights.cos_inner[i], -1, 1)))),
+                    float(np.degrees(np.arccos(np.clip(lights.cos_outer[i], -1, 1))))]
         if kind in ("point", "spot", "area"):
             entry["position"] = lights.position[i].tolist()
         if kind in ("directional", "spot", "area"):
@@ -151,6 +160,8 @@ def scene_info(scene):
         "spheres": int(scene.sphere_count),
         "lights": entries,
         "bsdfs": scene.bsdf_kinds(),
+        "textures": [f"{name} ({w}x{h})" for name, w, h in zip(
+            scene.textures.names, scene.textures.width.tolist(), scene.textures.height.tolist())],
         "camera": {"position": camera.position.tolist(), "target": camera.target.tolist(),
                    "hfov": camera.hfov, "vfov": camera.vfov, "screen_dist": camera.screen_dist,
                    "znear": camera.znear, "zfar": camera.zfar},

@@ -49,6 +49,7 @@ from .lights import (
 )
 from .sampling import sobol_1d, sobol_2d, uniform
 from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, REFRACTION
+from .textures import surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
@@ -67,11 +68,16 @@ PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
-                                         "vertex_normals", "material_index", "scale"])
+                                         "vertex_normals", "material_index", "scale", "uv",
+                                         "vertex_colours"])
 MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance", "emission",
-                                               "ior", "alpha", "eta", "k"])
+                                               "ior", "alpha", "eta", "k", "albedo_texture",
+                                               "emission_texture", "roughness_texture",
+                                               "texels", "tex_offset", "tex_width",
+                                               "tex_height", "tex_wrap"])
 LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
-                                         "edge_y", "area", "faced", "emitter_prims",
+                                         "edge_y", "area", "model", "cos_inner",
+                                         "cos_outer", "faced", "emitter_prims",
                                          "emitter_cdf", "prim_pdf", "findable", "env_image",
                                          "env_marginal", "env_conditional", "env_table"])
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
@@ -97,13 +103,20 @@ def primitive_scale(geometry):
 
 def scene_records(scene):
     """(SceneArrays, MaterialArrays, LightArrays) of a scene, with the dtypes the kernel takes."""
-    g, m, lights = scene.geometry, scene.materials, scene.lights
+    g, m, lights, tex = scene.geometry, scene.materials, scene.lights, scene.textures
     shapes = SceneArrays(g.vertices, g.faces, g.centers, g.radii, _f64(scene.vertex_normals, (3,)),
                          np.ascontiguousarray(scene.material_index, dtype=np.int64),
-                         primitive_scale(g))
-    materials = MaterialArrays(np.ascontiguousarray(m.kind, dtype=np.int64), _f64(m.albedo, (3,)),
+                         primitive_scale(g), _f64(scene.uv, (3, 2)),
+                         _f64(scene.vertex_colours, (3,)))
+    index = lambda array: np.ascontiguousarray(array, dtype=np.int64)
+    materials = MaterialArrays(index(m.kind), _f64(m.albedo, (3,)),
                                _f64(m.transmittance, (3,)), _f64(m.emission, (3,)), _f64(m.ior),
-                               _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)))
+                               _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)),
+                               index(m.albedo_texture), index(m.emission_texture),
+                               index(m.roughness_texture),
+                               np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),
+                               index(tex.offset), index(tex.width), index(tex.height),
+                               index(tex.wrap).reshape(-1, 2))
     faced, prims, cdf, prim_pdf = emitter_arrays(scene)
     extra = 1 if prims.shape[0] else 0     # one more light: the emissive primitives
     pad = lambda array: np.concatenate([_f64(array, array.shape[1:]),
@@ -112,7 +125,10 @@ def scene_records(scene):
         np.concatenate([np.asarray(lights.kind, dtype=np.int64),
                         np.full(extra, EMITTER, dtype=np.int64)]),
         pad(lights.radiance), pad(lights.position), pad(lights.direction), pad(lights.edge_x),
-        pad(lights.edge_y), pad(lights.area), np.concatenate([faced, np.zeros(extra, np.int64)]),
+        pad(lights.edge_y), pad(lights.area),
+        np.concatenate([np.asarray(lights.model, dtype=np.int64), np.zeros(extra, np.int64)]),
+        pad(lights.cos_inner), pad(lights.cos_outer),
+        np.concatenate([faced, np.zeros(extra, np.int64)]),
         prims, cdf, prim_pdf,
         bool(extra or np.isin(lights.kind, [AREA, AMBIENT, ENVIRONMENT]).any()),
         *environment_arrays(scene.environment))
@@ -236,8 +252,8 @@ def power_heuristic(pdf, other):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
-                 px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
-                 woz, tr, tg, tb):
+                 ar, ag, ab, alpha, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx,
+                 ny, nz, wox, woy, woz, tr, tg, tb):
     """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
     Light sampling: -l samples of each area, ambient, environment or emissive-geometry light and
@@ -245,7 +261,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
     (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also
     carries its power heuristic weight against the BSDF sample that trace_path takes next. With
     -H: -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the
-    emission its ray finds (or the environment's radiance where it escapes)."""
+    emission its ray finds (or the environment's radiance where it escapes). (ar, ag, ab) and
+    alpha are the albedo and roughness at this vertex (ptrace.textures.surface_albedo)."""
     kind = materials.kind[m]
     base = vertex * DIMS_PER_VERTEX
     r = g = b = 0.0
@@ -259,8 +276,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             u1, u2 = sample_2d(options, pixel, sample, sample * count + j, base + DIM_LIGHT,
                                base + DIM_LIGHT + 2 * j)
             lx, ly, lz = uniform_hemisphere(u1, u2)
-            fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
-                                   materials.k, m, wox, woy, woz, lx, ly, lz)
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k, m, wox,
+                                   woy, woz, lx, ly, lz)
             scale = lz * 2.0 * math.pi / count
             wx = lx * xx + ly * yx + lz * nx
             wy = lx * xy + ly * yy + lz * ny
@@ -278,15 +295,15 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             e = shapes.material_index[prim]
             if materials.kind[e] != EMISSION:
                 continue
-            emission = materials.emission
-            r += tr * (fr * scale) * emission[e, 0]
-            g += tg * (fg * scale) * emission[e, 1]
-            b += tb * (fb * scale) * emission[e, 2]
+            er, eg, eb = surface_emission(shapes, materials, e, prim, u, v)
+            r += tr * (fr * scale) * er
+            g += tg * (fg * scale) * eg
+            b += tb * (fb * scale) * eb
         return r, g, b, rays
     j = 0
     for light in range(lights.kind.shape[0]):
         light_kind = lights.kind[light]
-        delta = light_is_delta(light_kind)
+        delta = light_is_delta(light_kind, lights.model[light])
         count = 1 if delta else options.light_samples
         for s in range(count):
             index = sample * count + s
@@ -296,18 +313,16 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
                                base + DIM_SELECT + j)
                 lr, lg, lb, wx, wy, wz, dist, pdf = sample_emitter(
-                    shapes.vertices, shapes.faces, shapes.centers, shapes.radii,
-                    materials.emission, shapes.material_index, lights.emitter_prims,
-                    lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
+                    shapes, materials, lights.emitter_prims, lights.emitter_cdf,
+                    lights.prim_pdf, px, py, pz, u0, u1, u2)
             elif light_kind == ENVIRONMENT:
                 wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
                                                      lights.env_table, u1, u2)
                 lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
                 dist = math.inf
             else:
-                lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(
-                    light_kind, lights.radiance, lights.position, lights.direction,
-                    lights.edge_x, lights.edge_y, lights.area, light, px, py, pz, u1, u2)
+                lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(lights, light, px, py, pz, u1,
+                                                                 u2)
             j += 1
             if pdf < 1e-11:
                 continue
@@ -316,12 +331,12 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 continue
             wix = wx * xx + wy * xy + wz * xz
             wiy = wx * yx + wy * yy + wz * yz
-            fr, fg, fb = bsdf_eval(kind, materials.albedo, materials.alpha, materials.eta,
-                                   materials.k, m, wox, woy, woz, wix, wiy, wiz)
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k, m, wox,
+                                   woy, woz, wix, wiy, wiz)
             scale = wiz / (count * pdf)
             if options.mis and not delta:
-                scale *= power_heuristic(count * pdf, bsdf_pdf(kind, materials.alpha, m, wox, woy,
-                                                               woz, wix, wiy, wiz))
+                scale *= power_heuristic(count * pdf, bsdf_pdf(kind, alpha, wox, woy, woz, wix,
+                                                               wiy, wiz))
             ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
             sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional or ambient light
             if dist != math.inf:
@@ -346,9 +361,9 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, ox, oy, oz,
-                   dx, dy, dz, t, prim, m, gx, gy, gz):
-    """Emission a bounce ray from q (spawned at o, unit direction d, closest hit at t on prim,
-    material m) finds, as (r, g, b), before the throughput.
+                   dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
+    """Emission a bounce ray from q (spawned at o, unit direction d, closest hit at t on prim at
+    barycentrics (u, v), material m) finds, as (r, g, b), before the throughput.
 
     After a delta bounce (mirror, glass), which light sampling cannot follow, everything it
     sees counts whole: emissive geometry (a light's face included), area lights without a face,
@@ -405,9 +420,10 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
                 return r, g, b
             weight = power_heuristic(
                 bsdf_pdf_, n * area_pdf * (hx * hx + hy * hy + hz * hz) / cos_light)
-        r += weight * materials.emission[m, 0]
-        g += weight * materials.emission[m, 1]
-        b += weight * materials.emission[m, 2]
+        er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
+        r += weight * er
+        g += weight * eg
+        b += weight * eb
     return r, g, b
 
 
@@ -426,7 +442,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
             r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
         return r, g, b, rays
     if kinds[m] == EMISSION:
-        r, g, b = materials.emission[m, 0], materials.emission[m, 1], materials.emission[m, 2]
+        r, g, b = surface_emission(shapes, materials, m, prim, u, v)
     tr = tg = tb = 1.0
     lit = lights.kind.shape[0] > 0
     # multiple importance sampling needs a light that BSDF-sampled rays can find (not only
@@ -442,11 +458,12 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         woz = -dx * nx - dy * ny - dz * nz
         kind = kinds[m]
         delta = is_delta(kind)
+        ar, ag, ab, alpha = surface_albedo(shapes, materials, m, prim, u, v)
         if lit and kind != EMISSION and not delta:
             lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
-                                         pixel, sample, vertex, m, px, py, pz, gx, gy, gz,
-                                         offset, xx, xy, xz, yx, yy, yz, nx, ny, nz, wox, woy,
-                                         woz, tr, tg, tb)
+                                         pixel, sample, vertex, m, ar, ag, ab, alpha, px, py,
+                                         pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny,
+                                         nz, wox, woy, woz, tr, tg, tb)
             r += lr
             g += lg
             b += lb
@@ -461,8 +478,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
         u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
         wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
-            kind, materials.albedo, materials.transmittance, materials.ior, materials.alpha,
-            materials.eta, materials.k, m, wox, woy, woz, u1, u2, u3)
+            kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, materials.eta,
+            materials.k, m, wox, woy, woz, u1, u2, u3)
         if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
             break
         weight = abs(wiz) / pdf
@@ -489,7 +506,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
                                                                 dy, dz, t, prim, u, v)
         if delta or mis:
             er, eg, eb = emission_found(shapes, materials, lights, options, delta, pdf, qx, qy,
-                                        qz, ox, oy, oz, dx, dy, dz, t, prim, m, gx, gy, gz)
+                                        qz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy,
+                                        gz)
             r += tr * er
             g += tg * eg
             b += tb * eb

@@ -3,7 +3,9 @@ light index) and emissive geometry as one more light (emitter_arrays, sample_emi
 
 The course applies no distance falloff to point and directional lights (their colour is used as
 the radiance reaching every point): ptrace keeps that so course scenes look as the course made
-them. Spot lights are parsed and, like the course's Sp19 stub, contribute nothing.
+them. The course's spot lights are parsed and, like the course's Sp19 stub, contribute nothing.
+Lights of the PHYSICAL model (glTF's KHR_lights_punctual) fall off with the squared distance,
+and a spot's cone shapes its light (ptrace.scene.Lights).
 Emissive primitives are a light of their own unless they are a file light's visible face
 (_face_of); the course samples only its <light>s, so a scene lit by emissive geometry alone
 is black there.
@@ -13,32 +15,60 @@ import math
 import numpy as np
 from numba import njit
 
-from .scene import AMBIENT, AREA, DIRECTIONAL, POINT
+from .scene import AMBIENT, AREA, DIRECTIONAL, PHYSICAL, POINT, SPOT
+from .textures import surface_emission
 
 INF = math.inf
 
 
 @njit(cache=True, inline="always")
-def light_is_delta(kind):
-    return kind == POINT or kind == DIRECTIONAL
+def light_is_delta(kind, model):
+    """Lights sampled once per vertex, whatever -l: point and directional lights, and spot
+    lights with a cone (the course's stub spot lights keep -l samples of nothing)."""
+    return kind == POINT or kind == DIRECTIONAL or (kind == SPOT and model == PHYSICAL)
+
+
+@njit(cache=True, inline="always")
+def spot_falloff(cos_inner, cos_outer, cos_axis):
+    """1 inside the inner cone, 0 outside the outer one, and between them the square of the
+    linear ramp in cos theta (KHR_lights_punctual's suggested falloff, smooth at the inner
+    edge's side)."""
+    if cos_axis >= cos_inner:
+        return 1.0
+    if cos_axis <= cos_outer:
+        return 0.0
+    ramp = (cos_axis - cos_outer) / max(cos_inner - cos_outer, 1e-9)
+    return ramp * ramp
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def sample_light(kind, radiance, position, direction, edge_x, edge_y, area, i,
-                 px, py, pz, u1, u2):
-    """Sample light i as seen from point p.
+def sample_light(lights, i, px, py, pz, u1, u2):
+    """Sample light i (of the integrator's LightArrays) as seen from point p.
 
     Returns (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf): wi is the unit direction toward the
     light sample, distance is inf for lights at infinity, pdf is per unit solid angle (1 for
-    delta lights), and pdf 0 means "no contribution" (spot lights, the back of an area light).
+    delta lights), and pdf 0 means "no contribution" (the course's spot lights, the back of an
+    area light, a point outside a spot's cone).
     """
-    if kind == POINT:
+    kind, radiance, position, direction = lights.kind[i], lights.radiance, lights.position, \
+        lights.direction
+    edge_x, edge_y, area = lights.edge_x, lights.edge_y, lights.area
+    physical = lights.model[i] == PHYSICAL
+    if kind == POINT or (kind == SPOT and physical):
         dx, dy, dz = position[i, 0] - px, position[i, 1] - py, position[i, 2] - pz
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         if dist == 0.0:
             return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        return radiance[i, 0], radiance[i, 1], radiance[i, 2], dx / dist, dy / dist, dz / dist, \
-            dist, 1.0
+        wx, wy, wz = dx / dist, dy / dist, dz / dist
+        scale = 1.0 / (dist * dist) if physical else 1.0
+        if kind == SPOT:   # direction is the spot's axis, away from the light
+            scale *= spot_falloff(lights.cos_inner[i], lights.cos_outer[i],
+                                  -(wx * direction[i, 0] + wy * direction[i, 1]
+                                    + wz * direction[i, 2]))
+            if scale == 0.0:
+                return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
+        return radiance[i, 0] * scale, radiance[i, 1] * scale, radiance[i, 2] * scale, \
+            wx, wy, wz, dist, 1.0
     if kind == DIRECTIONAL:
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], direction[i, 0], \
             direction[i, 1], direction[i, 2], INF, 1.0
@@ -147,7 +177,17 @@ def emitter_arrays(scene):
         np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
     radii = g.radii[prims[~triangles] - g.triangle_count]
     areas[~triangles] = 4.0 * np.pi * radii ** 2
-    emission = scene.materials.emission[scene.material_index[prims]].mean(axis=1)
+    materials, textures = scene.materials, scene.textures
+    # a textured emitter's power: its factor times its texture's mean (primitives are chosen
+    # by power; the texture's variation over each one is left to the estimator's weights)
+    texture_mean = np.ones(len(materials))
+    for m in np.nonzero(materials.emission_texture >= 0)[0]:
+        t = materials.emission_texture[m]
+        start = textures.offset[t]
+        end = start + textures.width[t] * textures.height[t]
+        texture_mean[m] = float(textures.texels[start:end].mean())
+    index = scene.material_index[prims]
+    emission = materials.emission[index].mean(axis=1) * texture_mean[index]
     power = areas * np.maximum(emission, 0.0)
     total = power.sum()
     if not total > 0.0:
@@ -161,8 +201,7 @@ def emitter_arrays(scene):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def sample_emitter(vertices, faces, centers, radii, emission, material_index, prims, cdf,
-                   prim_pdf, px, py, pz, u0, u1, u2):
+def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, u2):
     """A point on the emissive primitives, chosen by power (u0) and uniformly by area (u1, u2),
     as seen from p: (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per unit solid angle). Emission is
     two-sided, like the course's."""
@@ -174,7 +213,9 @@ def sample_emitter(vertices, faces, centers, radii, emission, material_index, pr
         else:
             lo = mid + 1
     prim = prims[lo]
+    vertices, faces, centers, radii = shapes.vertices, shapes.faces, shapes.centers, shapes.radii
     n_tri = faces.shape[0]
+    wb = wc = 0.0
     if prim < n_tri:
         a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
         root = math.sqrt(u1)
@@ -209,9 +250,8 @@ def sample_emitter(vertices, faces, centers, radii, emission, material_index, pr
     cos_light = abs(wx * nx + wy * ny + wz * nz)
     if cos_light == 0.0:
         return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
-    m = material_index[prim]
-    return emission[m, 0], emission[m, 1], emission[m, 2], wx, wy, wz, dist, \
-        prim_pdf[prim] * dist2 / cos_light
+    er, eg, eb = surface_emission(shapes, materials, shapes.material_index[prim], prim, wb, wc)
+    return er, eg, eb, wx, wy, wz, dist, prim_pdf[prim] * dist2 / cos_light
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

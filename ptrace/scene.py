@@ -14,6 +14,9 @@ BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microface
 AMBIENT, DIRECTIONAL, POINT, AREA, SPOT, ENVIRONMENT = range(6)
 LIGHT_NAMES = ("ambient", "directional", "point", "area", "spot")
 KIND_NAMES = LIGHT_NAMES + ("environment",)
+# What a point or spot light's radiance means (Lights.model).
+COURSE, PHYSICAL = range(2)
+MODEL_NAMES = ("course", "physical")
 
 
 @dataclass(eq=False)
@@ -23,6 +26,12 @@ class Materials:
     diffuse: albedo; emission: emission; mirror: albedo (reflectance);
     glass: albedo (reflectance), transmittance, ior; refraction: transmittance, ior;
     microfacet: alpha, eta, k.
+
+    albedo_texture, emission_texture and roughness_texture index Scene.textures (-1: none):
+    a texture multiplies albedo or emission by its colour at the hit's UV, and a roughness
+    texture multiplies alpha by its green channel squared (glTF's metallicRoughness texture,
+    where roughness is G and alpha = roughness^2). File materials (mesh files) use them; the
+    course's scenes have none.
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
@@ -34,6 +43,14 @@ class Materials:
     eta: np.ndarray             # (M, 3)
     k: np.ndarray               # (M, 3)
     names: tuple = ()
+    albedo_texture: np.ndarray = None      # (M,) int32, -1 for none
+    emission_texture: np.ndarray = None    # (M,) int32
+    roughness_texture: np.ndarray = None   # (M,) int32
+
+    def __post_init__(self):
+        for name in ("albedo_texture", "emission_texture", "roughness_texture"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(len(self.kind), -1, dtype=np.int32))
 
     def __len__(self):
         return self.kind.shape[0]
@@ -57,7 +74,54 @@ class Materials:
             eta=rgb("eta", (0.0, 0.0, 0.0)),
             k=rgb("k", (0.0, 0.0, 0.0)),
             names=tuple(r.get("name", "") for r in records),
+            albedo_texture=np.array([r.get("albedo_texture", -1) for r in records],
+                                    dtype=np.int32).reshape(m),
+            emission_texture=np.array([r.get("emission_texture", -1) for r in records],
+                                      dtype=np.int32).reshape(m),
+            roughness_texture=np.array([r.get("roughness_texture", -1) for r in records],
+                                       dtype=np.int32).reshape(m),
         )
+
+
+# Texture wrap modes (Textures.wrap), glTF's three: repeat, clamp to edge, mirrored repeat.
+REPEAT, CLAMP, MIRROR_REPEAT = range(3)
+WRAP_NAMES = ("repeat", "clamp", "mirror")
+
+
+@dataclass(eq=False)
+class Textures:
+    """T image textures packed into one array of linear RGB texels: texture i is the rows
+    offset[i] .. offset[i] + width[i] * height[i] of texels, row by row from the image's top
+    row. wrap is (T, 2): the mode along u and along v."""
+    texels: np.ndarray      # (N, 3) float32, linear
+    offset: np.ndarray      # (T,) int64
+    width: np.ndarray       # (T,) int64
+    height: np.ndarray      # (T,) int64
+    wrap: np.ndarray        # (T, 2) int64
+    names: tuple = ()
+
+    def __len__(self):
+        return self.offset.shape[0]
+
+    @classmethod
+    def empty(cls):
+        return cls(np.zeros((0, 3), np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                   np.zeros(0, np.int64), np.zeros((0, 2), np.int64))
+
+    @classmethod
+    def from_images(cls, images, wraps=None, names=()):
+        """From a list of (H, W, 3) linear float arrays (top row first)."""
+        if not images:
+            return cls.empty()
+        heights = np.array([image.shape[0] for image in images], dtype=np.int64)
+        widths = np.array([image.shape[1] for image in images], dtype=np.int64)
+        sizes = heights * widths
+        offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        texels = np.concatenate([np.asarray(image, np.float32).reshape(-1, 3)
+                                 for image in images])
+        wrap = np.zeros((len(images), 2), np.int64) if wraps is None \
+            else np.array(wraps, dtype=np.int64).reshape(-1, 2)
+        return cls(texels, offset, widths, heights, wrap, tuple(names))
 
 
 @dataclass(eq=False)
@@ -67,6 +131,13 @@ class Lights:
     point/spot: position; directional: direction (unit, toward the light);
     area: position (centre), direction (unit facing normal), edge_x, edge_y (unnormalised), area;
     ambient: radiance only (the upper hemisphere about world +Y).
+
+    model says what a point or spot light means (MODEL_NAMES): COURSE, the course's (a point
+    light's radiance arrives undimmed at any distance; a spot light gives nothing, as in the
+    course's stub), or PHYSICAL, what glTF means (radiance is the intensity, divided by the
+    squared distance; a spot's direction is its axis, pointing away from the light, and it
+    falls off from 1 inside cos_inner to 0 outside cos_outer, smoothly, as glTF's
+    KHR_lights_punctual suggests).
     """
     kind: np.ndarray        # (L,) int32
     radiance: np.ndarray    # (L, 3)
@@ -75,6 +146,18 @@ class Lights:
     edge_x: np.ndarray      # (L, 3)
     edge_y: np.ndarray      # (L, 3)
     area: np.ndarray        # (L,)
+    model: np.ndarray = None       # (L,) int32: COURSE or PHYSICAL
+    cos_inner: np.ndarray = None   # (L,) spot cone, PHYSICAL model
+    cos_outer: np.ndarray = None   # (L,)
+
+    def __post_init__(self):
+        n = len(self.kind)
+        if self.model is None:
+            self.model = np.full(n, COURSE, dtype=np.int32)
+        if self.cos_inner is None:
+            self.cos_inner = np.ones(n)
+        if self.cos_outer is None:
+            self.cos_outer = np.ones(n)
 
     def __len__(self):
         return self.kind.shape[0]
@@ -89,6 +172,11 @@ class Lights:
             radiance=vec("radiance"), position=vec("position"), direction=vec("direction"),
             edge_x=vec("edge_x"), edge_y=vec("edge_y"),
             area=np.array([r.get("area", 0.0) for r in records], dtype=np.float64).reshape(n),
+            model=np.array([r.get("model", COURSE) for r in records], dtype=np.int32).reshape(n),
+            cos_inner=np.array([r.get("cos_inner", 1.0) for r in records],
+                               dtype=np.float64).reshape(n),
+            cos_outer=np.array([r.get("cos_outer", 1.0) for r in records],
+                               dtype=np.float64).reshape(n),
         )
 
     def counts(self):
@@ -128,6 +216,20 @@ class Scene:
     camera: CameraSpec = None
     notes: list = field(default_factory=list)   # what the loader decided (e.g. defaults given)
     environment: object = None      # a ptrace.environment.Environment, with an ENVIRONMENT light
+    # file materials (mesh files): texture coordinates of each triangle's corners, (F, 3, 2)
+    # with v up (OBJ's convention), or (0, 3, 2) when no material uses a texture; vertex
+    # colours (V, 3) that multiply the albedo, or (0, 3); the textures materials index
+    uv: np.ndarray = None
+    vertex_colours: np.ndarray = None
+    textures: Textures = None
+
+    def __post_init__(self):
+        if self.uv is None:
+            self.uv = np.zeros((0, 3, 2))
+        if self.vertex_colours is None:
+            self.vertex_colours = np.zeros((0, 3))
+        if self.textures is None:
+            self.textures = Textures.empty()
 
     def with_environment(self, environment):
         """This scene lit also by an environment (the course's -e): one more light, of kind

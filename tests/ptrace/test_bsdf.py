@@ -6,8 +6,10 @@ import pytest
 from scipy import stats
 
 from ptrace.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample
+from ptrace.environment import environment_arrays
+from ptrace.integrator import LightArrays
 from ptrace.lights import sample_light
-from ptrace.scene import AREA, DIFFUSE, GLASS, MICROFACET, MIRROR, REFRACTION, Materials
+from ptrace.scene import AREA, COURSE, DIFFUSE, GLASS, MICROFACET, MIRROR, REFRACTION, Materials
 
 MATERIALS = Materials.from_records([
     dict(kind=DIFFUSE, albedo=(0.8, 0.5, 0.2)),
@@ -21,8 +23,8 @@ M = MATERIALS
 
 
 def sample(m, wo, u):
-    return bsdf_sample(int(M.kind[m]), M.albedo, M.transmittance, M.ior, M.alpha, M.eta, M.k, m,
-                       wo[0], wo[1], wo[2], u[0], u[1], u[2])
+    return bsdf_sample(int(M.kind[m]), *M.albedo[m], M.transmittance, M.ior, M.alpha[m], M.eta,
+                       M.k, m, wo[0], wo[1], wo[2], u[0], u[1], u[2])
 
 
 def direction(theta_degrees, phi=0.3):
@@ -41,9 +43,9 @@ def chi_square_p(m, wo, n=60000, n_cos=10, n_phi=16, seed=0):
             rejected += 1
             continue
         # f and pdf returned by sample() agree with eval() and pdf() (checked on 2000 samples)
-        assert index > 2000 or pdf == pytest.approx(bsdf_pdf(int(M.kind[m]), M.alpha, m, *wo, x, y, z), rel=1e-9)
+        assert index > 2000 or pdf == pytest.approx(bsdf_pdf(int(M.kind[m]), M.alpha[m], *wo, x, y, z), rel=1e-9)
         assert index > 2000 or (fr, fg, fb) == pytest.approx(
-            bsdf_eval(int(M.kind[m]), M.albedo, M.alpha, M.eta, M.k, m, *wo, x, y, z), rel=1e-9)
+            bsdf_eval(int(M.kind[m]), *M.albedo[m], M.alpha[m], M.eta, M.k, m, *wo, x, y, z), rel=1e-9)
         i = min(int(z * n_cos), n_cos - 1)
         j = min(int((math.atan2(y, x) % (2 * math.pi)) / (2 * math.pi) * n_phi), n_phi - 1)
         counts[i, j] += 1
@@ -58,7 +60,7 @@ def chi_square_p(m, wo, n=60000, n_cos=10, n_phi=16, seed=0):
                 for b in range(sub):
                     phi = (j + (b + 0.5) / sub) / n_phi * 2 * math.pi
                     r = math.sqrt(1 - z * z)
-                    total += bsdf_pdf(int(M.kind[m]), M.alpha, m, *wo, r * math.cos(phi),
+                    total += bsdf_pdf(int(M.kind[m]), M.alpha[m], *wo, r * math.cos(phi),
                                       r * math.sin(phi), z)
             expected[i, j] = total / sub / sub * (1.0 / n_cos) * (2 * math.pi / n_phi)
     observed = np.append(counts.ravel(), rejected)
@@ -87,9 +89,9 @@ def test_diffuse_pdf_integrates_to_one_and_eval_is_albedo_over_pi():
     wi /= np.linalg.norm(wi, axis=1, keepdims=True)
     wi[:, 2] = np.abs(wi[:, 2])
     wo = direction(30)
-    pdfs = [bsdf_pdf(DIFFUSE, M.alpha, 0, *wo, *w) for w in wi]
+    pdfs = [bsdf_pdf(DIFFUSE, M.alpha[0], *wo, *w) for w in wi]
     assert np.mean(pdfs) * 2 * math.pi == pytest.approx(1.0, rel=0.02)
-    assert bsdf_eval(DIFFUSE, M.albedo, M.alpha, M.eta, M.k, 0, *wo, *wi[0]) == \
+    assert bsdf_eval(DIFFUSE, *M.albedo[0], M.alpha[0], M.eta, M.k, 0, *wo, *wi[0]) == \
         pytest.approx(tuple(M.albedo[0] / math.pi))
 
 
@@ -115,7 +117,7 @@ def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
             z, r = math.cos(t), math.sin(t)
             for j in range(n_p):
                 phi = (j + 0.5) / n_p * 2 * math.pi
-                f = bsdf_eval(kind, M.albedo, M.alpha, M.eta, M.k, m, *wo, r * math.cos(phi),
+                f = bsdf_eval(kind, *M.albedo[m], M.alpha[m], M.eta, M.k, m, *wo, r * math.cos(phi),
                               r * math.sin(phi), z)
                 integral += f[0] * z * r
         integral *= (math.pi / 2 / n_t) * (2 * math.pi / n_p)
@@ -188,15 +190,29 @@ def test_total_internal_reflection():
     assert sample(5, inside, (0.5, 0.5, 0.5))[6] == 0.0   # refraction only: nothing
 
 
+def light_record(kind, radiance, position, direction, edge_x, edge_y, area, model=COURSE,
+                 cos_inner=1.0, cos_outer=1.0):
+    """One light as the integrator's LightArrays (the fields sample_light reads; the rest
+    empty). The record type is ptrace's own: numba's cache index of sample_light keeps the
+    types it was compiled for, and a type defined in a test module could not be unpickled by a
+    later render."""
+    empty = np.zeros(0)
+    return LightArrays(np.array([kind]), radiance, position, direction, edge_x, edge_y, area,
+                       np.array([model]), np.array([cos_inner]), np.array([cos_outer]),
+                       np.zeros(1, np.int64), np.zeros(0, np.int64), empty, empty, False,
+                       *environment_arrays(None))
+
+
 def test_area_light_pdf_integrates_its_solid_angle():
     """E[1 / pdf] over light samples is the light's solid angle, computed here on a fine grid."""
     position = np.array([[0.0, 1.49, 0.0]])
     facing = np.array([[0.0, -1.0, 0.0]])
     edge_x, edge_y = np.array([[0.6, 0, 0]]), np.array([[0, 0, 0.8]])
     radiance, area = np.ones((1, 3)), np.array([0.48])
+    area_light = light_record(AREA, radiance, position, facing, edge_x, edge_y, area)
     p = np.array([0.3, 0.2, -0.4])
     rng = np.random.default_rng(3)
-    inverse = [1.0 / sample_light(AREA, radiance, position, facing, edge_x, edge_y, area, 0,
+    inverse = [1.0 / sample_light(area_light, 0,
                                   *p, *u)[7] for u in rng.random((40000, 2))]
     s = (np.arange(400) + 0.5) / 400 - 0.5
     sx, sy = np.meshgrid(s, s)
@@ -206,6 +222,6 @@ def test_area_light_pdf_integrates_its_solid_angle():
     solid_angle = np.sum(np.abs(d @ facing[0]) / dist ** 3) * area[0] / s.size ** 2
     assert np.mean(inverse) == pytest.approx(solid_angle, rel=0.01)
     # and the point behind the light gets nothing
-    behind = sample_light(AREA, radiance, position, facing, edge_x, edge_y, area, 0,
+    behind = sample_light(area_light, 0,
                           0.0, 2.0, 0.0, 0.5, 0.5)
     assert behind[7] == 0.0
