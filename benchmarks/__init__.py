@@ -51,6 +51,9 @@ BENCHMARKS = {
     "spheres_vs_meshes": Benchmark("an analytic sphere against tessellated ones"),
     "stability_light": Benchmark("the light-transport half of the stability report",
                                  in_all=False),
+    "view_latency": Benchmark("ptrace view: milliseconds from a camera drag to the first "
+                              "refreshed image, pushed and drawn in headless chromium",
+                              requires="selenium", in_all=False),
     "side_by_side": Benchmark("issue 12's targets: an older checkout against this tree",
                               quick=None, in_all=False),
 }

@@ -286,8 +286,12 @@ def run(argv):
 
 def main(argv=None):
     from .errors import PtraceError
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "view":   # `ptrace view SCENE [render flags]`: the browser preview
+        from . import view
+        return view.main(argv[1:])
     try:
-        return run(sys.argv[1:] if argv is None else argv)
+        return run(argv)
     except (_UsageError, argparse.ArgumentTypeError) as error:
         print(f"ptrace: error: {error}", file=sys.stderr)
     except PtraceError as error:
