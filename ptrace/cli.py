@@ -113,6 +113,13 @@ def build_parser():
     add("--seed", type=_nonnegative_int("seed"), default=0, help="random seed (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",
         help="path (light transport) or normals (the course's normal shading)")
+    add("--aov", default=None, metavar="LIST",
+        help="feature buffers to add to an .exr output as extra channels, any of albedo, normal, "
+             "depth (first hit, averaged per pixel like the radiance; one more ray per sample)")
+    add("--denoise", action="store_true",
+        help="also write FILE_denoised (Intel Open Image Denoise guided by the albedo and "
+             "normal AOVs; biased, so the noisy image is kept; needs pip install "
+             "\"ptrace[denoise]\")")
     add("--info", action="store_true", help="print a JSON summary of the scene and exit")
     add("-q", "--quiet", action="store_true",
         help="no progress bar, compile notice or notes of what the loader ignored or assumed")
@@ -206,6 +213,7 @@ def run(argv):
     from . import load, render
     from .camera import course_camera, load_camera_settings
     from .errors import PtraceError
+    from .features import denoise, denoised_path, require_denoiser
     from .image import FORMATS, rate_colours, rate_path, write_image
     args = build_parser().parse_args(argv)
     _one_line_warnings()
@@ -218,6 +226,19 @@ def run(argv):
         output = os.path.splitext(os.path.basename(args.scene))[0] + ".png"
     if os.path.splitext(output)[1].lower() not in FORMATS:
         raise PtraceError(f"{output}: output must end in {' or '.join(FORMATS)}")
+    aov_names = ()
+    if args.aov is not None:
+        from .features import parse_aovs
+        try:
+            aov_names = parse_aovs(args.aov)
+        except ValueError as error:
+            raise _UsageError(str(error)) from None
+        if not output.lower().endswith(".exr"):
+            raise PtraceError(f"{output}: --aov adds channels to an .exr output; use -f "
+                              f"NAME.exr")
+    if args.denoise:
+        require_denoiser()
+    aovs = {} if (aov_names or args.denoise) else None
     out_dir = os.path.dirname(os.path.abspath(output))
     if not args.info and not (os.path.isdir(out_dir) and os.access(out_dir, os.W_OK)):
         raise PtraceError(f"{output}: cannot write to directory {out_dir}")
@@ -259,10 +280,14 @@ def run(argv):
                            client=client, light_samples=args.light_samples,
                            max_depth=args.max_depth, adaptive=args.adaptive,
                            hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-                           bvh_split=args.bvh_split, notice=None if args.quiet else _notice)
-            write_image(output, image)
+                           bvh_split=args.bvh_split, notice=None if args.quiet else _notice,
+                           aovs=aovs)
+            write_image(output, image, extra=[(name, aovs[name]) for name in aov_names])
             write_image(rate_path(output), None,
                         eight_bit=rate_colours(stats["samples"] / args.spp))
+            if args.denoise:
+                write_image(denoised_path(output),
+                            denoise(image, aovs["albedo"], aovs["normal"]))
         finally:
             if client is not None:
                 distributed.shutdown(client, cluster)
@@ -274,6 +299,9 @@ def run(argv):
           f"{where}accel {args.accel}{split} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
+    if args.denoise:
+        print(f"denoised by Open Image Denoise (biased) -> "
+              f"{os.path.abspath(denoised_path(output))}")
     if not args.quiet:   # what the loader ignored, changed or assumed (after the render, so that
         # an error stays the one line it promises to be)
         for line in grouped_notes(scene.notes):

@@ -114,11 +114,12 @@ class Phases:
         self.counts[name] = self.counts.get(name, 0) + n
 
 
-def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases, notice=None):
+def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases, notice=None,
+                      features=None):
     """Run the pass schedule over the pixels; Ctrl-C stops between kernel calls and keeps what
     was summed. phases (a running Phases of IN_PROCESS_PHASES) gets the compile, build, records
     and render phases and the counts of passes and kernel calls. Returns the render's figures
-    for stats."""
+    for stats. features: the AOVs' per-pixel sums, or None (TileWork.trace)."""
     phases.enter("compile")
     if notice is not None and is_cold(accel.record_class(settings.accel)):
         notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
@@ -142,7 +143,7 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
         for first_sample, pass_n, active in passes:
             phases.count("passes")
             nonfinite += work.trace(pixel_x[active], pixel_y[active], first_sample, pass_n,
-                                    passes.sums, active, on_block)
+                                    passes.sums, active, on_block, features)
     except KeyboardInterrupt:
         interrupted = True
     return dict(build_seconds=build_seconds, render_seconds=time.perf_counter() - start,

@@ -35,10 +35,12 @@ def rate_path(path):
     return root + "_rate.png"
 
 
-def write_image(path, radiance, eight_bit=None):
+def write_image(path, radiance, eight_bit=None, extra=()):
     """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float).
 
-    eight_bit, if given, is written as it is instead (for the rate image)."""
+    eight_bit, if given, is written as it is instead (for the rate image). extra, for an .exr:
+    (name, (H, W) or (H, W, 3) array) pairs written as more channels after R, G, B, named by
+    ptrace.features.AOV_CHANNELS (albedo.R, normal.X, depth.Z, ...)."""
     import OpenImageIO as oiio
     path = os.fspath(path)
     extension = os.path.splitext(path)[1].lower()
@@ -53,6 +55,17 @@ def write_image(path, radiance, eight_bit=None):
         pixels, pixel_type = course_8bit(radiance), oiio.UINT8
     else:
         pixels, pixel_type = np.ascontiguousarray(radiance, dtype=np.float32), oiio.FLOAT
+    names = ["R", "G", "B"][:pixels.shape[2]]
+    if extra:
+        from .features import AOV_CHANNELS
+        if extension != ".exr":
+            raise PtraceError(f"{path}: extra channels need an .exr output")
+        layers = [pixels]
+        for name, array in extra:
+            array = np.asarray(array, dtype=np.float32)
+            layers.append(array.reshape(array.shape[:2] + (-1,)))
+            names += AOV_CHANNELS[name]
+        pixels = np.ascontiguousarray(np.concatenate(layers, axis=2))
     height, width, channels = pixels.shape
     try:
         handle, temporary = tempfile.mkstemp(prefix=".ptrace-", suffix=extension, dir=directory)
@@ -62,6 +75,8 @@ def write_image(path, radiance, eight_bit=None):
     try:
         output = oiio.ImageOutput.create(temporary)
         spec = oiio.ImageSpec(width, height, channels, pixel_type)
+        if channels == len(names):
+            spec.channelnames = tuple(names)
         if output is None or not output.open(temporary, spec):
             message = oiio.geterror() if output is None else output.geterror()
             raise PtraceError(f"{path}: cannot write image ({message})")

@@ -31,7 +31,7 @@ from numba import njit
 
 from accel.compiled import any_hit, closest_hit
 
-from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
+from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, conductor_fresnel, is_delta, uniform_hemisphere
 from .environment import (
     LUMINANCE,
     environment_arrays,
@@ -48,7 +48,7 @@ from .lights import (
     sample_light,
 )
 from .sampling import sobol_1d, sobol_2d, uniform
-from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, REFRACTION
+from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, MICROFACET, REFRACTION
 from .textures import surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
@@ -539,6 +539,37 @@ def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
 
 
+@njit(cache=True, _nrt=False, forceinline=True)
+def first_hit_features(shapes, materials, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's first hit: the
+    surface's albedo at the hit as a denoiser wants it (diffuse: its albedo; mirror: its
+    reflectance; glass and refraction: their transmittance; a conductor: its reflectance at
+    normal incidence; an emitter: its emission clamped to 1), the shading normal turned toward
+    the camera, world space, and the distance along the ray; zeros and hit 0 on a miss."""
+    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, materials.kind, ox, oy, oz,
+                                                            dx, dy, dz, t, prim, u, v)
+    if m < 0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    kind = materials.kind[m]
+    ar, ag, ab, alpha = surface_albedo(shapes, materials, m, prim, u, v)
+    if kind == EMISSION:
+        er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
+        ar, ag, ab = min(er, 1.0), min(eg, 1.0), min(eb, 1.0)
+    elif kind == GLASS or kind == REFRACTION:
+        tr = materials.transmittance
+        ar, ag, ab = tr[m, 0], tr[m, 1], tr[m, 2]
+    elif kind == MICROFACET:
+        eta, k = materials.eta, materials.k
+        ar = conductor_fresnel(eta[m, 0], k[m, 0], 1.0)
+        ag = conductor_fresnel(eta[m, 1], k[m, 1], 1.0)
+        ab = conductor_fresnel(eta[m, 2], k[m, 2], 1.0)
+    if nx * dx + ny * dy + nz * dz > 0.0:    # glass keeps its outward normal: face the camera
+        nx, ny, nz = -nx, -ny, -nz
+    return ar, ag, ab, nx, ny, nz, t * math.sqrt(dx * dx + dy * dy + dz * dz), 1.0
+
+
+
 @njit(cache=True, inline="always")
 def concentric_disk(u1, u2):
     """A point of the unit disc from [0, 1)^2 by Shirley and Chiu's concentric map (as pbrt's
@@ -596,11 +627,13 @@ def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
 
 @njit(cache=True, nogil=True, _nrt=False)
 def render_pixels(shapes, materials, lights, camera, options, record, scratch, pixel_x, pixel_y,
-                  rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
+                  rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count, features):
     """Samples first_sample .. first_sample + pass_n - 1 of each given pixel (y from the bottom):
     per pixel, the samples' radiance, illuminance and its square are summed from zero, in sample
     order, and added to row rows[k] of the sums, with the count of finite samples (a sample with
-    a non-finite channel is dropped and counted). Returns (dropped, rays traced).
+    a non-finite channel is dropped and counted). Returns (dropped, rays traced). features,
+    if it has rows ((n, 8), else (0, 8)), gets the same per-pixel sums of each kept sample's
+    first_hit_features (ptrace.features: AOVs), from one more trace of its camera ray.
 
     Serial and without the GIL: the caller (ptrace.tiles) runs many such calls on small blocks
     of pixels at once, one per thread (see there for why not prange). scratch is the backend's
@@ -612,9 +645,11 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
     width = camera.width
     dropped = 0
     rays = 0
+    aovs = features.shape[0] > 0
     for k in range(pixel_x.shape[0]):
         pixel = pixel_y[k] * width + pixel_x[k]
         r = g = b = lum = lum2 = 0.0
+        f0 = f1 = f2 = f3 = f4 = f5 = f6 = f7 = 0.0
         n = 0
         for sample in range(first_sample, first_sample + pass_n):
             cx, cy, cz, dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel,
@@ -631,6 +666,19 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
             if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
                 dropped += 1
                 continue
+            if aovs:
+                a0, a1, a2, a3, a4, a5, a6, a7 = first_hit_features(
+                    shapes, materials, record, scratch, cx, cy, cz, dx, dy, dz, camera.znear,
+                    camera.zfar)
+                rays += 1
+                f0 += a0
+                f1 += a1
+                f2 += a2
+                f3 += a3
+                f4 += a4
+                f5 += a5
+                f6 += a6
+                f7 += a7
             value = x * l0 + y * l1 + z * l2
             r += x
             g += y
@@ -645,4 +693,13 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
         sum_l[row] += lum
         sum_l2[row] += lum2
         count[row] += n
+        if aovs:
+            features[row, 0] += f0
+            features[row, 1] += f1
+            features[row, 2] += f2
+            features[row, 3] += f3
+            features[row, 4] += f4
+            features[row, 5] += f5
+            features[row, 6] += f6
+            features[row, 7] += f7
     return dropped, rays

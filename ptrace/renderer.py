@@ -15,6 +15,7 @@ import numpy as np
 from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
 from .errors import PtraceError
 from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
+from .features import FEATURES, aov_images
 from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
@@ -47,7 +48,7 @@ def scene_warnings(scene, settings):
 
 def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
            threads=None, crop=None, camera=None, progress=False, stats=None, client=None,
-           notice=None, **options):
+           notice=None, aovs=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
     resolution is (W, H), default the course's 800x600 (a crop of the same focal length, not a
@@ -63,7 +64,10 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     DASK_PHASES with a client: they cover this call without overlapping) and "counts" (passes
     and kernel calls in-process, functions numba compiled; tasks on Dask). client renders on a
     Dask cluster; notice, if given, is called with a one-line message when the kernels must be
-    compiled first (a cold numba cache).
+    compiled first (a cold numba cache). aovs, if a dict, receives the feature buffers of
+    ptrace.features ("albedo" and "normal" (H, W, 3), "depth" (H, W)), averaged per pixel over
+    the same samples as the image, at the cost of one more ray per sample (in-process only);
+    the image is the same bits with or without them.
     """
     phases = Phases(IN_PROCESS_PHASES if client is None else DASK_PHASES)
     phases.enter("setup")
@@ -85,7 +89,7 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
             numba.set_num_threads(threads)
         try:
             return _render(scene, settings, width, height, crop, camera, progress, stats,
-                           client, worker_threads, notice, phases)
+                           client, worker_threads, notice, phases, aovs)
         finally:
             numba.set_num_threads(previous_threads)
     finally:
@@ -95,7 +99,7 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
 
 
 def _render(scene, settings, width, height, crop, camera, progress, stats, client,
-            worker_threads, notice, phases):
+            worker_threads, notice, phases, aovs):
     camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
     for message in scene_warnings(scene, settings):
@@ -105,6 +109,10 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
     pixel_y = ys.reshape(-1).astype(np.int64)
     n_pixels = pixel_x.shape[0]
     sums = new_sums(n_pixels)
+    if aovs is not None and client is not None:
+        raise PtraceError("AOVs (--aov, --denoise) are rendered in-process only, not on a Dask "
+                          "cluster")
+    features = np.zeros((n_pixels, FEATURES)) if aovs is not None else None
     bar = None
     if progress:
         # tqdm.auto: the notebook's widget under Jupyter, the terminal's bar elsewhere
@@ -124,13 +132,15 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
             phases.count("tasks", outcome["tasks"])
         else:
             outcome = render_in_process(scene, settings, camera, pixel_x, pixel_y, passes,
-                                        phases, notice)
+                                        phases, notice, features)
     finally:
         if bar is not None:
             bar.close()
     phases.enter("image")
     sum_rgb, count = sums[0], sums[3]
     image = np.where(count[:, None] > 0, sum_rgb / np.maximum(count, 1)[:, None], 0.0)
+    if aovs is not None:
+        aovs.update(aov_images(features, count, (cell_h, cell_w)))
     if stats is not None:
         stats.update(outcome, spp=settings.spp,
                      samples=count.reshape(cell_h, cell_w)[::-1].copy())

@@ -16,6 +16,7 @@ from accel.compiled import new_scratch
 from .integrator import camera_record, render_pixels, scene_records
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
+NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
 BLOCK_PATHS = 4096       # (pixel, sample) pairs per kernel call (at least one pixel): Ctrl-C
                          # and the progress bar act between calls; a call holds no memory that
                          # depends on -s, -l or -m (a path keeps its state in registers)
@@ -140,23 +141,27 @@ class TileWork:
         self.camera = camera_record(camera)
         self.rays_traced = 0
 
-    def trace(self, pixel_x, pixel_y, first_sample, pass_n, sums, rows, on_chunk=None):
+    def trace(self, pixel_x, pixel_y, first_sample, pass_n, sums, rows, on_chunk=None,
+              features=None):
         """Trace samples first_sample .. first_sample + pass_n - 1 of the given pixels (y from
         the bottom) and add each pixel's sums into `sums` at `rows`. Work goes to the kernel in
         blocks of about BLOCK_PATHS paths (whole pixels), on all threads; on_chunk(samples) is
-        called after each block, in order. Returns the number of non-finite samples dropped."""
+        called after each block, in order. features, if given, an (N, 8) array beside the sums,
+        gets the per-pixel sums of the AOVs (ptrace.features). Returns the number of non-finite
+        samples dropped."""
         shapes, materials, lights = self.records
         sum_rgb, sum_l, sum_l2, count = sums
         pixel_x = np.ascontiguousarray(pixel_x, dtype=np.int64)
         pixel_y = np.ascontiguousarray(pixel_y, dtype=np.int64)
         rows = np.ascontiguousarray(rows, dtype=np.int64)
         first_sample, pass_n = int(first_sample), int(pass_n)
+        features = NO_FEATURES if features is None else features
 
         def block(start, end):
             return end - start, render_pixels(
                 shapes, materials, lights, self.camera, self.options, self.accel,
                 new_scratch(self.accel), pixel_x[start:end], pixel_y[start:end], rows[start:end],
-                first_sample, pass_n, sum_rgb, sum_l, sum_l2, count)
+                first_sample, pass_n, sum_rgb, sum_l, sum_l2, count, features)
 
         size = max(1, BLOCK_PATHS // pass_n)
         blocks = [(start, min(start + size, pixel_x.shape[0]))
