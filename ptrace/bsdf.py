@@ -10,7 +10,7 @@ import math
 
 from numba import njit
 
-from .scene import DIFFUSE, GLASS, MICROFACET, MIRROR, REFRACTION
+from .scene import DIFFUSE, GLASS, GLOSSY, MICROFACET, MIRROR, REFRACTION
 
 INV_PI = 1.0 / math.pi
 SQRT_PI = math.sqrt(math.pi)
@@ -101,10 +101,60 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
     return p_h / (4.0 * (wix * hx + wiy * hy + wiz * hz))
 
 
+# -- glossy: a diffuse base under a glossy dielectric coat ------------------------------------------
+
+GLOSSY_DIFFUSE = 28.0 / (23.0 * math.pi)
+
+
+@njit(cache=True, inline="always")
+def schlick(r0, cos):
+    return r0 + (1.0 - r0) * (1.0 - cos) ** 5
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz):
+    """Ashikhmin and Shirley's coupled diffuse + glossy model (2000), as pbrt's FresnelBlend:
+    a Beckmann coat of normal reflectance Rs with Schlick's Fresnel, F D / (4 |wi.h|
+    max(cos_i, cos_o)), over a diffuse base of albedo Rd that gets what the coat lets through,
+    28 Rd (1 - Rs) / (23 pi) (1 - (1 - cos_i / 2)^5)(1 - (1 - cos_o / 2)^5): reciprocal, and
+    its directional albedo at most 1 for Rd, Rs in [0, 1] (tested)."""
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if norm == 0.0:
+        return 0.0, 0.0, 0.0
+    hx, hy, hz = hx / norm, hy / norm, hz / norm
+    cos_d = wix * hx + wiy * hy + wiz * hz
+    coat = beckmann_d(alpha, hz) / (4.0 * cos_d * max(wiz, woz))
+    base = GLOSSY_DIFFUSE * (1.0 - (1.0 - 0.5 * wiz) ** 5) * (1.0 - (1.0 - 0.5 * woz) ** 5)
+    r0, r1, r2 = specular[m, 0], specular[m, 1], specular[m, 2]
+    return (base * ar * (1.0 - r0) + coat * schlick(r0, cos_d),
+            base * ag * (1.0 - r1) + coat * schlick(r1, cos_d),
+            base * ab * (1.0 - r2) + coat * schlick(r2, cos_d))
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
+    """Half cosine-weighted, half the coat's Beckmann half-vector density."""
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0
+    return 0.5 * wiz * INV_PI + 0.5 * _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, inline="always")
+def beckmann_half_vector(alpha, u1, u2):
+    tan2 = -alpha * alpha * math.log(max(1.0 - u1, 1e-300))
+    cos_h = 1.0 / math.sqrt(1.0 + tan2)
+    sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
+    phi = 2.0 * math.pi * u2
+    return sin_h * math.cos(phi), sin_h * math.sin(phi), cos_h
+
+
 # -- the interface ---------------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
     """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters. (ar, ag, ab) and alpha
     are material m's albedo and roughness at the shading point (ptrace.textures)."""
     if kind == DIFFUSE:
@@ -113,6 +163,8 @@ def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
         return 0.0, 0.0, 0.0
     if kind == MICROFACET:
         return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+    if kind == GLOSSY:
+        return _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
@@ -123,12 +175,14 @@ def bsdf_pdf(kind, alpha, wox, woy, woz, wix, wiy, wiz):
         return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
     if kind == MICROFACET:
         return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+    if kind == GLOSSY:
+        return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
     return 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, m, wox, woy, woz, u1, u2,
-                u3):
+def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, specular, m, wox, woy, woz,
+                u1, u2, u3):
     """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
 
     For delta BSDFs f carries the whole weight divided by |cos theta_i| and pdf is the discrete
@@ -151,11 +205,7 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, m, wox, woy
         if woz <= 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
         a = alpha
-        tan2 = -a * a * math.log(max(1.0 - u1, 1e-300))
-        cos_h = 1.0 / math.sqrt(1.0 + tan2)
-        sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
-        phi = 2.0 * math.pi * u2
-        hx, hy, hz = sin_h * math.cos(phi), sin_h * math.sin(phi), cos_h
+        hx, hy, hz = beckmann_half_vector(a, u1, u2)
         d = wox * hx + woy * hy + woz * hz
         wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
         if wiz <= 0.0:
@@ -163,6 +213,19 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, m, wox, woy
         pdf = _microfacet_pdf(a, wox, woy, woz, wix, wiy, wiz)
         fr, fg, fb = _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
         return wix, wiy, wiz, fr, fg, fb, pdf
+    if kind == GLOSSY:
+        if woz <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        if u3 < 0.5:     # the base's cosine lobe
+            wix, wiy, wiz = cosine_hemisphere(u1, u2)
+        else:            # the coat's: reflect wo about a Beckmann half vector
+            hx, hy, hz = beckmann_half_vector(alpha, u1, u2)
+            d = wox * hx + woy * hy + woz * hz
+            wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+        if wiz <= 0.0:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+        fr, fg, fb = _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
+        return wix, wiy, wiz, fr, fg, fb, _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
     if kind == GLASS or kind == REFRACTION:
         if woz == 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0

@@ -71,7 +71,8 @@ SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii"
                                          "vertex_normals", "material_index", "scale", "uv",
                                          "vertex_colours"])
 MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance", "emission",
-                                               "ior", "alpha", "eta", "k", "albedo_texture",
+                                               "ior", "alpha", "eta", "k", "specular",
+                                               "albedo_texture",
                                                "emission_texture", "roughness_texture",
                                                "texels", "tex_offset", "tex_width",
                                                "tex_height", "tex_wrap"])
@@ -112,6 +113,7 @@ def scene_records(scene):
     materials = MaterialArrays(index(m.kind), _f64(m.albedo, (3,)),
                                _f64(m.transmittance, (3,)), _f64(m.emission, (3,)), _f64(m.ior),
                                _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)),
+                               _f64(m.specular, (3,)),
                                index(m.albedo_texture), index(m.emission_texture),
                                index(m.roughness_texture),
                                np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),
@@ -276,8 +278,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             u1, u2 = sample_2d(options, pixel, sample, sample * count + j, base + DIM_LIGHT,
                                base + DIM_LIGHT + 2 * j)
             lx, ly, lz = uniform_hemisphere(u1, u2)
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k, m, wox,
-                                   woy, woz, lx, ly, lz)
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k,
+                                   materials.specular, m, wox, woy, woz, lx, ly, lz)
             scale = lz * 2.0 * math.pi / count
             wx = lx * xx + ly * yx + lz * nx
             wy = lx * xy + ly * yy + lz * ny
@@ -331,8 +333,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 continue
             wix = wx * xx + wy * xy + wz * xz
             wiy = wx * yx + wy * yy + wz * yz
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k, m, wox,
-                                   woy, woz, wix, wiy, wiz)
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k,
+                                   materials.specular, m, wox, woy, woz, wix, wiy, wiz)
             scale = wiz / (count * pdf)
             if options.mis and not delta:
                 scale *= power_heuristic(count * pdf, bsdf_pdf(kind, alpha, wox, woy, woz, wix,
@@ -479,7 +481,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
         wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
             kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, materials.eta,
-            materials.k, m, wox, woy, woz, u1, u2, u3)
+            materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
         if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
             break
         weight = abs(wiz) / pdf

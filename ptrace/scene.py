@@ -6,8 +6,8 @@ import numpy as np
 import accel
 
 # BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
-DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET = range(6)
-BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet")
+DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY = range(7)
+BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy")
 
 # Light kinds (Lights.kind). The codes index KIND_NAMES; LIGHT_NAMES are those a scene file
 # may name. ENVIRONMENT is added by Scene.with_environment (the course's -e), never by a file.
@@ -25,7 +25,9 @@ class Materials:
 
     diffuse: albedo; emission: emission; mirror: albedo (reflectance);
     glass: albedo (reflectance), transmittance, ior; refraction: transmittance, ior;
-    microfacet: alpha, eta, k.
+    microfacet: alpha, eta, k; glossy (not the course's: a diffuse base under a glossy
+    dielectric coat, for mesh files' plastics): albedo (the base), specular (the coat's
+    reflectance at normal incidence), alpha.
 
     albedo_texture, emission_texture and roughness_texture index Scene.textures (-1: none):
     a texture multiplies albedo or emission by its colour at the hit's UV, and a roughness
@@ -43,11 +45,14 @@ class Materials:
     eta: np.ndarray             # (M, 3)
     k: np.ndarray               # (M, 3)
     names: tuple = ()
+    specular: np.ndarray = None            # (M, 3), glossy only
     albedo_texture: np.ndarray = None      # (M,) int32, -1 for none
     emission_texture: np.ndarray = None    # (M,) int32
     roughness_texture: np.ndarray = None   # (M,) int32
 
     def __post_init__(self):
+        if self.specular is None:
+            self.specular = np.zeros((len(self.kind), 3))
         for name in ("albedo_texture", "emission_texture", "roughness_texture"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full(len(self.kind), -1, dtype=np.int32))
@@ -73,6 +78,7 @@ class Materials:
             alpha=one("alpha", 0.0),
             eta=rgb("eta", (0.0, 0.0, 0.0)),
             k=rgb("k", (0.0, 0.0, 0.0)),
+            specular=rgb("specular", (0.0, 0.0, 0.0)),
             names=tuple(r.get("name", "") for r in records),
             albedo_texture=np.array([r.get("albedo_texture", -1) for r in records],
                                     dtype=np.int32).reshape(m),

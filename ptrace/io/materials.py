@@ -24,6 +24,7 @@ from ..scene import (
     DIRECTIONAL,
     EMISSION,
     GLASS,
+    GLOSSY,
     MICROFACET,
     MIRROR,
     MIRROR_REPEAT,
@@ -153,13 +154,13 @@ def obj_material(material, directory, pool, notes, where):
                           eta=tuple(eta), k=tuple(k))
     else:
         record.update(kind=DIFFUSE, albedo=kd[:3])
+        if max(ks) > 0.0:   # a diffuse base under a glossy coat of reflectance Ks
+            record.update(kind=GLOSSY, specular=tuple(min(v, 1.0) for v in ks[:3]),
+                          alpha=max(math.sqrt(2.0 / (ns + 2.0)), MIN_ALPHA))
         if image is not None:
             record["albedo_texture"] = pool.add(image, srgb=True,
                                                 wrap=_obj_wrap(fields.get("map_kd")),
                                                 name=f"{name} map_Kd")
-        if max(ks) > 0.0:
-            notes.append(f"{where}: material {name!r}: diffuse; its specular Ks (and Ns) "
-                         f"ignored (ptrace has no diffuse + glossy layer)")
     if ignored:
         notes.append(f"{where}: material {name!r}: ignored " + ", ".join(sorted(ignored)))
     return record
@@ -287,14 +288,22 @@ def gltf_material(material, document, pool, notes, where):
         if metallic < 1.0:
             notes.append(f"{where}: material {name!r}: metallic {metallic:g} rendered as a "
                          f"metal (ptrace has no blend)")
-    else:
-        record.update(kind=DIFFUSE, albedo=tuple(base))
+    else:   # a dielectric: the base colour under a glossy coat of the ior's reflectance
+        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        record.update(kind=GLOSSY, albedo=tuple(base), specular=(r0, r0, r0),
+                      alpha=max(roughness * roughness, MIN_ALPHA))
         if base_image is not None:
             record["albedo_texture"] = pool.add(
                 base_image, srgb=True, wrap=_gltf_wrap(document, pbr.get("baseColorTexture")),
                 name=f"{name} baseColorTexture")
-        notes.append(f"{where}: material {name!r}: diffuse (metallic {metallic:g}); its "
-                     f"specular reflection (roughness {roughness:g}) is not rendered")
+        if rough_image is not None:
+            record["roughness_texture"] = pool.add(
+                rough_image, srgb=False,
+                wrap=_gltf_wrap(document, pbr.get("metallicRoughnessTexture")),
+                name=f"{name} metallicRoughnessTexture")
+        if metallic > 0.0:
+            notes.append(f"{where}: material {name!r}: metallic {metallic:g} rendered as a "
+                         f"dielectric (ptrace has no blend)")
     return record
 
 
