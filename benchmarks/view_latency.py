@@ -1,6 +1,7 @@
 """How long from a camera drag to the first refreshed image in `ptrace view`.
 
     python -m benchmarks.view_latency [--quick] [--drags N] [--screenshot docs/view.png]
+    python -m benchmarks.view_latency --only-screenshot docs/view.png
 
 Serves each scene with ptrace.view.ViewServer (in this process, on its own loop), opens the
 page in headless chromium (Debian's chromium and chromedriver, through Selenium), lets the
@@ -11,7 +12,9 @@ it is drawn on the page's canvas (both from the message's sending, by the page's
 the release (`still`) and the time to its first frame. Medians over the drags. Scenes:
 scenes/cornell.dae and $PTRACE_SCENES/sky/CBbunny.dae at ptrace view's defaults (800x600,
 -s 1024, -m 1) and at -m 5. Writes benchmarks/results/view_latency.md; with --screenshot, also
-a screenshot of the page (Cornell box, 320x240, -m 5) for the README.
+a screenshot of the page (Cornell box, 320x240, -m 5) for the README; --only-screenshot makes
+the screenshot alone (no measurement, the results file untouched). The screenshot is cropped
+to the page's content and written as a 256-colour palette PNG (Pillow's octree, dithered), to keep it small.
 """
 import argparse
 import asyncio
@@ -136,7 +139,12 @@ def main(argv=None):
     parser.add_argument("--drags", type=int, default=None)
     parser.add_argument("--screenshot", default=None, metavar="PNG",
                         help="also save a screenshot of the page here")
+    parser.add_argument("--only-screenshot", default=None, metavar="PNG",
+                        help="only save the screenshot here (no measurement)")
     args = report.quick_defaults(parser.parse_args(argv), drags=(2, 9))
+    if args.only_screenshot:
+        screenshot(args.only_screenshot)
+        return 0
     resolution = (320, 240) if args.quick else (800, 600)
     cases = [("cornell.dae", CORNELL, 1), ("cornell.dae", CORNELL, 5),
              ("CBbunny.dae", bunny(), 1), ("CBbunny.dae", bunny(), 5)]
@@ -178,7 +186,12 @@ def main(argv=None):
 
 
 def screenshot(path, spp_shown=24):
-    """The page on the Cornell box (320x240, -m 5) once it shows spp_shown samples per pixel."""
+    """The page on the Cornell box (320x240, -m 5) once it shows spp_shown samples per pixel,
+    cropped below the page's last line and quantised to a 256-colour palette (dithered)."""
+    import io
+
+    import PIL.Image
+
     import ptrace
     from ptrace.camera import course_camera
     from ptrace.settings import Settings
@@ -189,11 +202,18 @@ def screenshot(path, spp_shown=24):
         driver.get(served.url)
         wait(driver, lambda: (driver.execute_script("return window.ptraceView.stats")
                               or {}).get("spp", 0) >= spp_shown)
-        driver.save_screenshot(os.path.abspath(path))
+        bottom = driver.execute_script(
+            "return Math.ceil(document.getElementById('message').getBoundingClientRect()"
+            ".bottom)")
+        shot = PIL.Image.open(io.BytesIO(driver.get_screenshot_as_png())).convert("RGB")
     finally:
         served.stop()
         driver.quit()
-    print(f"wrote {path}")
+    shot = shot.crop((0, 0, shot.width, min(shot.height, bottom + 8)))
+    shot.quantize(256, method=PIL.Image.Quantize.FASTOCTREE,
+                  dither=PIL.Image.Dither.FLOYDSTEINBERG).save(os.path.abspath(path),
+                                                               optimize=True)
+    print(f"wrote {path} ({os.path.getsize(path) // 1024} KB)")
 
 
 if __name__ == "__main__":

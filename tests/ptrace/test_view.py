@@ -17,8 +17,9 @@ import tornado.httpclient
 import tornado.websocket
 
 import ptrace
-from ptrace import cli, view
+from ptrace import cli, view, view_render, view_session
 from ptrace.camera import course_camera
+from ptrace.image import course_8bit, read_image
 from ptrace.settings import Settings
 
 from console import ptrace_command
@@ -57,8 +58,8 @@ class Frames:
 
 def preview(scene, settings, frames, **keywords):
     camera = course_camera(scene, W, H)
-    backends = view.Backends(scene, lambda text: None)
-    frames.preview = view.Preview(scene, settings, camera, backends, frames, **keywords)
+    backends = view_render.Backends(scene, lambda text: None)
+    frames.preview = view_session.Preview(scene, settings, camera, backends, frames, **keywords)
     return frames.preview
 
 
@@ -138,24 +139,53 @@ def test_camera_moves_are_quick_frames_then_a_restart(cornell):
     np.testing.assert_array_equal(seen[-1][1], expected)
 
 
+def test_save_while_moving_writes_the_accumulated_render(cornell, tmp_path):
+    """Save during a move writes the last full-resolution render (here ptrace.render's 16
+    samples of the camera before the move, exposure applied), not the quick 1-sample frame of
+    the moved camera on screen, and the reply says so; when still, it writes what is shown."""
+    frames = Frames()
+    outputs = (str(tmp_path / "v.png"), str(tmp_path / "v.exr"))
+    session = preview(cornell, Settings(spp=16, max_depth=2), frames, outputs=outputs)
+    try:
+        frames.until(lambda m: m["state"] == "done")
+        session.handle({"type": "exposure", "stops": 1.0})
+        frames.until(lambda m: m["exposure"] == 1.0)
+        still = session.save()
+        assert "note" not in still
+        session.handle({"type": "camera", "op": "orbit", "dx": 8, "dy": 2, "moving": True,
+                        "id": 1})
+        quick = frames.until(lambda m: m["request"] == 1)[-1]
+        assert quick[0]["kind"] == "quick" and session.shown[0] is not session.accumulated[0]
+        saved = session.save()
+    finally:
+        session.stop()
+        session.join()
+    assert "quick frame" in saved["note"] and saved["exr"] == os.path.abspath(outputs[1])
+    expected = ptrace.render(cornell, spp=16, max_depth=2, resolution=(W, H)) * np.float32(2)
+    np.testing.assert_array_equal(read_image(outputs[1]), expected)
+    png = np.round(read_image(outputs[0]) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(png, course_8bit(expected))
+    assert not np.array_equal(quick[1], expected / 2)
+
+
 def test_orbit_pan_and_zoom(cornell):
     camera = course_camera(cornell, W, H)
     distance = np.linalg.norm(camera.position - camera.target)
-    turned = view.orbit(camera, 0.3, -0.2)
+    turned = view_render.orbit(camera, 0.3, -0.2)
     np.testing.assert_array_equal(turned.target, camera.target)
     assert np.linalg.norm(turned.position - turned.target) == pytest.approx(distance)
     assert not np.allclose(turned.position, camera.position)
-    np.testing.assert_allclose(view.orbit(camera, 0.0, 0.0).position, camera.position,
+    np.testing.assert_allclose(view_render.orbit(camera, 0.0, 0.0).position, camera.position,
                                atol=1e-12)
-    np.testing.assert_allclose(view.orbit(camera, 0.0, 0.0).camera_to_world,
+    np.testing.assert_allclose(view_render.orbit(camera, 0.0, 0.0).camera_to_world,
                                camera.camera_to_world, atol=1e-12)
-    moved = view.pan(camera, 10, -4)
+    moved = view_render.pan(camera, 10, -4)
     shift = moved.position - camera.position
     np.testing.assert_allclose(moved.target - camera.target, shift, atol=1e-12)
     assert abs(shift @ camera.camera_to_world[:, 2]) < 1e-12 and np.linalg.norm(shift) > 0
-    near = view.zoom(camera, 0.5)
+    near = view_render.zoom(camera, 0.5)
     assert np.linalg.norm(near.position - near.target) == pytest.approx(distance / 2)
-    small = view.scaled(camera, 4)
+    small = view_render.scaled(camera, 4)
     assert (small.width, small.height) == (W // 4, H // 4)
     assert small.hfov == pytest.approx(camera.hfov, rel=0.05)
 

@@ -1,0 +1,394 @@
+"""One `ptrace view` viewer's session (Preview): its own camera, settings and render thread
+over the shared scene and backends (ptrace.view_render). The render reuses ptrace.tiles: the
+pass schedule of ptrace.render (Passes) through TileWork.trace, so N samples here are bit for
+bit ptrace.render's N samples. Each pass is traced into fresh sums and then added to the
+image's (0 + x is x, so the bits are the same), which lets a camera move or a setting abort a
+pass at any block without leaving half a pass behind. After a reset, and while the camera
+moves, a throwaway frame of 1 sample at reduced resolution is shown first.
+"""
+import dataclasses
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+
+import numba
+import numpy as np
+
+from .errors import PtraceError
+from .image import course_8bit, rate_colours, write_image
+from .tiles import Passes, new_sums
+from .view_render import mean_image, orbit, pan, scaled, zoom
+
+QUICK_SECONDS = 0.06            # the budget of a frame while the camera moves
+PUSH_SECONDS = 0.25             # within a pass, the screen is refreshed at most this often
+ESTIMATORS = ("mis", "light", "hemisphere")
+MODES = ("image", "rate", "normals")
+
+
+class _Abort(Exception):
+    """Raised inside a trace when its work is no longer wanted."""
+
+
+@dataclasses.dataclass
+class _Job:
+    """A pass schedule over some pixels (all of them, or a cell): its own sums, and the pass
+    in progress (kept until merged, so an aborted pass is traced again)."""
+    settings: object
+    camera: object
+    rows: np.ndarray            # indices into the image's pixels (bottom row first)
+    sums: tuple
+    passes: object
+    schedule: object
+    current: tuple = None
+    started: float = 0.0
+    seconds: float = 0.0        # tracing time so far
+    samples: int = 0
+    rays: int = 0
+    done: bool = False
+
+
+class Preview:
+    """One viewer's render: settings, camera, the image's sums, and the thread that renders.
+    Messages (dicts from the page) go to handle(), which returns a reply or None; frames go to
+    publish(stats, png bytes) from the render thread, notices and errors to publish(dict, None).
+    """
+
+    def __init__(self, scene, settings, camera, backends, publish, *, threads=None, crop=None,
+                 outputs=("view.png", "view.exr")):
+        self.scene, self.backends, self.publish = scene, backends, publish
+        self.threads, self.outputs = threads, outputs
+        self.settings, self.camera = settings, camera
+        self.width, self.height = camera.width, camera.height
+        self.mode = "normals" if settings.integrator == "normals" else "image"
+        self.exposure, self.paused, self.stopped, self.moving = 0.0, False, False, False
+        self.cond = threading.Condition()
+        # generation counts changes: work of an older generation is abandoned at its next block
+        self.generation, self.redraw = 0, None      # redraw: None, "frame" or "image"
+        self.request, self.request_at = 0, None     # the last camera message, for latency
+        self.paths_per_second = 2e5                 # measured; sizes the quick frames
+        self.show_seconds = 0.0                     # the last progress frame's cost
+        self.fallback = None            # the quick frame, shown where nothing is summed yet
+        self.shown = None               # (radiance, counts, spp, rate image, exposure)
+        self.accumulated = None         # the last shown that was no quick frame (Save's)
+        self.seq = 0
+        self.sums = new_sums(self.width * self.height)
+        self.job = None
+        self.temporary = tempfile.mkdtemp(prefix="ptrace-view-")
+        self._reset(crop)
+        self.thread = threading.Thread(target=self._run, name="ptrace-view", daemon=True)
+        self.thread.start()
+
+    # --- requests (from the IOLoop's thread) -----------------------------------------------
+
+    def handle(self, message):
+        kind = message.get("type")
+        if kind == "probe":
+            return self.probe(int(message["x"]), int(message["y"]))
+        if kind == "save":
+            return self.save()
+        with self.cond:
+            if kind == "camera":
+                self._camera(message)
+            elif kind == "settings":
+                self._settings(message)
+            elif kind == "cell":
+                x, y, dx, dy = (int(message[k]) for k in ("x", "y", "dx", "dy"))
+                if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > self.width \
+                        or y + dy > self.height:
+                    raise PtraceError(f"cell {x} {y} {dx} {dy} is not inside the image")
+                self._reset((x, y, dx, dy))
+            elif kind == "pause":
+                self.paused = bool(message["paused"])
+                self._redraw("image")
+            elif kind == "exposure":
+                self.exposure = float(np.clip(float(message["stops"]), -20, 20))
+                self._redraw("image")
+            else:
+                raise PtraceError(f"unknown message type {kind!r}")
+            self.cond.notify_all()
+        return None
+
+    def _redraw(self, what):
+        """Abandon the work under way (a pass is traced again) and show the image again, or a
+        new quick frame ("frame" wins over "image")."""
+        self.generation += 1
+        self.redraw = "frame" if "frame" in (what, self.redraw) else what
+
+    def _camera(self, message):
+        camera, op = self.camera, message.get("op")
+        if op == "orbit":
+            camera = orbit(camera, -float(message["dx"]) * np.pi / self.width,
+                           -float(message["dy"]) * np.pi / self.width)
+        elif op == "pan":
+            camera = pan(camera, float(message["dx"]), float(message["dy"]))
+        elif op == "zoom":
+            camera = zoom(camera, float(np.clip(float(message["factor"]), 0.1, 10.0)))
+        elif op != "still":
+            raise PtraceError(f"unknown camera operation {op!r}")
+        self.camera = camera
+        self.request, self.request_at = int(message.get("id", 0)), time.perf_counter()
+        if not message.get("moving"):
+            self._reset(None)
+        elif not self.moving:       # the first move abandons the pass under way
+            self.moving = True
+            self._redraw("frame")
+        else:                       # later ones let the quick frame under way finish
+            self.redraw = "frame"
+
+    def _settings(self, message):
+        changes = {}
+        for name in ("spp", "max_depth", "light_samples"):
+            if name in message:
+                changes[name] = int(message[name])
+        if "estimator" in message:
+            if message["estimator"] not in ESTIMATORS:
+                raise PtraceError(f"unknown estimator {message['estimator']!r}")
+            changes["hemisphere"] = message["estimator"] == "hemisphere"
+            if message["estimator"] != "hemisphere":
+                changes["direct"] = message["estimator"]
+        if "accel" in message:
+            changes["accel"] = message["accel"]
+            if message["accel"] != "bvh":
+                changes["bvh_split"] = "mean"
+        mode = message.get("mode", self.mode)
+        if mode not in MODES:
+            raise PtraceError(f"unknown view {mode!r}")
+        if mode != "rate":
+            changes["integrator"] = "normals" if mode == "normals" else "path"
+        settings = dataclasses.replace(self.settings, **changes)   # validates
+        self.mode = mode
+        if settings != self.settings:
+            self.settings = settings
+            self._reset(None)
+        else:
+            self._redraw("image")
+
+    def _reset(self, cell):
+        """Start over: the whole image (cell None: sums cleared, a quick frame first) or one
+        cell (x, y, dx, dy from the bottom: only its pixels are traced again)."""
+        if cell is None:
+            rows = np.arange(self.width * self.height)
+            for array in self.sums:
+                array[...] = 0
+            self.fallback, self.moving = None, False
+            self._redraw("frame")
+        else:
+            self.generation += 1
+            x, y, dx, dy = cell
+            ys, xs = np.mgrid[y:y + dy, x:x + dx]
+            rows = (ys * self.width + xs).reshape(-1)
+        sums = new_sums(rows.shape[0])
+        passes = Passes(self.settings, sums)
+        self.job = _Job(self.settings, self.camera, rows, sums, passes, iter(passes))
+
+    def stop(self):
+        with self.cond:
+            self.stopped = True
+            self.generation += 1
+            self.cond.notify_all()
+
+    def join(self, timeout=None):
+        self.thread.join(timeout)
+        shutil.rmtree(self.temporary, ignore_errors=True)
+
+    def probe(self, x, y):
+        """Radiance (linear, before exposure) and samples of pixel (x, y from the bottom)."""
+        shown = self.shown
+        if shown is None or not (0 <= x < self.width and 0 <= y < self.height):
+            raise PtraceError(f"pixel {x} {y} is not in the image")
+        row = self.height - 1 - y
+        return {"type": "probe", "x": x, "y": y, "radiance": shown[0][row, x].tolist(),
+                "samples": int(shown[1][row, x])}
+
+    def save(self):
+        """PNG and EXR of the last full-resolution frame: what is on screen, except that a quick
+        frame (while the camera moves, or just after a reset) is never saved; the frame before
+        it is, and the reply says so. The PNG is that frame's pixels (the same course_8bit or
+        rate_colours pixels it was sent as), the EXR its linear radiance times 2**exposure."""
+        shown, accumulated = self.shown, self.accumulated
+        if accumulated is None:
+            raise PtraceError("nothing to save yet")
+        radiance, _, _, rate, exposure = accumulated
+        png, exr = self.outputs
+        write_image(png, radiance * np.float32(2.0 ** exposure), eight_bit=rate)
+        write_image(exr, radiance * np.float32(2.0 ** exposure))
+        reply = {"type": "saved", "png": os.path.abspath(png), "exr": os.path.abspath(exr)}
+        if accumulated is not shown:
+            reply["note"] = "the last full-resolution render, not the quick frame on screen"
+        return reply
+
+    # --- the render thread -----------------------------------------------------------------
+
+    def _run(self):
+        if self.threads is not None:
+            numba.set_num_threads(self.threads)
+        while True:
+            with self.cond:
+                while not self.stopped and self.redraw is None and (
+                        self.paused or self.job.done or self.moving):
+                    self.cond.wait()
+                if self.stopped:
+                    return
+                generation, job, redraw, self.redraw = self.generation, self.job, self.redraw, None
+                camera, settings, moving = self.camera, self.settings, self.moving
+            try:
+                if redraw == "frame":
+                    self._frame(generation, camera, settings, job, moving)
+                elif redraw == "image":
+                    self._show(generation, job, None, "redraw")
+                else:
+                    self._pass(generation, job)
+            except _Abort:
+                pass
+            except Exception as error:   # noqa: BLE001 - told to the page; the server goes on
+                if not isinstance(error, PtraceError):
+                    error = f"internal error: {type(error).__name__}: {error}"
+                    print(f"ptrace: {error}", file=sys.stderr, flush=True)
+                self.publish({"type": "error", "message": str(error)}, None)
+                with self.cond:
+                    job.done = True
+
+    def _check(self, generation):
+        if self.generation != generation or self.stopped:
+            raise _Abort
+
+    def _frame(self, generation, camera, settings, job, moving):
+        """A throwaway frame of 1 sample per pixel, at the resolution that takes about
+        QUICK_SECONDS at the last speed measured: while the camera moves, and after a reset
+        (then shown where no pass has summed yet)."""
+        scale = int(np.ceil(np.sqrt(self.width * self.height
+                                    / max(self.paths_per_second * QUICK_SECONDS, 1.0))))
+        small = scaled(camera, max(1, scale))
+        one = dataclasses.replace(settings, spp=1, adaptive=None)
+        work = self.backends.work(one, small)
+        ys, xs = np.mgrid[0:small.height, 0:small.width]
+        sums = new_sums(xs.size)
+        start = time.perf_counter()
+        work.trace(xs.reshape(-1), ys.reshape(-1), 0, 1, sums, np.arange(xs.size),
+                   lambda _: self._check(generation))
+        self.paths_per_second = xs.size / max(time.perf_counter() - start, 1e-6)
+        image = mean_image(sums, small.width, small.height)
+        scale = max(1, scale)
+        full = np.zeros((self.height, self.width, 3), np.float32)
+        big = np.repeat(np.repeat(image, scale, axis=0), scale, axis=1)
+        full[:big.shape[0], :big.shape[1]] = big[:self.height, :self.width]
+        if not moving:
+            with self.cond:
+                self._check(generation)
+                self.fallback = full
+        # the page scales the small image up (nearest pixel); nothing is summed yet
+        self._show(generation, job, None, "quick", override=(image, scale, full))
+
+    def _pass(self, generation, job):
+        if job.current is None:
+            job.current = next(job.schedule, None)
+            if job.current is None:
+                with self.cond:
+                    job.done = True
+                self._show(generation, job, None, "done")
+                return
+        first, n, active = job.current
+        work = self.backends.work(job.settings, job.camera)
+        rows = job.rows[active]
+        temp = new_sums(active.shape[0])
+        progress = {"pixels": 0, "last": time.perf_counter()}
+        start = time.perf_counter()
+
+        def on_block(samples):
+            self._check(generation)
+            progress["pixels"] += samples // n
+            now = time.perf_counter()
+            if now - progress["last"] > max(PUSH_SECONDS, 4 * self.show_seconds):
+                self._show(generation, job, (active, temp, progress["pixels"]), "progress",
+                           rays=work.rays_traced, seconds=now - start)
+                progress["last"] = time.perf_counter()
+                self.show_seconds = progress["last"] - now
+
+        work.trace(rows % self.width, rows // self.width, first, n, temp,
+                   np.arange(active.shape[0]), on_block)
+        seconds = time.perf_counter() - start
+        self.paths_per_second = n * active.shape[0] / max(seconds, 1e-6)
+        with self.cond:
+            self._check(generation)
+            for total, part in zip(job.sums, temp):
+                total[active] += part          # what ptrace.render adds: 0 + x is x
+            for full, part in zip(self.sums, job.sums):
+                full[job.rows] = part
+            job.seconds += seconds
+            job.rays += work.rays_traced
+            job.samples += n * active.shape[0]
+            job.current = None
+        self._show(generation, job, None, "pass")
+
+    def _show(self, generation, job, partial, kind, override=None, rays=0, seconds=0.0):
+        """Build the frame (the summed image, with the finished blocks of the pass under way if
+        partial), encode it as a PNG (_png) and publish it with its stats."""
+        with self.cond:
+            self._check(generation)
+            rgb, counts = self.sums[0].copy(), self.sums[3].copy()
+            done_samples = job.samples
+            if partial is not None:
+                active, temp, pixels = partial
+                rows, mine = job.rows[active[:pixels]], active[:pixels]
+                rgb[rows] = job.sums[0][mine] + temp[0][:pixels]
+                counts[rows] = job.sums[3][mine] + temp[3][:pixels]
+                done_samples += pixels * job.current[1]
+            exposure, mode, fallback = self.exposure, self.mode, self.fallback
+            request, request_at, paused = self.request, self.request_at, self.paused
+            moving = self.moving
+            if kind in ("quick", "pass"):
+                self.request_at = None
+        w, h = self.width, self.height
+        gain = np.float32(2.0 ** exposure)
+        spp, rate, scale = job.settings.spp, None, 1
+        if override is not None:      # a quick frame: sent small, scaled up by the page
+            small, scale, radiance = override
+            encoded = course_8bit(small * gain)
+            counts = counts.reshape(h, w)[::-1]
+        else:
+            radiance = mean_image((rgb, None, None, counts), w, h)
+            counts = counts.reshape(h, w)[::-1]
+            if fallback is not None:
+                radiance = np.where(counts[..., None] > 0, radiance, fallback)
+            if mode == "rate":
+                encoded = rate = rate_colours(counts / spp)
+            else:
+                encoded = course_8bit(radiance * gain)
+        png = self._png(encoded)
+        seconds, rays = job.seconds + seconds, job.rays + rays
+        remaining = job.rows.size * spp - done_samples
+        self.seq += 1
+        self.shown = (radiance, counts, spp, rate, exposure)
+        if override is None:
+            self.accumulated = self.shown
+        state = "paused" if paused else "moving" if moving else \
+            "done" if job.done else "rendering"
+        stats = {"type": "frame", "seq": self.seq, "kind": kind, "width": w, "height": h,
+                 "scale": scale,
+                 "spp": 1.0 if override is not None else done_samples / job.rows.size,
+                 "target": spp, "mode": mode,
+                 "exposure": exposure, "seconds": seconds,
+                 "rays_per_second": rays / seconds if seconds else 0.0,
+                 "eta_seconds": seconds / done_samples * remaining
+                 if done_samples and state == "rendering" else None,
+                 "state": state, "request": request, "cell": job.rows.size != w * h,
+                 "latency_ms": None if request_at is None or kind not in ("quick", "pass")
+                 else 1000 * (time.perf_counter() - request_at)}
+        self.publish(stats, png)
+
+    def _png(self, pixels):
+        """PNG bytes of 8-bit pixels (the same pixels write_image writes; zlib level 1, fast)."""
+        import OpenImageIO as oiio
+        path = os.path.join(self.temporary, "frame.png")
+        spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
+        spec.attribute("png:compressionLevel", 1)
+        output = oiio.ImageOutput.create(path)
+        if output is None or not output.open(path, spec) or not output.write_image(
+                np.ascontiguousarray(pixels)):
+            raise RuntimeError(f"cannot encode a frame: {oiio.geterror()}")
+        output.close()
+        with open(path, "rb") as handle:
+            return handle.read()
