@@ -22,7 +22,7 @@ import accel
 
 from .errors import PtraceError
 from .image import FORMATS
-from .view_render import Backends
+from .view_render import Backends, denoiser_missing
 from .view_session import Preview
 
 VIEW_SPP = 1024                 # -s without a value: a preview has something to refine
@@ -40,9 +40,10 @@ class ViewServer:
     returns the URL with its token; stop() closes every socket and stops every render."""
 
     def __init__(self, scene, settings, camera, *, threads=None, crop=None,
-                 outputs=("view.png", "view.exr"), notice=None):
+                 outputs=("view.png", "view.exr"), notice=None, denoise=False):
         self.scene, self.settings, self.camera = scene, settings, camera
         self.threads, self.crop, self.outputs = threads, crop, outputs
+        self.denoise = denoise          # the page's denoised toggle starts on (--denoise)
         self.notice = notice or (lambda text: None)
         self.backends = Backends(scene, self._notice)
         self.token = secrets.token_urlsafe(32)
@@ -83,7 +84,8 @@ class ViewServer:
 
     def new_session(self, publish):
         return Preview(self.scene, self.settings, self.camera, self.backends, publish,
-                       threads=self.threads, crop=self.crop, outputs=self.outputs)
+                       threads=self.threads, crop=self.crop, outputs=self.outputs,
+                       denoise=self.denoise)
 
 
 def _handlers(view):
@@ -127,6 +129,7 @@ def _handlers(view):
                        "estimator": "hemisphere" if s.hemisphere else s.direct,
                        "accel": s.accel, "accels": list(accel.KINDS),
                        "mode": "normals" if s.integrator == "normals" else "image",
+                       "denoise": view.denoise, "denoiser_missing": denoiser_missing(),
                        "outputs": [os.path.abspath(p) for p in view.outputs]}, None)
             self.session = view.new_session(self.publish)
 
@@ -187,7 +190,8 @@ def parse(argv):
                         help="only print the URL, do not open a browser")
     parser.set_defaults(spp=VIEW_SPP)
     args = parser.parse_args(argv)
-    for flag, given in (("--info", args.info), ("--workers", args.workers is not None),
+    for flag, given in (("--info", args.info), ("--aov", args.aov is not None),
+                        ("--workers", args.workers is not None),
                         ("--scheduler", args.scheduler is not None),
                         ("--dashboard", args.dashboard)):
         if given:
@@ -211,6 +215,9 @@ def prepare(args):
     directory = os.path.dirname(os.path.abspath(output))
     if not (os.path.isdir(directory) and os.access(directory, os.W_OK)):
         raise PtraceError(f"{output}: cannot write to directory {directory}")
+    if args.denoise:            # the page's denoised toggle starts on
+        from .features import require_denoiser
+        require_denoiser()
     if args.threads is not None and args.threads > numba.config.NUMBA_NUM_THREADS:
         raise PtraceError(f"threads must be between 1 and {numba.config.NUMBA_NUM_THREADS}, "
                           f"got {args.threads}")
@@ -240,7 +247,7 @@ async def _serve(args, scene, settings, camera, outputs):
     import logging
     logging.getLogger("tornado.access").setLevel(logging.ERROR)   # refusals are not news
     view = ViewServer(scene, settings, camera, threads=args.threads, crop=args.crop,
-                      outputs=outputs, notice=notice)
+                      outputs=outputs, notice=notice, denoise=args.denoise)
     url = view.start()
     print(f"ptrace: viewing {args.scene} at {url} (Ctrl-C stops)", flush=True)
     if not args.no_browser:

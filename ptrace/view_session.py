@@ -5,9 +5,15 @@ bit ptrace.render's N samples. Each pass is traced into fresh sums and then adde
 image's (0 + x is x, so the bits are the same), which lets a camera move or a setting abort a
 pass at any block without leaving half a pass behind. After a reset, and while the camera
 moves, a throwaway frame of 1 sample at reduced resolution is shown first.
+
+The denoised toggle: while it is on, each full-resolution frame (not a quick one, not the rate
+view) is ptrace --denoise's image of the merged passes, guided by the AOVs' sums, which the
+passes accumulate beside the radiance (ptrace.features) from the start of the render: turning
+the toggle on restarts a render that has no sums of them; turning it off keeps them until the
+next restart, so turning it on again costs nothing. They are not accumulated always because
+they cost one more ray per sample (about a quarter more render time on the Cornell box).
 """
 import dataclasses
-import os
 import shutil
 import sys
 import tempfile
@@ -17,15 +23,15 @@ import time
 import numba
 import numpy as np
 
+from . import view_render
 from .errors import PtraceError
-from .image import course_8bit, rate_colours, write_image
+from .features import FEATURES, aov_images, denoise
+from .image import course_8bit, rate_colours
 from .tiles import Passes, new_sums
-from .view_render import mean_image, orbit, pan, scaled, zoom
+from .view_render import Shown, denoiser_missing, mean_image, png_bytes, settings_of, write_frame
 
 QUICK_SECONDS = 0.06            # the budget of a frame while the camera moves
 PUSH_SECONDS = 0.25             # within a pass, the screen is refreshed at most this often
-ESTIMATORS = ("mis", "light", "hemisphere")
-MODES = ("image", "rate", "normals")
 
 
 class _Abort(Exception):
@@ -42,6 +48,7 @@ class _Job:
     sums: tuple
     passes: object
     schedule: object
+    features: np.ndarray = None  # the AOVs' sums beside sums (ptrace.features), or None
     current: tuple = None
     started: float = 0.0
     seconds: float = 0.0        # tracing time so far
@@ -57,7 +64,7 @@ class Preview:
     """
 
     def __init__(self, scene, settings, camera, backends, publish, *, threads=None, crop=None,
-                 outputs=("view.png", "view.exr")):
+                 outputs=("view.png", "view.exr"), denoise=False):
         self.scene, self.backends, self.publish = scene, backends, publish
         self.threads, self.outputs = threads, outputs
         self.settings, self.camera = settings, camera
@@ -71,10 +78,16 @@ class Preview:
         self.paths_per_second = 2e5                 # measured; sizes the quick frames
         self.show_seconds = 0.0                     # the last progress frame's cost
         self.fallback = None            # the quick frame, shown where nothing is summed yet
-        self.shown = None               # (radiance, counts, spp, rate image, exposure)
+        self.shown = None               # a Shown
         self.accumulated = None         # the last shown that was no quick frame (Save's)
         self.seq = 0
         self.sums = new_sums(self.width * self.height)
+        self.missing = denoiser_missing()
+        if denoise and self.missing:
+            raise PtraceError(self.missing)
+        self.denoise = denoise                          # the toggle; the image's AOV sums:
+        self.features = np.zeros((self.width * self.height, FEATURES)) if denoise else None
+        self.merged, self.last_denoised = 0, (None, None)   # changes of the sums; a cache
         self.job = None
         self.temporary = tempfile.mkdtemp(prefix="ptrace-view-")
         self._reset(crop)
@@ -120,12 +133,13 @@ class Preview:
     def _camera(self, message):
         camera, op = self.camera, message.get("op")
         if op == "orbit":
-            camera = orbit(camera, -float(message["dx"]) * np.pi / self.width,
-                           -float(message["dy"]) * np.pi / self.width)
+            camera = view_render.orbit(camera, -float(message["dx"]) * np.pi / self.width,
+                                       -float(message["dy"]) * np.pi / self.width)
         elif op == "pan":
-            camera = pan(camera, float(message["dx"]), float(message["dy"]))
+            camera = view_render.pan(camera, float(message["dx"]), float(message["dy"]))
         elif op == "zoom":
-            camera = zoom(camera, float(np.clip(float(message["factor"]), 0.1, 10.0)))
+            factor = float(np.clip(float(message["factor"]), 0.1, 10.0))
+            camera = view_render.zoom(camera, factor)
         elif op != "still":
             raise PtraceError(f"unknown camera operation {op!r}")
         self.camera = camera
@@ -139,28 +153,12 @@ class Preview:
             self.redraw = "frame"
 
     def _settings(self, message):
-        changes = {}
-        for name in ("spp", "max_depth", "light_samples"):
-            if name in message:
-                changes[name] = int(message[name])
-        if "estimator" in message:
-            if message["estimator"] not in ESTIMATORS:
-                raise PtraceError(f"unknown estimator {message['estimator']!r}")
-            changes["hemisphere"] = message["estimator"] == "hemisphere"
-            if message["estimator"] != "hemisphere":
-                changes["direct"] = message["estimator"]
-        if "accel" in message:
-            changes["accel"] = message["accel"]
-            if message["accel"] != "bvh":
-                changes["bvh_split"] = "mean"
-        mode = message.get("mode", self.mode)
-        if mode not in MODES:
-            raise PtraceError(f"unknown view {mode!r}")
-        if mode != "rate":
-            changes["integrator"] = "normals" if mode == "normals" else "path"
-        settings = dataclasses.replace(self.settings, **changes)   # validates
-        self.mode = mode
-        if settings != self.settings:
+        settings, mode = settings_of(self.settings, self.mode, message)   # validates
+        denoise = bool(message.get("denoise", self.denoise))
+        if denoise and self.missing:
+            raise PtraceError(self.missing)
+        self.mode, self.denoise = mode, denoise
+        if settings != self.settings or (denoise and self.features is None):
             self.settings = settings
             self._reset(None)
         else:
@@ -169,10 +167,12 @@ class Preview:
     def _reset(self, cell):
         """Start over: the whole image (cell None: sums cleared, a quick frame first) or one
         cell (x, y, dx, dy from the bottom: only its pixels are traced again)."""
+        self.merged += 1
         if cell is None:
             rows = np.arange(self.width * self.height)
             for array in self.sums:
                 array[...] = 0
+            self.features = np.zeros((rows.size, FEATURES)) if self.denoise else None
             self.fallback, self.moving = None, False
             self._redraw("frame")
         else:
@@ -182,7 +182,8 @@ class Preview:
             rows = (ys * self.width + xs).reshape(-1)
         sums = new_sums(rows.shape[0])
         passes = Passes(self.settings, sums)
-        self.job = _Job(self.settings, self.camera, rows, sums, passes, iter(passes))
+        features = None if self.features is None else np.zeros((rows.size, FEATURES))
+        self.job = _Job(self.settings, self.camera, rows, sums, passes, iter(passes), features)
 
     def stop(self):
         with self.cond:
@@ -207,17 +208,16 @@ class Preview:
         """PNG and EXR of the last full-resolution frame: what is on screen, except that a quick
         frame (while the camera moves, or just after a reset) is never saved; the frame before
         it is, and the reply says so. The PNG is that frame's pixels (the same course_8bit or
-        rate_colours pixels it was sent as), the EXR its linear radiance times 2**exposure."""
+        rate_colours pixels it was sent as), the EXR its linear radiance times 2**exposure.
+        With the denoised toggle on, NAME_denoised.png and .exr too (the same way)."""
         shown, accumulated = self.shown, self.accumulated
         if accumulated is None:
             raise PtraceError("nothing to save yet")
-        radiance, _, _, rate, exposure = accumulated
-        png, exr = self.outputs
-        write_image(png, radiance * np.float32(2.0 ** exposure), eight_bit=rate)
-        write_image(exr, radiance * np.float32(2.0 ** exposure))
-        reply = {"type": "saved", "png": os.path.abspath(png), "exr": os.path.abspath(exr)}
+        reply, notes = write_frame(accumulated, self.outputs, self.denoise)
         if accumulated is not shown:
-            reply["note"] = "the last full-resolution render, not the quick frame on screen"
+            notes.insert(0, "the last full-resolution render, not the quick frame on screen")
+        if notes:
+            reply["note"] = "; ".join(notes)
         return reply
 
     # --- the render thread -----------------------------------------------------------------
@@ -261,7 +261,7 @@ class Preview:
         (then shown where no pass has summed yet)."""
         scale = int(np.ceil(np.sqrt(self.width * self.height
                                     / max(self.paths_per_second * QUICK_SECONDS, 1.0))))
-        small = scaled(camera, max(1, scale))
+        small = view_render.scaled(camera, max(1, scale))
         one = dataclasses.replace(settings, spp=1, adaptive=None)
         work = self.backends.work(one, small)
         ys, xs = np.mgrid[0:small.height, 0:small.width]
@@ -278,7 +278,7 @@ class Preview:
         if not moving:
             with self.cond:
                 self._check(generation)
-                self.fallback = full
+                self.fallback, self.merged = full, self.merged + 1
         # the page scales the small image up (nearest pixel); nothing is summed yet
         self._show(generation, job, None, "quick", override=(image, scale, full))
 
@@ -294,6 +294,7 @@ class Preview:
         work = self.backends.work(job.settings, job.camera)
         rows = job.rows[active]
         temp = new_sums(active.shape[0])
+        features = None if job.features is None else np.zeros((active.shape[0], FEATURES))
         progress = {"pixels": 0, "last": time.perf_counter()}
         start = time.perf_counter()
 
@@ -302,13 +303,13 @@ class Preview:
             progress["pixels"] += samples // n
             now = time.perf_counter()
             if now - progress["last"] > max(PUSH_SECONDS, 4 * self.show_seconds):
-                self._show(generation, job, (active, temp, progress["pixels"]), "progress",
-                           rays=work.rays_traced, seconds=now - start)
+                self._show(generation, job, (active, temp, features, progress["pixels"]),
+                           "progress", rays=work.rays_traced, seconds=now - start)
                 progress["last"] = time.perf_counter()
                 self.show_seconds = progress["last"] - now
 
         work.trace(rows % self.width, rows // self.width, first, n, temp,
-                   np.arange(active.shape[0]), on_block)
+                   np.arange(active.shape[0]), on_block, features)
         seconds = time.perf_counter() - start
         self.paths_per_second = n * active.shape[0] / max(seconds, 1e-6)
         with self.cond:
@@ -317,6 +318,10 @@ class Preview:
                 total[active] += part          # what ptrace.render adds: 0 + x is x
             for full, part in zip(self.sums, job.sums):
                 full[job.rows] = part
+            if features is not None:
+                job.features[active] += features
+                self.features[job.rows] = job.features
+            self.merged += 1
             job.seconds += seconds
             job.rays += work.rays_traced
             job.samples += n * active.shape[0]
@@ -329,21 +334,28 @@ class Preview:
         with self.cond:
             self._check(generation)
             rgb, counts = self.sums[0].copy(), self.sums[3].copy()
-            done_samples = job.samples
+            features = None if self.features is None or override is not None \
+                else self.features.copy()
+            done_samples, merged = job.samples, None if partial is not None else self.merged
             if partial is not None:
-                active, temp, pixels = partial
+                active, temp, temp_features, pixels = partial
                 rows, mine = job.rows[active[:pixels]], active[:pixels]
                 rgb[rows] = job.sums[0][mine] + temp[0][:pixels]
                 counts[rows] = job.sums[3][mine] + temp[3][:pixels]
+                if features is not None:
+                    features[rows] = job.features[mine] + temp_features[:pixels]
                 done_samples += pixels * job.current[1]
-            exposure, mode, fallback = self.exposure, self.mode, self.fallback
+            exposure, mode, fallback, denoise = self.exposure, self.mode, self.fallback, \
+                self.denoise
             request, request_at, paused = self.request, self.request_at, self.paused
             moving = self.moving
             if kind in ("quick", "pass"):
                 self.request_at = None
         w, h = self.width, self.height
         gain = np.float32(2.0 ** exposure)
-        spp, rate, scale = job.settings.spp, None, 1
+        spp, rate, scale, aovs, denoised = job.settings.spp, None, 1, None, None
+        if features is not None:
+            aovs = aov_images(features, counts, (h, w))
         if override is not None:      # a quick frame: sent small, scaled up by the page
             small, scale, radiance = override
             encoded = course_8bit(small * gain)
@@ -355,13 +367,16 @@ class Preview:
                 radiance = np.where(counts[..., None] > 0, radiance, fallback)
             if mode == "rate":
                 encoded = rate = rate_colours(counts / spp)
+            elif denoise and aovs is not None:
+                denoised = self._denoised(radiance, aovs, merged)
+                encoded = course_8bit(denoised * gain)
             else:
                 encoded = course_8bit(radiance * gain)
-        png = self._png(encoded)
+        png = png_bytes(encoded, self.temporary)
         seconds, rays = job.seconds + seconds, job.rays + rays
         remaining = job.rows.size * spp - done_samples
         self.seq += 1
-        self.shown = (radiance, counts, spp, rate, exposure)
+        self.shown = Shown(radiance, counts, spp, rate, exposure, aovs, denoised)
         if override is None:
             self.accumulated = self.shown
         state = "paused" if paused else "moving" if moving else \
@@ -369,7 +384,7 @@ class Preview:
         stats = {"type": "frame", "seq": self.seq, "kind": kind, "width": w, "height": h,
                  "scale": scale,
                  "spp": 1.0 if override is not None else done_samples / job.rows.size,
-                 "target": spp, "mode": mode,
+                 "target": spp, "mode": mode, "denoised": denoised is not None,
                  "exposure": exposure, "seconds": seconds,
                  "rays_per_second": rays / seconds if seconds else 0.0,
                  "eta_seconds": seconds / done_samples * remaining
@@ -379,16 +394,12 @@ class Preview:
                  else 1000 * (time.perf_counter() - request_at)}
         self.publish(stats, png)
 
-    def _png(self, pixels):
-        """PNG bytes of 8-bit pixels (the same pixels write_image writes; zlib level 1, fast)."""
-        import OpenImageIO as oiio
-        path = os.path.join(self.temporary, "frame.png")
-        spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.UINT8)
-        spec.attribute("png:compressionLevel", 1)
-        output = oiio.ImageOutput.create(path)
-        if output is None or not output.open(path, spec) or not output.write_image(
-                np.ascontiguousarray(pixels)):
-            raise RuntimeError(f"cannot encode a frame: {oiio.geterror()}")
-        output.close()
-        with open(path, "rb") as handle:
-            return handle.read()
+    def _denoised(self, radiance, aovs, merged):
+        """The denoised radiance, computed again only when the sums changed (merged is their
+        change count, None for a frame within a pass): exposure and view changes reuse it."""
+        if merged is not None and self.last_denoised[0] == merged:
+            return self.last_denoised[1]
+        denoised = denoise(radiance, aovs["albedo"], aovs["normal"])
+        if merged is not None:
+            self.last_denoised = (merged, denoised)
+        return denoised

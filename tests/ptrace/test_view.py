@@ -9,6 +9,7 @@ import queue
 import signal
 import socket
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -19,6 +20,7 @@ import tornado.websocket
 import ptrace
 from ptrace import cli, view, view_render, view_session
 from ptrace.camera import course_camera
+from ptrace.features import denoise
 from ptrace.image import course_8bit, read_image
 from ptrace.settings import Settings
 
@@ -34,14 +36,18 @@ def cornell():
 
 
 class Frames:
-    """A Preview's publish(): every frame's stats with a copy of the radiance it showed."""
+    """A Preview's publish(): every frame's stats with a copy of the radiance it showed (and
+    in self.shown, by the frame's seq, the whole Shown: its AOVs and denoised image)."""
 
     def __init__(self):
         self.queue = queue.Queue()
         self.preview = None
+        self.shown = {}
 
     def __call__(self, message, png):
         shown = None if png is None else self.preview.shown[0].copy()
+        if png is not None:
+            self.shown[message["seq"]] = self.preview.shown
         self.queue.put((message, png, shown))
 
     def until(self, test, timeout=120):
@@ -168,6 +174,70 @@ def test_save_while_moving_writes_the_accumulated_render(cornell, tmp_path):
     assert not np.array_equal(quick[1], expected / 2)
 
 
+def test_the_denoised_toggle_shows_ptrace_denoise_of_the_render(cornell, tmp_path):
+    """With the toggle on, the passes also sum the AOVs from sample 0 (turning it on restarts
+    the render) and each full-resolution frame is ptrace.features.denoise of the merged
+    passes: at the end the radiance and the AOVs are ptrace.render(..., aovs=)'s bit for bit
+    and the denoised image is denoise() of them (equal within float tolerance; OIDN gave the
+    same bits on every call here, but is not promised to). Turning it off and on again
+    redraws without a restart; Save writes NAME_denoised.png/.exr beside the noisy ones."""
+    options = dict(spp=24, max_depth=3)
+    frames = Frames()
+    outputs = (str(tmp_path / "v.png"), str(tmp_path / "v.exr"))
+    session = preview(cornell, Settings(**options), frames, outputs=outputs)
+    try:
+        frames.until(lambda m: m["state"] == "done")
+        assert session.features is None                 # not summed while the toggle is off
+        session.handle({"type": "settings", "denoise": True})
+        seen = frames.until(lambda m: m["state"] == "done" and m["denoised"])
+        done = frames.shown[seen[-1][0]["seq"]]
+        session.handle({"type": "settings", "denoise": False})
+        off = frames.until(lambda m: not m["denoised"])[-1][0]
+        session.handle({"type": "settings", "denoise": True})
+        on = frames.until(lambda m: m["denoised"])[-1][0]
+        saved = session.save()
+    finally:
+        session.stop()
+        session.join()
+    assert seen[0][0]["kind"] == "quick" and not seen[0][0]["denoised"]   # the restart
+    assert all(m["denoised"] for m, _ in seen if m["kind"] in ("pass", "progress"))
+    assert off["kind"] == on["kind"] == "redraw" and on["state"] == "done"
+    aovs = {}
+    expected = ptrace.render(cornell, resolution=(W, H), aovs=aovs, **options)
+    np.testing.assert_array_equal(done.radiance, expected)
+    for name in ("albedo", "normal", "depth"):
+        np.testing.assert_array_equal(done.aovs[name], aovs[name])
+    denoised = denoise(expected, aovs["albedo"], aovs["normal"])
+    np.testing.assert_allclose(done.denoised, denoised, rtol=1e-5, atol=1e-6)
+    assert not np.allclose(done.denoised, expected, atol=1e-3)
+    np.testing.assert_array_equal(frames.shown[on["seq"]].denoised, done.denoised)   # reused
+    assert saved["denoised"] == [str(tmp_path / "v_denoised.png"), str(tmp_path / "v_denoised.exr")]
+    np.testing.assert_array_equal(read_image(outputs[1]), expected)
+    np.testing.assert_array_equal(read_image(tmp_path / "v_denoised.exr"), done.denoised)
+    png = np.round(read_image(tmp_path / "v_denoised.png") * 255).astype(np.uint8)
+    np.testing.assert_array_equal(png, course_8bit(done.denoised))
+
+
+def test_without_pyoidn_the_toggle_is_refused_with_the_reason(cornell, monkeypatch):
+    """No pyoidn: the page's hello carries the one-line reason (the page disables the toggle
+    and shows it) and a session refuses the toggle with it; the render goes on."""
+    monkeypatch.setitem(sys.modules, "pyoidn", None)     # import pyoidn raises ImportError
+
+    async def test(server, url):
+        connection = await tornado.websocket.websocket_connect(socket_url(url))
+        hello = json.loads(await connection.read_message())
+        await next_frame(connection)
+        session = next(iter(server.sockets)).session
+        with pytest.raises(ptrace.PtraceError, match="ptrace.denoise"):
+            session.handle({"type": "settings", "denoise": True})
+        connection.close()
+        return hello, session.denoise
+    hello, on = serve(cornell, test)
+    assert hello["denoise"] is False and not on
+    reason = hello["denoiser_missing"]
+    assert "\n" not in reason and 'pip install "ptrace[denoise]"' in reason
+
+
 def test_orbit_pan_and_zoom(cornell):
     camera = course_camera(cornell, W, H)
     distance = np.linalg.norm(camera.position - camera.target)
@@ -193,6 +263,7 @@ def test_orbit_pan_and_zoom(cornell):
 def test_errors_of_the_view_command_are_one_line(tmp_path, capsys):
     for argv, text in ((["view", str(tmp_path / "missing.dae"), "--no-browser"], "missing.dae"),
                        (["view", str(SHIPPED), "--workers", "2"], "no --workers"),
+                       (["view", str(SHIPPED), "--aov", "albedo"], "no --aov"),
                        (["view", str(SHIPPED), "-f", str(tmp_path / "a.jpg")], "must end in"),
                        (["view", str(SHIPPED), "-s", "0"], "samples per pixel")):
         assert cli.main(argv) == cli.EXIT_USAGE

@@ -241,3 +241,20 @@ def test_save_writes_what_is_on_screen(browser, serve, tmp_path):
     np.testing.assert_allclose(np.float32(probe["radiance"]) * np.float32(2 ** 1.5),
                                exr[H // 2, W // 2], rtol=1e-6)
     assert f"{probe['samples']} samples" in browser.find_element("id", "probe").text
+
+
+def test_the_denoised_toggle_changes_the_image_and_labels_it(browser, serve):
+    server = serve(spp=32, max_depth=2)
+    open_page(browser, server)
+    wait(browser, lambda: stats(browser)["state"] == "done")
+    before = canvas(browser)
+    label = browser.find_element("id", "stat-denoised")
+    assert not label.is_displayed()
+    assert browser.find_element("id", "denoise").is_enabled()
+    browser.find_element("id", "denoise").click()
+    wait(browser, lambda: stats(browser)["denoised"] and stats(browser)["state"] == "done")
+    after = canvas(browser)
+    assert np.abs(after.astype(int) - before).mean() > 1
+    assert label.is_displayed() and label.text.endswith("denoised (biased)")
+    shown = next(iter(server.server.sockets)).session.shown
+    np.testing.assert_array_equal(after, course_8bit(shown.denoised))
