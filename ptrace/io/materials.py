@@ -254,6 +254,16 @@ def gltf_material(material, document, pool, notes, where):
                "KHR_materials_ior"}
     for extension in sorted(set(extensions) - handled):
         notes.append(f"{where}: material {name!r}: extension {extension} ignored")
+    for field, ref in (("baseColorTexture", pbr.get("baseColorTexture")),
+                       ("metallicRoughnessTexture", pbr.get("metallicRoughnessTexture")),
+                       ("emissiveTexture", spec.get("emissiveTexture"))):
+        if isinstance(ref, dict):   # a texture reference's own options: ptrace reads none
+            for extension in sorted(ref.get("extensions", {})):
+                notes.append(f"{where}: material {name!r}: {field}'s {extension} ignored")
+            if ref.get("texCoord", 0) != 0:
+                notes.append(f"{where}: material {name!r}: {field} uses texCoord "
+                             f"{ref['texCoord']}; ptrace reads the first set of texture "
+                             f"coordinates only")
     for field in ("normalTexture", "occlusionTexture"):
         if field in spec:
             notes.append(f"{where}: material {name!r}: {field} ignored")

@@ -362,3 +362,12 @@ def test_a_distributed_render_scopes_its_log_filter_to_itself(client, monkeypatc
     assert ptrace.render(ptrace.load(SHIPPED), client=client, spp=1, resolution=(8, 6)).max() > 0
     assert seen == [["_DropSyncCancelRace"]]
     assert configuration() == before
+
+
+def test_aovs_are_refused_on_a_cluster(client):
+    """AOVs are rendered in-process only: asking for them with a client is a one-line
+    PtraceError before any task runs, not a silently empty dict."""
+    scene = ptrace.load(os.path.join(os.path.dirname(__file__), "..", "..", "scenes",
+                                     "cornell.dae"))
+    with pytest.raises(ptrace.PtraceError, match="in-process only"):
+        ptrace.render(scene, client=client, resolution=(8, 6), aovs={})

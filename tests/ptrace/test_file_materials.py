@@ -326,3 +326,24 @@ def test_obj_diffuse_with_specular_is_a_glossy_coat(tmp_path):
     np.testing.assert_allclose(m.albedo[0], [0.6, 0.2, 0.1])
     np.testing.assert_allclose(m.specular[0], 0.05)
     assert m.alpha[0] == pytest.approx(math.sqrt(2 / 100))
+
+
+def test_gltf_texture_reference_options_are_noted(tmp_path):
+    """A texture reference's own extension (KHR_texture_transform) and a second texCoord set
+    are not read: each is a note, not silence."""
+    path = textured_quad_scene(tmp_path, "glb")
+    from ptrace.io.materials import gltf_json
+    document = gltf_json(str(path))
+    ref = document["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]
+    ref["extensions"] = {"KHR_texture_transform": {"scale": [2, 2]}}
+    ref["texCoord"] = 1
+    import struct
+    data = path.read_bytes()
+    length = struct.unpack_from("<I", data, 12)[0]
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + data[20 + length:]
+    path.write_bytes(b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body)
+    notes = ptrace.load(path).notes
+    assert any("baseColorTexture's KHR_texture_transform ignored" in n for n in notes), notes
+    assert any("texCoord 1" in n for n in notes), notes
