@@ -70,15 +70,24 @@ def conductor_fresnel(eta, k, cos_i):
     return 0.5 * (rs + rp)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+@njit(cache=True, inline="always")
+def reflection_half_vector(wox, woy, woz, wix, wiy, wiz):
+    """The unit half vector of wo and wi for reflection, and whether it is defined: both must
+    be above the surface (z > 0), and not opposite."""
     if woz <= 0.0 or wiz <= 0.0:
-        return 0.0, 0.0, 0.0
+        return 0.0, 0.0, 1.0, False
     hx, hy, hz = wox + wix, woy + wiy, woz + wiz
     norm = math.sqrt(hx * hx + hy * hy + hz * hz)
     if norm == 0.0:
+        return 0.0, 0.0, 1.0, False
+    return hx / norm, hy / norm, hz / norm, True
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
         return 0.0, 0.0, 0.0
-    hz /= norm
     d = beckmann_d(alpha, hz)
     g = 1.0 / (1.0 + smith_lambda(alpha, wiz) + smith_lambda(alpha, woz))
     scale = d * g / (4.0 * woz * wiz)
@@ -89,13 +98,9 @@ def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
-    if woz <= 0.0 or wiz <= 0.0:
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
         return 0.0
-    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
-    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if norm == 0.0:
-        return 0.0
-    hx, hy, hz = hx / norm, hy / norm, hz / norm
     # p(h) = D(h) cos(theta_h): the Beckmann distribution of normals, then the reflection Jacobian
     p_h = beckmann_d(alpha, hz) * hz
     return p_h / (4.0 * (wix * hx + wiy * hy + wiz * hz))
@@ -118,13 +123,9 @@ def _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz):
     max(cos_i, cos_o)), over a diffuse base of albedo Rd that gets what the coat lets through,
     28 Rd (1 - Rs) / (23 pi) (1 - (1 - cos_i / 2)^5)(1 - (1 - cos_o / 2)^5): reciprocal, and
     its directional albedo at most 1 for Rd, Rs in [0, 1] (tested)."""
-    if woz <= 0.0 or wiz <= 0.0:
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
         return 0.0, 0.0, 0.0
-    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
-    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if norm == 0.0:
-        return 0.0, 0.0, 0.0
-    hx, hy, hz = hx / norm, hy / norm, hz / norm
     cos_d = wix * hx + wiy * hy + wiz * hz
     coat = beckmann_d(alpha, hz) / (4.0 * cos_d * max(wiz, woz))
     base = GLOSSY_DIFFUSE * (1.0 - (1.0 - 0.5 * wiz) ** 5) * (1.0 - (1.0 - 0.5 * woz) ** 5)
