@@ -17,12 +17,10 @@ the screenshot alone (no measurement, the results file untouched). The screensho
 to the page's content and written as a 256-colour palette PNG (Pillow's octree, dithered), to keep it small.
 """
 import argparse
-import asyncio
 import os
 import shutil
 import statistics
 import tempfile
-import threading
 
 from . import report
 
@@ -49,33 +47,13 @@ def chromium(width=1000, height=1000):
                                             or "/usr/bin/chromedriver"), options=options)
 
 
-class Served:
-    """A ViewServer on its own asyncio loop in a background thread."""
-
-    def __init__(self, scene, settings, camera):
-        from ptrace.view import ViewServer
-        self.ready = threading.Event()
-        directory = tempfile.mkdtemp(prefix="ptrace-view-bench-")
-        self.server = ViewServer(scene, settings, camera,
-                                 outputs=(os.path.join(directory, "v.png"),
-                                          os.path.join(directory, "v.exr")))
-        self.thread = threading.Thread(target=asyncio.run, args=(self._main(),), daemon=True)
-        self.thread.start()
-        self.ready.wait(60)
-
-    async def _main(self):
-        self.loop = asyncio.get_running_loop()
-        self.stopping = asyncio.Event()
-        self.url = self.server.start()
-        self.ready.set()
-        try:
-            await self.stopping.wait()
-        finally:
-            self.server.stop()
-
-    def stop(self):
-        self.loop.call_soon_threadsafe(self.stopping.set)
-        self.thread.join(60)
+def serve(scene, settings, camera):
+    """A ViewServer in a background thread, writing its saves to a scratch directory."""
+    from ptrace.view import ViewServer
+    directory = tempfile.mkdtemp(prefix="ptrace-view-bench-")
+    return ViewServer(scene, settings, camera,
+                      outputs=(os.path.join(directory, "v.png"),
+                               os.path.join(directory, "v.exr"))).start_in_background()
 
 
 def wait(driver, condition, timeout=600):
@@ -164,7 +142,7 @@ def main(argv=None):
     try:
         for name, path, depth in cases:
             scene = ptrace.load(path)
-            served = Served(scene, Settings(spp=VIEW_SPP, max_depth=depth),
+            served = serve(scene, Settings(spp=VIEW_SPP, max_depth=depth),
                             course_camera(scene, *resolution))
             try:
                 rows = measure(driver, served, args.drags)
@@ -197,7 +175,7 @@ def screenshot(path, spp_shown=24):
     from ptrace.settings import Settings
     scene = ptrace.load(CORNELL)
     driver = chromium(720, 800)
-    served = Served(scene, Settings(spp=1024, max_depth=5), course_camera(scene, 320, 240))
+    served = serve(scene, Settings(spp=1024, max_depth=5), course_camera(scene, 320, 240))
     try:
         driver.get(served.url)
         wait(driver, lambda: (driver.execute_script("return window.ptraceView.stats")

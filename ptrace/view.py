@@ -82,6 +82,12 @@ class ViewServer:
         if self.server is not None:
             self.server.stop()
 
+    def start_in_background(self):
+        """Run this server on its own asyncio loop in a daemon thread (for Python callers: a
+        notebook, the browser tests, the latency benchmark); returns a Background whose url is
+        the page's and whose stop() stops the server and the thread."""
+        return Background(self)
+
     def new_session(self, publish):
         return Preview(self.scene, self.settings, self.camera, self.backends, publish,
                        threads=self.threads, crop=self.crop, outputs=self.outputs,
@@ -275,3 +281,29 @@ def main(argv):
         _internal_error(error)
         return EXIT_INTERNAL
     return 0
+
+
+class Background:
+    """A ViewServer on its own asyncio loop in a background thread (ViewServer.start_in_background)."""
+
+    def __init__(self, server):
+        self.server, self.url = server, None
+        self.ready = threading.Event()
+        self.thread = threading.Thread(target=asyncio.run, args=(self._main(),), daemon=True)
+        self.thread.start()
+        if not self.ready.wait(60):
+            raise RuntimeError("the view server did not start")
+
+    async def _main(self):
+        self.loop = asyncio.get_running_loop()
+        self.stopping = asyncio.Event()
+        self.url = self.server.start()
+        self.ready.set()
+        try:
+            await self.stopping.wait()
+        finally:
+            self.server.stop()
+
+    def stop(self):
+        self.loop.call_soon_threadsafe(self.stopping.set)
+        self.thread.join(60)

@@ -1,11 +1,9 @@
 """The viewer's page in a real browser: Debian's chromium, headless, through chromedriver and
 Selenium. With CI set (.ci/run sets it and installs both) a missing browser fails these tests;
 elsewhere they are skipped with the reason. Every wait is on a condition (WebDriverWait)."""
-import asyncio
 import os
 import pathlib
 import shutil
-import threading
 
 import numpy as np
 import pytest
@@ -54,41 +52,16 @@ def browser():
     driver.quit()
 
 
-class Running:
-    """A ViewServer on its own asyncio loop in a background thread."""
-
-    def __init__(self, scene, settings, outputs):
-        self.ready = threading.Event()
-        self.settings, self.scene, self.outputs = settings, scene, outputs
-        self.thread = threading.Thread(target=asyncio.run, args=(self._main(),), daemon=True)
-        self.thread.start()
-        assert self.ready.wait(60), "the server did not start"
-
-    async def _main(self):
-        self.loop = asyncio.get_running_loop()
-        self.stopping = asyncio.Event()
-        self.server = view.ViewServer(self.scene, self.settings,
-                                      course_camera(self.scene, W, H), outputs=self.outputs)
-        self.url = self.server.start()
-        self.ready.set()
-        try:
-            await self.stopping.wait()
-        finally:
-            self.server.stop()
-
-    def stop(self):
-        self.loop.call_soon_threadsafe(self.stopping.set)
-        self.thread.join(60)
-
-
 @pytest.fixture
 def serve(tmp_path):
     scene = ptrace.load(SHIPPED)
     running = []
 
     def start(**options):
-        running.append(Running(scene, Settings(**options),
-                               (str(tmp_path / "view.png"), str(tmp_path / "view.exr"))))
+        server = view.ViewServer(scene, Settings(**options), course_camera(scene, W, H),
+                                 outputs=(str(tmp_path / "view.png"),
+                                          str(tmp_path / "view.exr")))
+        running.append(server.start_in_background())
         return running[-1]
     yield start
     for server in running:
