@@ -11,21 +11,23 @@ half of the centroids sorted on that axis goes left), which always makes progres
 depth: a run of bad mean splits cannot make a giant leaf, an endless loop, or a tree deeper than
 the traversal stack.
 
-Layout (structure of arrays): lower[n], upper[n] boxes; child_or_first[n] is the left child index
-(the right child is the next node) for an interior node, or the first entry in `order` for a leaf;
-count[n] is 0 for an interior node and the number of primitives for a leaf.
+Layout of that binary tree (structure of arrays): lower[n], upper[n] boxes; child_or_first[n] is
+the left child index (the right child is the next node) for an interior node, or the first entry
+in `order` for a leaf; count[n] is 0 for an interior node and the number of primitives for a leaf.
 
-Traversal does not walk that binary tree: after the build, `_collapse` folds it into a 4-wide
-tree (each wide node takes its binary node's two children, then keeps opening the interior child
-of largest surface area until it has four), which halves the nodes a ray visits and so the chain
-of dependent memory loads (the README's BVH departure gives the side-by-side figures against the
-binary traversal, and benchmarks/results/accel_rays.md the rays per second of today's; an 8-wide
-tree and float32 boxes were tried and were not faster). A wide node is one row of 32
-floats (256 bytes, 64-byte aligned): for each of the six planes lower x, y, z, upper x, y, z the
-value of its 4 children, then the 4 children's links, then their counts. A link is a wide node's
-row when its count is 0 and the first entry in `order` of a leaf otherwise; an unused slot has an
-empty box (lower +inf, upper -inf) that no ray enters. Triangles are stored as (p0, p1, p2) rows
-in leaf order (what both triangle tests of accel.kernels read).
+Traversal does not walk the binary tree: `_collapse` folds it into an 8-wide tree (each wide node
+takes its binary node's two children, then keeps opening the interior child of largest surface
+area until it has eight), so a ray visits fewer nodes and the slab test of a node's children is
+one vector operation (accel.simd: one AVX-512 instruction per step, or two AVX2 ones). A wide
+node is one 512-byte row (_node_rows): its children's six box planes as float64, and an int64
+payload per child: a row for an interior child, or a leaf's
+first triangle block and its triangle and sphere counts. A leaf's triangles are stored by
+_fill_rows in blocks of four, as float64 coordinates (the mesh's own values: each lane of
+accel.simd's block test computes what the scalar test of accel.kernels computes on those values,
+bit for bit, so bvh and naive agree exactly), and tested four at a time. What each of these
+choices bought is measured side by side in benchmarks/results/accel_rays.md (its "Traversal
+changes" section): 8-wide with vector slab and block tests over the earlier 4-wide scalar
+traversal.
 """
 import time
 from collections import namedtuple
@@ -36,13 +38,14 @@ from numba import njit, prange
 from . import compiled
 from .kernels import (
     NO_HIT,
+    WATERTIGHT,
     better,
-    row_triangle_hit,
     shear_setup,
     slab_setup,
     sphere_hit,
     triangle_test,
 )
+from .simd import BLOCK, BLOCK_COLUMNS, make_slab_test, moller_trumbore_block, watertight_block
 from .types import Hits
 
 STACK_SIZE = 128
@@ -50,8 +53,12 @@ MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2
 SPLITS = ("mean", "sah")   # the seed's mean-centroid split; a binned surface-area heuristic
 SAH_BINS = 16
 RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
-WIDTH = 4                # children per node of the traversal's tree
+WIDTH = 8                # children per node of the traversal's tree (_closest's tournament: 8)
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
+NODE_COLUMNS = 64        # float64 columns of a wide node's row: 6 * WIDTH planes, WIDTH payloads
+PAYLOAD = 6 * WIDTH      # the first payload's column in the row's int64 view
+MAX_LEAF_SIZE = 0xffff   # a leaf payload holds its triangle and sphere counts in 16 bits each
+slab_test = make_slab_test(WIDTH, np.float64)
 
 
 @njit(cache=True, inline="always")
@@ -224,18 +231,23 @@ def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, us
     return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
 
 
-def _aligned_empty(rows, columns):
-    """An empty float64 (rows, columns) array whose first row starts on a 64-byte boundary
-    (numpy only promises 16), so each wide node row starts a cache line."""
-    buffer = np.empty(rows * columns + 8)
-    skip = (-buffer.ctypes.data % 64) // 8
+def _aligned_empty(rows, columns, dtype=np.float64):
+    """An empty (rows, columns) array whose first row starts on a 64-byte boundary (numpy only
+    promises 16), so rows whose size is a multiple of 64 bytes each start a cache line."""
+    itemsize = np.dtype(dtype).itemsize
+    buffer = np.empty(rows * columns + 64 // itemsize, dtype=dtype)
+    skip = (-buffer.ctypes.data % 64) // itemsize
     return buffer[skip:skip + rows * columns].reshape(rows, columns)
 
 
 @njit(cache=True)
 def _collapse(lower, upper, child_or_first, count, wide):
-    """Fold the binary tree into WIDTH-wide rows of `wide` (see the module docstring); row 0
-    is the root. Returns the number of rows used (at most the binary tree's node count)."""
+    """Fold the binary tree into WIDTH-wide float64 rows of `wide`; row 0 is the root. A row holds
+    the six planes lower x, y, z, upper x, y, z of its WIDTH children, then each child's link (a
+    wide row for an interior child, its first `order` entry for a leaf), then its count (0 for
+    an interior child); an unused slot has an empty box (lower +inf, upper -inf). _node_rows and
+    _fill_rows turn these rows into the traversal's. Returns the number of rows used (at most
+    the binary tree's node count)."""
     n = lower.shape[0]
     if n == 0:
         return 0
@@ -292,62 +304,178 @@ def _collapse(lower, upper, child_or_first, count, wide):
     return used
 
 
-@njit(cache=True, inline="always")
-def _child_entries(nodes, node, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, tmin, tmax,
-                   entries):
-    """Slab test of the ray against the WIDTH child boxes of wide node `node`: entries[c] is
-    child c's entry t clipped to [tmin, tmax], or inf where the ray misses it.
-
-    ix, iy, iz are inverse_direction() of the ray's direction and nx .. fz from near_columns():
-    the planes (0-5 for lower x, y, z, upper x, y, z) nearest and farthest along each axis, so
-    no per-box comparison is needed to order the two planes. The test is written so that an
-    unused slot's empty box (where t0 = inf and t1 = -inf make the tolerance NaN) is a miss.
-    """
-    for c in range(WIDTH):
-        t0 = max(tmin, (nodes[node, nx * WIDTH + c] - ox) * ix,
-                 (nodes[node, ny * WIDTH + c] - oy) * iy, (nodes[node, nz * WIDTH + c] - oz) * iz)
-        t1 = min(tmax, (nodes[node, fx * WIDTH + c] - ox) * ix,
-                 (nodes[node, fy * WIDTH + c] - oy) * iy, (nodes[node, fz * WIDTH + c] - oz) * iz)
-        # The slab t values carry rounding error; widen the far end so a box never rejects a
-        # hit the primitive test would accept (boxes are also padded at build time).
-        entries[c] = t0 if t0 <= t1 + abs(t1) * 4e-16 else np.inf
 
 
 @njit(cache=True)
-def _pack_triangles(order, vertices, faces):
-    """Each triangle's vertices (p0, p1, p2) in leaf order, so a leaf reads its triangles from
-    consecutive rows instead of through order -> faces -> vertices."""
-    n_tri = faces.shape[0]
-    tris = np.zeros((order.shape[0], 9))
-    for i in range(order.shape[0]):
-        if order[i] < n_tri:
-            for j in range(3):
-                for a in range(3):
-                    tris[i, 3 * j + a] = vertices[faces[order[i], j], a]
-    return tris
+def _wide_rows(lower, upper, child_or_first, count):
+    """_collapse into a staging array sized for the worst case (a row per interior binary node,
+    or the one row of a leaf root), returned as a copy of the rows used."""
+    interior = max(1, int((count == 0).sum()))
+    wide = np.empty((interior, 8 * WIDTH))
+    used = _collapse(lower, upper, child_or_first, count, wide)
+    return wide[:used].copy()
 
 
-BVHRecord = namedtuple("BVHRecord", ["nodes", "tris", "order", "n_tri", "centers", "radii",
-                                     "triangle"])
+@njit(cache=True)
+def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
+    """The traversal's rows (see _node_rows) from _collapse's: the planes and each child's
+    payload; and the leaves as blocks of BLOCK triangles, in the order the rows reach them.
+
+    For each leaf slot (count > 0) of each row: its triangles fill ceil(triangles / BLOCK)
+    consecutive blocks (NaN in unused lanes, which every triangle test misses), then its spheres
+    take ceil(spheres / BLOCK) more block rows of `prims` (their `blocks` rows stay NaN), so every
+    leaf starts on a block. Returns (blocks, prims): the float64 (blocks, BLOCK_COLUMNS) vertex
+    coordinates and the int64 primitive id of each lane (-1 unused)."""
+    rows, width = wide.shape[0], WIDTH
+    for r in range(rows):
+        for k in range(6 * WIDTH):
+            nodes[r, k] = wide[r, k]
+    links = wide[:, 6 * WIDTH:7 * WIDTH].astype(np.int64)
+    counts = wide[:, 7 * WIDTH:8 * WIDTH].astype(np.int64)
+    n_blocks = 0
+    for r in range(rows):
+        for c in range(width):
+            if counts[r, c] > 0:
+                n_tri_leaf = 0
+                for i in range(links[r, c], links[r, c] + counts[r, c]):
+                    n_tri_leaf += order[i] < n_tri
+                n_sph = counts[r, c] - n_tri_leaf
+                n_blocks += (n_tri_leaf + BLOCK - 1) // BLOCK + (n_sph + BLOCK - 1) // BLOCK
+    blocks = np.full((n_blocks, BLOCK_COLUMNS), np.nan)
+    prims = np.full(n_blocks * BLOCK, -1, dtype=np.int64)
+    block = 0
+    for r in range(rows):
+        for c in range(width):
+            if counts[r, c] == 0:
+                payloads[r, PAYLOAD + c] = links[r, c]
+                continue
+            first = block
+            lane = 0
+            for i in range(links[r, c], links[r, c] + counts[r, c]):   # triangles first
+                p = order[i]
+                if p < n_tri:
+                    for j in range(3):
+                        for a in range(3):
+                            blocks[block, (3 * j + a) * BLOCK + lane] = vertices[faces[p, j], a]
+                    prims[block * BLOCK + lane] = p
+                    lane += 1
+                    if lane == BLOCK:
+                        block, lane = block + 1, 0
+            n_tri_leaf = (block - first) * BLOCK + lane
+            if lane > 0:
+                block, lane = block + 1, 0
+            spheres = block * BLOCK
+            for i in range(links[r, c], links[r, c] + counts[r, c]):
+                if order[i] >= n_tri:
+                    prims[spheres] = order[i]
+                    spheres += 1
+            n_sph = spheres - block * BLOCK
+            block += (n_sph + BLOCK - 1) // BLOCK
+            payloads[r, PAYLOAD + c] = first | (n_tri_leaf << 32) | (n_sph << 48)
+    return blocks, prims
+
+
+def _node_rows(rows):
+    """An empty node array of `rows` 512-byte rows, one per wide node, each starting a cache line,
+    and its int64 view (filled by _fill_rows).
+
+    Columns 0-47 (float64): the six planes lower x, y, z, upper x, y, z, WIDTH children each;
+    columns 48-55, read as int64: each child's payload. A payload is a row for an interior child, or for a leaf first_block | n_triangles
+    << 32 | n_spheres << 48 (n_triangles + n_spheres > 0, so payload >> 32 is not 0), its
+    triangles in blocks first_block.. and its spheres' ids in the `prims` entries after them
+    (_fill_rows)."""
+    nodes = _aligned_empty(rows, NODE_COLUMNS)
+    return nodes, nodes.view(np.int64)
+
+
+BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_tri", "centers",
+                                     "radii", "triangle"])
 
 
 @njit(cache=True)
 def new_scratch(record):
-    """Traversal stacks for one block of rays: links, their counts (0: a wide node, else a leaf
-    size), the t where the ray enters each box, and the WIDTH children's entries."""
-    return (np.empty(WIDE_STACK, dtype=np.int64), np.empty(WIDE_STACK, dtype=np.int64),
-            np.empty(WIDE_STACK), np.empty(WIDTH))
+    """Traversal stack for one block of rays: payloads and the t where the ray enters each."""
+    return np.empty(WIDE_STACK, dtype=np.int64), np.empty(WIDE_STACK)
+
+
+@njit(cache=True, inline="always")
+def _ray_planes(ox, oy, oz, dx, dy, dz):
+    """What slab_test needs of a ray: its near and far plane columns, and (origin, inverse
+    direction)."""
+    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+    planes = (nx * WIDTH, ny * WIDTH, nz * WIDTH, fx * WIDTH, fy * WIDTH, fz * WIDTH)
+    return planes, (ox, oy, oz, ix, iy, iz)
+
+
+@njit(cache=True, inline="always")
+def _block_test(record, block, shear, ray, lo, hi):
+    """The record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes."""
+    if record.triangle == WATERTIGHT:
+        return watertight_block(record.blocks, block, shear, lo, hi)
+    return moller_trumbore_block(record.blocks, block, ray, lo, hi)
+
+
+@njit(cache=True, inline="always")
+def _nearer(ta, a, tb, b):
+    """The pair (t, slot) nearer first: a compare-exchange of the nearest-child tournament."""
+    if tb < ta:
+        return tb, b, ta, a
+    return ta, a, tb, b
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v):
+    """Fold a leaf's primitives into the closest hit so far."""
+    prims, n_tri = record.prims, record.n_tri
+    first = payload & 0xffffffff
+    n_blocks = (((payload >> 32) & 0xffff) + BLOCK - 1) // BLOCK
+    for block in range(first, first + n_blocks):
+        mask, ts, us, vs = _block_test(record, block, shear, ray, lo, best_t)
+        if mask != 0:
+            for lane in range(BLOCK):
+                t = ts[lane]
+                if (mask >> lane) & 1 and t <= best_t:
+                    p = prims[block * BLOCK + lane]
+                    if better(t, p, best_t, best_prim):
+                        best_t, best_prim, best_u, best_v = t, p, us[lane], vs[lane]
+    ox, oy, oz, dx, dy, dz = ray
+    start = (first + n_blocks) * BLOCK
+    for i in range(start, start + ((payload >> 48) & 0xffff)):
+        p = prims[i]
+        t = sphere_hit(record.centers, record.radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, best_t)
+        if t <= best_t and better(t, p, best_t, best_prim):
+            best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
+    return best_t, best_prim, best_u, best_v
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _leaf_any(record, payload, shear, ray, lo, hi):
+    """True if any of a leaf's primitives is hit with lo <= t <= hi."""
+    first = payload & 0xffffffff
+    n_blocks = (((payload >> 32) & 0xffff) + BLOCK - 1) // BLOCK
+    for block in range(first, first + n_blocks):
+        if _block_test(record, block, shear, ray, lo, hi)[0] != 0:
+            return True
+    ox, oy, oz, dx, dy, dz = ray
+    start = (first + n_blocks) * BLOCK
+    for i in range(start, start + ((payload >> 48) & 0xffff)):
+        p = record.prims[i] - record.n_tri
+        if sphere_hit(record.centers, record.radii, p, ox, oy, oz, dx, dy, dz, lo, hi) <= hi:
+            return True
+    return False
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
-    """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, triangle tests)."""
-    nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
-    centers, radii = record.centers, record.radii
-    stack, counts, entry, entries = scratch
-    test = record.triangle
-    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+    """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, primitive tests).
+
+    Ordered: at each node the nearest child hit is entered next and the others are pushed with
+    their entry t (in slot order); a popped entry beyond the nearest hit found is skipped."""
+    nodes, payloads = record.nodes, record.payloads
+    stack, entry = scratch
+    planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
+    ray = (ox, oy, oz, dx, dy, dz)
     best_t = hi
     best_prim = NO_HIT
     best_u = 0.0
@@ -355,46 +483,41 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     visits = 0
     tests = 0
     top = 0
-    if nodes.shape[0] > 0:   # the root's children are tested when it is popped
-        stack[0], counts[0], entry[0] = 0, 0, lo
-        top = 1
-    while top > 0:
-        top -= 1
-        if entry[top] > best_t:
-            continue
-        link = stack[top]
-        k = counts[top]
-        if k > 0:
-            for i in range(link, link + k):
-                p = order[i]
-                if p < n_tri:
-                    tests += 1
-                    t, u, v = row_triangle_hit(tris, i, test, ox, oy, oz, dx, dy, dz, shear)
-                    if t >= lo and t <= best_t and better(t, p, best_t, best_prim):
-                        best_t, best_prim, best_u, best_v = t, p, u, v
-                else:
-                    t = sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, best_t)
-                    if t <= best_t and better(t, p, best_t, best_prim):
-                        best_t, best_prim, best_u, best_v = t, p, 0.0, 0.0
-            continue
-        visits += 1
-        _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, best_t,
-                       entries)
-        # push the children hit, farthest deepest, so the nearest is popped first
-        # (an insertion sort of at most WIDTH entries above `base`)
-        base = top
-        for c in range(WIDTH):
-            t = entries[c]
-            if t == np.inf:
+    payload = 0   # the root, row 0
+    while nodes.shape[0] > 0:
+        if payload >> 32 == 0:   # a wide node
+            visits += 1
+            row = payload
+            mask, ts = slab_test(nodes, row, planes, slab_ray, lo, best_t)
+            if mask != 0:
+                # a tournament for the nearest child hit (a missed child's t is inf)
+                t0, c0, t1, c1 = _nearer(ts[0], 0, ts[1], 1)
+                t2, c2, t3, c3 = _nearer(ts[2], 2, ts[3], 3)
+                t4, c4, t5, c5 = _nearer(ts[4], 4, ts[5], 5)
+                t6, c6, t7, c7 = _nearer(ts[6], 6, ts[7], 7)
+                t0, c0, t2, c2 = _nearer(t0, c0, t2, c2)
+                t4, c4, t6, c6 = _nearer(t4, c4, t6, c6)
+                t0, c0, t4, c4 = _nearer(t0, c0, t4, c4)
+                others = mask & ~(1 << c0)
+                for c in range(WIDTH):   # push the other children hit, without branches
+                    stack[top] = payloads[row, PAYLOAD + c]
+                    entry[top] = ts[c]
+                    top += (others >> c) & 1
+                payload = payloads[row, PAYLOAD + c0]
                 continue
-            j = top
-            while j > base and entry[j - 1] < t:
-                stack[j], counts[j], entry[j] = stack[j - 1], counts[j - 1], entry[j - 1]
-                j -= 1
-            stack[j] = int(nodes[link, 6 * WIDTH + c])
-            counts[j] = int(nodes[link, 7 * WIDTH + c])
-            entry[j] = t
-            top += 1
+        else:
+            tests += ((payload >> 32) & 0xffff) + ((payload >> 48) & 0xffff)
+            best_t, best_prim, best_u, best_v = _leaf_closest(
+                record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v)
+        popped = False
+        while top > 0:   # pop the next entry that starts before the nearest hit
+            top -= 1
+            if entry[top] <= best_t:
+                payload = stack[top]
+                popped = True
+                break
+        if not popped:
+            break
     if best_prim == NO_HIT:
         best_t = np.inf
     return best_t, best_prim, best_u, best_v, visits, tests
@@ -408,39 +531,28 @@ def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
-    """Any-hit traversal of one ray: children are tested before they are pushed, leaves stop at
-    the first primitive hit."""
-    nodes, tris, order, n_tri = record.nodes, record.tris, record.order, record.n_tri
-    centers, radii = record.centers, record.radii
-    stack, counts, _, entries = scratch
-    test = record.triangle
-    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+    """Any-hit traversal of one ray: every child hit is pushed (in slot order, unsorted: entering
+    the nearest first measured slower for shadow rays), and the first primitive hit ends it."""
+    nodes, payloads = record.nodes, record.payloads
+    stack = scratch[0]
+    planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
+    ray = (ox, oy, oz, dx, dy, dz)
     top = 0
-    if nodes.shape[0] > 0:
-        stack[0], counts[0] = 0, 0
-        top = 1
-    while top > 0:
+    payload = 0
+    while nodes.shape[0] > 0:
+        if payload >> 32 == 0:
+            row = payload
+            mask = slab_test(nodes, row, planes, slab_ray, lo, hi)[0]
+            for c in range(WIDTH):
+                stack[top] = payloads[row, PAYLOAD + c]
+                top += (mask >> c) & 1
+        elif _leaf_any(record, payload, shear, ray, lo, hi):
+            return True
+        if top == 0:
+            break
         top -= 1
-        link = stack[top]
-        k = counts[top]
-        if k > 0:
-            for i in range(link, link + k):
-                p = order[i]
-                if p < n_tri:
-                    t, u, v = row_triangle_hit(tris, i, test, ox, oy, oz, dx, dy, dz, shear)
-                    if t >= lo and t <= hi:
-                        return True
-                elif sphere_hit(centers, radii, p - n_tri, ox, oy, oz, dx, dy, dz, lo, hi) <= hi:
-                    return True
-            continue
-        _child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, hi,
-                       entries)
-        for c in range(WIDTH):
-            if entries[c] != np.inf:
-                stack[top] = int(nodes[link, 6 * WIDTH + c])
-                counts[top] = int(nodes[link, 7 * WIDTH + c])
-                top += 1
+        payload = stack[top]
     return False
 
 
@@ -473,8 +585,8 @@ class BVHAccelerator:
         if split not in SPLITS:
             raise ValueError(f"unknown BVH split {split!r}; choose one of {', '.join(SPLITS)}")
         max_leaf_size = int(max_leaf_size)
-        if max_leaf_size < 1:
-            raise ValueError("max_leaf_size must be at least 1")
+        if not 1 <= max_leaf_size <= MAX_LEAF_SIZE:
+            raise ValueError(f"max_leaf_size must be between 1 and {MAX_LEAF_SIZE}")
         self.geometry = geometry
         self.max_leaf_size = max_leaf_size
         self.split = split
@@ -493,21 +605,28 @@ class BVHAccelerator:
         # the build returns views of buffers sized for 2n - 1 nodes: copy to free the rest
         self.lower, self.upper = self.lower.copy(), self.upper.copy()
         self.child_or_first, self.count = self.child_or_first.copy(), self.count.copy()
-        # each wide row takes at least one interior binary node: at most (nodes + 1) / 2 rows
-        wide = _aligned_empty(max(1, (self.lower.shape[0] + 1) // 2), 8 * WIDTH)
-        used = _collapse(self.lower, self.upper, self.child_or_first, self.count, wide)
-        self._nodes = _aligned_empty(used, 8 * WIDTH)
-        self._nodes[:] = wide[:used]
-        self._tris = _pack_triangles(self.order, geometry.vertices, geometry.faces)
+        wide = _wide_rows(self.lower, self.upper, self.child_or_first, self.count)
+        self._nodes, payloads = _node_rows(wide.shape[0])
+        self._blocks, self._prims = _fill_rows(wide, self._nodes, payloads, self.order,
+                                               geometry.triangle_count, geometry.vertices,
+                                               geometry.faces)
+        del wide
         self._build_seconds = time.perf_counter() - start
         # A wide row at level L comes from a binary node at depth >= L, and popping it leaves
-        # at most 3 L + 4 entries on a traversal stack: depth < STACK_SIZE - 1 keeps that
-        # within WIDE_STACK.
+        # at most (WIDTH - 1) L + WIDTH entries on a traversal stack: depth < STACK_SIZE - 1
+        # keeps that within WIDE_STACK.
         if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
             raise RuntimeError("BVH deeper than the traversal stack")
         self._last_work = None
-        self.compiled = BVHRecord(self._nodes, self._tris, self.order, geometry.triangle_count,
-                                  geometry.centers, geometry.radii, test)
+        self.compiled = BVHRecord(self._nodes, payloads, self._blocks, self._prims,
+                                  geometry.triangle_count, geometry.centers, geometry.radii, test)
+
+    def wide_tree(self):
+        """The traversal's tree as float64 arrays, for tests and studies: (lower, upper) of
+        shape (rows, 3, WIDTH), each child's box as traversed, and
+        payloads (rows, WIDTH) as described in _node_rows."""
+        planes = self._nodes[:, :6 * WIDTH].astype(np.float64).reshape(-1, 6, WIDTH)
+        return planes[:, :3], planes[:, 3:], self.compiled.payloads[:, PAYLOAD:].copy()
 
     def intersect(self, rays):
         rays.validate()
@@ -524,12 +643,13 @@ class BVHAccelerator:
     def last_mean_visits(self):
         """Interior wide nodes visited per ray in the last intersect() (None before the
         first); leaves are counted by last_mean_triangle_tests. Not comparable with figures
-        from before the 4-wide traversal, which counted binary nodes, leaves included."""
+        from before the 8-wide traversal (4-wide nodes, and before that binary nodes)."""
         return None if self._last_work is None else _mean(self._last_work[0])
 
     @property
     def last_mean_triangle_tests(self):
-        """Ray-triangle tests per ray in the last intersect() (None before the first)."""
+        """Primitive tests per ray in the last intersect() (None before the first): the
+        primitives of each leaf visited (a block's unused lanes are not counted)."""
         return None if self._last_work is None else _mean(self._last_work[1])
 
     def occluded(self, rays):
@@ -538,13 +658,14 @@ class BVHAccelerator:
 
     def stats(self):
         nodes = int(self.lower.shape[0])
-        arrays = (self._nodes, self._tris, self.order)   # what traversal reads
+        arrays = (self._nodes, self._blocks, self._prims)   # what traversal reads
         return {"kind": self.kind, "primitives": self.geometry.primitive_count,
                 "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
                 "build_seconds": self._build_seconds, "split": self.split,
-                "triangle": self.triangle,
+                "triangle": self.triangle, "width": WIDTH,
                 "nodes": nodes, "wide_nodes": int(self._nodes.shape[0]),
                 "leaves": int((self.count > 0).sum()),
+                "triangle_blocks": int(self._blocks.shape[0]),
                 "max_depth": int(self.max_depth), "max_leaf_size": self.max_leaf_size,
                 "largest_leaf": int(self.count.max(initial=0)),
                 "bytes": int(sum(a.nbytes for a in arrays))}

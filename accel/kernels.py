@@ -131,25 +131,10 @@ def watertight(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
 
 
 @njit(cache=True, inline="always")
-def row_triangle_hit(rows, i, test, ox, oy, oz, dx, dy, dz, shear):
-    """The chosen test on row i of an array of (p0, p1, p2) rows (9 floats: the BVH stores its
-    triangles so, in leaf order); shear is shear_setup() of the ray."""
-    if test == WATERTIGHT:
-        kx, ky, kz, px, py, pz, sx, sy, sz = shear
-        return watertight(rows[i, kx] - px, rows[i, ky] - py, rows[i, kz] - pz,
-                          rows[i, 3 + kx] - px, rows[i, 3 + ky] - py, rows[i, 3 + kz] - pz,
-                          rows[i, 6 + kx] - px, rows[i, 6 + ky] - py, rows[i, 6 + kz] - pz,
-                          sx, sy, sz)
-    return moller_trumbore(rows[i, 0], rows[i, 1], rows[i, 2], rows[i, 3], rows[i, 4],
-                           rows[i, 5], rows[i, 6], rows[i, 7], rows[i, 8],
-                           ox, oy, oz, dx, dy, dz)
-
-
-@njit(cache=True, inline="always")
 def mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear):
-    """The chosen test on triangle `tri` of a mesh: the same arithmetic as row_triangle_hit on
-    its vertices, so every backend computes bit-identical t, u, v whether it reads the mesh or
-    the BVH's per-triangle copy."""
+    """The chosen test on triangle `tri` of a mesh (shear is shear_setup() of the ray). The BVH
+    runs the same arithmetic four triangles at a time on its copy of the coordinates
+    (accel.simd's block tests), so every backend computes bit-identical t, u, v."""
     i0 = faces[tri, 0]
     i1 = faces[tri, 1]
     i2 = faces[tri, 2]

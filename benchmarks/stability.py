@@ -258,9 +258,12 @@ def study_rays(name, n, rays, seed=RAY_SEED):
 
 
 def allocated_node_bytes(primitives):
-    """Bytes the BVH build allocates for its arrays: 2P - 1 nodes (two float64 boxes of 3, two
-    int64) and the int64 order; the returned node arrays are views that keep all of it alive."""
-    return (2 * primitives - 1) * (6 * 8 + 2 * 8) + 8 * primitives
+    """The bound accel/bvh.py's layout puts on what its traversal keeps (stats()['bytes']): a
+    wide row (256 bytes) per interior node folded into it and a block of four triangles (288
+    bytes of coordinates, 32 of primitive ids) per leaf block, and there are at most P of each
+    (every wide row holds at least one interior binary node, every block at least one
+    primitive)."""
+    return primitives * (256 + 288 + 32)
 
 
 def measured_build(geometry, split):

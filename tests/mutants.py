@@ -25,6 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 REPORT = ROOT / "benchmarks" / "results" / "mutants.md"
 
 INTEGRATOR, KERNELS, BVH = "ptrace/integrator.py", "accel/kernels.py", "accel/bvh.py"
+SIMD = "accel/simd.py"
 RR_TEST = "tests/ptrace/test_roulette_rule.py"
 
 # name -> (what the bug is, [(file, text, replacement)], [pytest arguments])
@@ -63,12 +64,15 @@ MUTANTS = {
         ["tests/accel/test_backends.py", "-k", "barycentrics"]),
     "no-tmax-shrink": (
         "BVH traversal opens boxes beyond the nearest hit found so far",
-        [(BVH, "        if entry[top] > best_t:\n            continue\n",
-          "        if False:\n            continue\n"),
-         (BVH, "_child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, fy, fz, lo, "
-               "best_t,", "_child_entries(nodes, link, ox, oy, oz, ix, iy, iz, nx, ny, nz, fx, "
-               "fy, fz, lo, hi,")],
+        [(BVH, "            if entry[uint64(top)] <= best_t:\n",
+          "            if True:\n"),
+         (BVH, "slab_test(nodes, row, planes, slab_ray, lo, best_t)",
+          "slab_test(nodes, row, planes, slab_ray, lo, hi)")],
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
+    "block-swapped-barycentrics": (
+        "the BVH's four-lane watertight test returns (v, u) for (u, v)",
+        [(SIMD, "b.fmul(e1, inv), b.fmul(e2, inv),", "b.fmul(e2, inv), b.fmul(e1, inv),")],
+        ["tests/accel/test_backends.py", "-k", "barycentrics"]),
     "light-pdf-doubled": (
         "an area light sample reports twice its solid-angle pdf",
         [("ptrace/lights.py", "pdf = dist2 / (area[i] * -cos_light)",

@@ -46,9 +46,11 @@ def test_bvh_build_is_bounded_and_exact(name, split):
     assert stats["max_depth"] <= stability.depth_bound(P) < STACK_SIZE - 1
     assert stats["largest_leaf"] <= MAX_LEAF
     assert stats["nodes"] <= 2 * P - 1
-    # memory: the node arrays stay within the 2P-1 nodes allocated, numpy temporaries linear
+    # memory: the traversal's arrays within their layout's bound, numpy temporaries linear
     assert stats["bytes"] <= stability.allocated_node_bytes(P)
-    assert python_peak <= 400 * P, python_peak      # measured about 235 bytes per triangle
+    # measured about 365 bytes per triangle, most of it the traversal's own arrays (a leaf's
+    # triangles take a 288-byte block of four)
+    assert python_peak <= 500 * P, python_peak
     # answers never depend on the tree
     reference = accel.build("naive", geometry).intersect(rays)
     assert stability.same_hits(bvh.intersect(rays), reference)
@@ -65,7 +67,7 @@ def test_coincident_centroids_give_a_balanced_count_split_tree(name):
 def test_bvh_gains_nothing_when_all_boxes_overlap():
     """The report's failure claim: identical triangles make every ray visit every node;
     concentric triangles and slivers make rays visit a large share of the tree (visits count
-    the traversal's 4-wide nodes)."""
+    the traversal's 8-wide nodes)."""
     visits = {}
     for name in ("identical", "concentric", "slivers"):
         geometry, rays = stability.study_rays(name, N, RAYS)

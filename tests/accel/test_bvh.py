@@ -42,21 +42,21 @@ def check_invariants(bvh):
 
 
 def check_wide_invariants(bvh):
-    """The 4-wide tree the traversal walks: from row 0 it reaches every wide row once and
-    every binary leaf once (same first entry, count and box), each interior slot's box holds
-    its row's boxes, unused slots are empty boxes after the used ones, and a row has fewer
+    """The 8-wide tree the traversal walks: from row 0 it reaches every wide row once and every
+    binary leaf once (the same primitives, triangles stored lane by lane with the mesh's own
+    coordinates, NaN in unused lanes, spheres after them) with its box, each interior slot's box
+    holds its row's boxes, unused slots are empty boxes after the used ones, and a row has fewer
     than WIDTH children only when all of them are leaves."""
-    wide = bvh._nodes
-    assert bvh.stats()["wide_nodes"] == wide.shape[0]
+    lower, upper, payloads = bvh.wide_tree()
+    assert bvh.stats()["wide_nodes"] == lower.shape[0]
     if bvh.lower.shape[0] == 0:
-        assert wide.shape[0] == 0
+        assert lower.shape[0] == 0
         return
-    leaves = {int(bvh.child_or_first[b]): b for b in np.flatnonzero(bvh.count > 0)}
-    lower = wide[:, :3 * WIDTH].reshape(-1, 3, WIDTH)
-    upper = wide[:, 3 * WIDTH:6 * WIDTH].reshape(-1, 3, WIDTH)
-    links = wide[:, 6 * WIDTH:7 * WIDTH].astype(int)
-    counts = wide[:, 7 * WIDTH:].astype(int)
-    reached_rows = np.zeros(wide.shape[0], dtype=int)
+    geometry, blocks, prims = bvh.geometry, bvh._blocks, bvh._prims
+    leaves = {frozenset(bvh.order[bvh.child_or_first[b]:bvh.child_or_first[b] + bvh.count[b]]
+                        .tolist()): b for b in np.flatnonzero(bvh.count > 0)}
+    boxes = {}   # binary node -> its box, reached through the collapse
+    reached_rows = np.zeros(lower.shape[0], dtype=int)
     reached_leaves = []
     todo = [(0, 0)]
     while todo:
@@ -67,22 +67,37 @@ def check_wide_invariants(bvh):
         n_used = int(used.sum())
         assert used[:n_used].all() and n_used >= 1
         assert (lower[row, :, ~used] == np.inf).all() and (upper[row, :, ~used] == -np.inf).all()
-        assert n_used == WIDTH or (counts[row, :n_used] > 0).all()
+        leaf = payloads[row, :n_used] >> 32 != 0
+        assert n_used == WIDTH or leaf.all()
         for c in range(n_used):
-            if counts[row, c] > 0:
-                b = leaves[links[row, c]]
-                assert counts[row, c] == bvh.count[b]
-                np.testing.assert_array_equal(lower[row, :, c], bvh.lower[b])
-                np.testing.assert_array_equal(upper[row, :, c], bvh.upper[b])
+            payload = int(payloads[row, c])
+            if payload >> 32:
+                first, n_tri, n_sph = payload & 0xffffffff, (payload >> 32) & 0xffff, payload >> 48
+                lanes = prims[4 * first:4 * first + n_tri]
+                tri_blocks = -(-n_tri // 4)
+                assert (prims[4 * first + n_tri:4 * (first + tri_blocks)] == -1).all()
+                spheres = prims[4 * (first + tri_blocks):4 * (first + tri_blocks) + n_sph]
+                assert (lanes < geometry.triangle_count).all()
+                assert (spheres >= geometry.triangle_count).all()
+                b = leaves[frozenset(lanes.tolist() + spheres.tolist())]
+                assert n_tri + n_sph == bvh.count[b]
+                coordinates = blocks[first:first + tri_blocks].reshape(-1, 3, 3, 4)
+                coordinates = coordinates.transpose(0, 3, 1, 2).reshape(-1, 3, 3)
+                np.testing.assert_array_equal(coordinates[:n_tri],
+                                              geometry.vertices[geometry.faces[lanes]])
+                assert np.isnan(coordinates[n_tri:]).all()
                 reached_leaves.append(b)
+                boxes[row, c] = b
             else:
-                child = links[row, c]
-                child_used = np.isfinite(lower[child, 0])
-                assert (lower[row, :, c, None] <= lower[child][:, child_used]).all()
-                assert (upper[child][:, child_used] <= upper[row, :, c, None]).all()
-                todo.append((child, depth + 1))
+                child_used = np.isfinite(lower[payload, 0])
+                assert (lower[row, :, c, None] <= lower[payload][:, child_used]).all()
+                assert (upper[payload][:, child_used] <= upper[row, :, c, None]).all()
+                todo.append((payload, depth + 1))
     np.testing.assert_array_equal(reached_rows, 1)
     assert sorted(reached_leaves) == sorted(leaves.values())
+    for (row, c), b in boxes.items():
+        np.testing.assert_array_equal(lower[row, :, c], bvh.lower[b])
+        np.testing.assert_array_equal(upper[row, :, c], bvh.upper[b])
 
 
 @pytest.mark.parametrize("split", ["mean", "sah"])

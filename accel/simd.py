@@ -1,0 +1,278 @@
+"""Explicit SIMD for the BVH's two hot loops: the slab test of a wide node's children, and the
+triangle test of a leaf's block of four triangles (numba intrinsics that emit LLVM vector IR).
+
+Why by hand. numba compiles with LLVM's SLP vectoriser off (NUMBA_SLP_VECTORIZE=0), so scalar
+code written lane by lane stays scalar; turning it on is a process-wide numba setting that would
+change every numba function in the user's process too, and it did not vectorise the traversal's
+scalar slab test profitably when tried (benchmarks/results/accel_rays.md). These intrinsics
+write the vector operations themselves, so what runs does not depend on numba's configuration.
+
+Exactness. Each lane performs exactly the IEEE float64 operations of the scalar kernels in
+accel.kernels, in the same order, with no fast-math flags (so nothing is reassociated or fused
+into a multiply-add): each lane's t, u and v are bit for bit what watertight() or
+moller_trumbore() returns for that triangle, which is what keeps bvh equal to naive, primitive
+for primitive and t for t. A missed lane is t = NaN (u = v = 0), as the scalar kernels' MISS.
+The slab test reproduces the scalar traversal's max/min (numba's max(a, b) is `b if b > a else
+a`, an ordered compare) and its tolerance.
+
+LLVM lowers an 8-lane float64 vector to one AVX-512 register or two AVX2 ones, whichever the
+machine has (numba compiles for the host CPU). Loads are declared with the element's alignment
+only, so an array that lost its 64-byte alignment (a copy) still works.
+"""
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.core.errors import TypingError
+from numba.extending import intrinsic
+
+_I32 = ir.IntType(32)
+_I64 = ir.IntType(64)
+_F32 = ir.FloatType()
+_F64 = ir.DoubleType()
+
+
+def _vector(element, lanes):
+    return ir.VectorType(element, lanes)
+
+
+def _splat(builder, value, lanes):
+    """A vector of `lanes` copies of the float64 `value`."""
+    vector = _vector(_F64, lanes)
+    one = builder.insert_element(ir.Constant(vector, None), value, ir.Constant(_I32, 0))
+    return builder.shuffle_vector(one, ir.Constant(vector, None),
+                                  ir.Constant(_vector(_I32, lanes), [0] * lanes))
+
+
+def _constant(builder, value, lanes):
+    return _splat(builder, ir.Constant(_F64, value), lanes)
+
+
+def _check_array(array, dtype, name):
+    if not (isinstance(array, types.Array) and array.ndim == 2 and array.layout == "C"
+            and array.dtype == dtype):
+        raise TypingError(f"{name} must be a C-contiguous 2D {dtype} array, not {array}")
+
+
+def _row_pointer(context, builder, array_type, array, row, column):
+    """Pointer to element (row, column) of a C-contiguous 2D array (row and column are i64)."""
+    ary = context.make_array(array_type)(context, builder, array)
+    row_length = cgutils.unpack_tuple(builder, ary.shape, 2)[1]
+    index = builder.add(builder.mul(row, row_length), column)
+    return builder.gep(ary.data, [index], inbounds=True)
+
+
+def _load(builder, pointer, element, lanes):
+    """`lanes` consecutive elements from `pointer`, widened to float64."""
+    vector_type = _vector(element, lanes)
+    vector = builder.load(builder.bitcast(pointer, vector_type.as_pointer()),
+                          align=4 if element is _F32 else 8)
+    return builder.fpext(vector, _vector(_F64, lanes)) if element is _F32 else vector
+
+
+def _lanes_mask(builder, condition, lanes):
+    """An i1 vector as an int64 bit mask (bit c for lane c)."""
+    return builder.zext(builder.bitcast(condition, ir.IntType(lanes)), _I64)
+
+
+def _tuple(context, builder, signature, mask, vectors, lanes):
+    """(mask, (lanes of vectors[0]), (lanes of vectors[1]), ...) as the signature's tuple."""
+    parts = [mask]
+    for vector, part_type in zip(vectors, signature.return_type.types[1:]):
+        lane_values = [builder.extract_element(vector, ir.Constant(_I32, lane))
+                       for lane in range(lanes)]
+        parts.append(context.make_tuple(builder, part_type, lane_values))
+    return context.make_tuple(builder, signature.return_type, parts)
+
+
+def make_slab_test(width, dtype):
+    """The slab test of a node's `width` children, as a numba intrinsic:
+
+        mask, (t_0, ..., t_{width-1}) = slab_test(nodes, row, planes, ray, lo, hi)
+
+    nodes: C-contiguous rows of `dtype` (float32 or float64); row `row` holds six planes of `width` values each,
+    starting at the columns in `planes` = (near x, near y, near z, far x, far y, far z) (int64),
+    the near plane of an axis being the one a ray along it meets first. ray = (ox, oy, oz, ix,
+    iy, iz): origin and inverse direction (accel.kernels.inverse_direction). t_c is child c's
+    entry t, max(lo, near planes' t), when the box is hit, t0 <= t1 + |t1| 4e-16 with t1 =
+    min(hi, far planes' t) (the scalar traversal's tolerance for the slab t's rounding), and inf
+    otherwise; bit c of mask is set where child c is hit. An empty slot's box (lower +inf, upper
+    -inf) gives t0 = inf and t1 = -inf, a NaN tolerance, a miss.
+    """
+    element_type = types.float32 if dtype == np.float32 else types.float64
+    element = _F32 if dtype == np.float32 else _F64
+
+    @intrinsic
+    def slab_test(typingctx, nodes, row, planes, ray, lo, hi):
+        _check_array(nodes, element_type, "nodes")
+        signature = types.Tuple((types.int64, types.UniTuple(types.float64, width)))(
+            nodes, row, planes, ray, lo, hi)
+
+        def codegen(context, builder, signature, args):
+            nodes_value, row_value, planes_value, ray_value, lo_value, hi_value = args
+            plane_columns = cgutils.unpack_tuple(builder, planes_value, 6)
+            ox, oy, oz, ix, iy, iz = cgutils.unpack_tuple(builder, ray_value, 6)
+
+            def plane_t(column, origin, inverse):   # (plane - o) * inverse, per lane
+                pointer = _row_pointer(context, builder, signature.args[0], nodes_value,
+                                       row_value, column)
+                planes = _load(builder, pointer, element, width)
+                return builder.fmul(builder.fsub(planes, _splat(builder, origin, width)),
+                                    _splat(builder, inverse, width))
+
+            def larger(acc, value):    # numba's max(acc, value): value if value > acc else acc
+                return builder.select(builder.fcmp_ordered(">", value, acc), value, acc)
+
+            def smaller(acc, value):
+                return builder.select(builder.fcmp_ordered("<", value, acc), value, acc)
+
+            t0 = _splat(builder, lo_value, width)
+            t1 = _splat(builder, hi_value, width)
+            for axis, (origin, inverse) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
+                t0 = larger(t0, plane_t(plane_columns[axis], origin, inverse))
+            for axis, (origin, inverse) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
+                t1 = smaller(t1, plane_t(plane_columns[3 + axis], origin, inverse))
+            fabs = cgutils.get_or_insert_function(
+                builder.module, ir.FunctionType(_vector(_F64, width), [_vector(_F64, width)]),
+                f"llvm.fabs.v{width}f64")
+            slack = builder.fmul(builder.call(fabs, [t1]), _constant(builder, 4e-16, width))
+            hit = builder.fcmp_ordered("<=", t0, builder.fadd(t1, slack))
+            entries = builder.select(hit, t0, _constant(builder, float("inf"), width))
+            return _tuple(context, builder, signature, _lanes_mask(builder, hit, width),
+                          [entries], width)
+
+        return signature, codegen
+
+    return slab_test
+
+
+# A leaf's triangles are stored in blocks of BLOCK: row b of a float64 (blocks, 9 * BLOCK) array
+# holds vertex j's coordinate a of lane l at column (3 j + a) BLOCK + l; unused lanes are NaN.
+BLOCK = 4
+BLOCK_COLUMNS = 9 * BLOCK
+
+
+def _block_coordinate(context, builder, array_type, blocks, block, vertex, axis):
+    """The BLOCK lanes of one vertex coordinate of a block (axis an i64 value)."""
+    column = builder.add(ir.Constant(_I64, 3 * BLOCK * vertex),
+                         builder.mul(axis, ir.Constant(_I64, BLOCK)))
+    pointer = _row_pointer(context, builder, array_type, blocks, block, column)
+    return _load(builder, pointer, _F64, BLOCK)
+
+
+def _block_result(context, builder, signature, miss, t, u, v, lo, hi):
+    """(mask of lanes with lo <= t <= hi, t per lane, u, v); missed lanes t = NaN, u = v = 0."""
+    zero = _constant(builder, 0.0, BLOCK)
+    t = builder.select(miss, _constant(builder, float("nan"), BLOCK), t)
+    u = builder.select(miss, zero, u)
+    v = builder.select(miss, zero, v)
+    inside = builder.and_(builder.fcmp_ordered(">=", t, _splat(builder, lo, BLOCK)),
+                          builder.fcmp_ordered("<=", t, _splat(builder, hi, BLOCK)))
+    return _tuple(context, builder, signature, _lanes_mask(builder, inside, BLOCK), [t, u, v],
+                  BLOCK)
+
+
+def _block_signature(blocks, block, ray, lo, hi):
+    _check_array(blocks, types.float64, "blocks")
+    lanes = types.UniTuple(types.float64, BLOCK)
+    return types.Tuple((types.int64, lanes, lanes, lanes))(blocks, block, ray, lo, hi)
+
+
+@intrinsic
+def watertight_block(typingctx, blocks, block, shear, lo, hi):
+    """accel.kernels.watertight on the BLOCK triangles of block `block`, lane by lane:
+
+        mask, (t_0..t_3), (u_0..u_3), (v_0..v_3) = watertight_block(blocks, block, shear, lo, hi)
+
+    shear is accel.kernels.shear_setup() of the ray (kx, ky, kz, px, py, pz, sx, sy, sz); bit l
+    of mask is set where lane l is hit with lo <= t <= hi.
+    """
+    signature = _block_signature(blocks, block, shear, lo, hi)
+
+    def codegen(context, builder, signature, args):
+        blocks_value, block_value, shear_value, lo_value, hi_value = args
+        kx, ky, kz, px, py, pz, sx, sy, sz = cgutils.unpack_tuple(builder, shear_value, 9)
+
+        def coordinate(vertex, axis, origin):   # the vertex coordinate, minus the ray's origin
+            lanes = _block_coordinate(context, builder, signature.args[0], blocks_value,
+                                      block_value, vertex, axis)
+            return builder.fsub(lanes, _splat(builder, origin, BLOCK))
+
+        b = builder
+        sx, sy, sz = (_splat(b, value, BLOCK) for value in (sx, sy, sz))
+        ax, ay, az = coordinate(0, kx, px), coordinate(0, ky, py), coordinate(0, kz, pz)
+        bx, by, bz = coordinate(1, kx, px), coordinate(1, ky, py), coordinate(1, kz, pz)
+        cx, cy, cz = coordinate(2, kx, px), coordinate(2, ky, py), coordinate(2, kz, pz)
+        ax, ay = b.fadd(ax, b.fmul(sx, az)), b.fadd(ay, b.fmul(sy, az))
+        bx, by = b.fadd(bx, b.fmul(sx, bz)), b.fadd(by, b.fmul(sy, bz))
+        cx, cy = b.fadd(cx, b.fmul(sx, cz)), b.fadd(cy, b.fmul(sy, cz))
+        e0 = b.fsub(b.fmul(bx, cy), b.fmul(by, cx))
+        e1 = b.fsub(b.fmul(cx, ay), b.fmul(cy, ax))
+        e2 = b.fsub(b.fmul(ax, by), b.fmul(ay, bx))
+        zero = _constant(b, 0.0, BLOCK)
+
+        def any_of(predicate):
+            return b.or_(b.or_(b.fcmp_ordered(predicate, e0, zero),
+                               b.fcmp_ordered(predicate, e1, zero)),
+                         b.fcmp_ordered(predicate, e2, zero))
+
+        det = b.fadd(b.fadd(e0, e1), e2)
+        miss = b.or_(b.and_(any_of("<"), any_of(">")), b.fcmp_ordered("==", det, zero))
+        inv = b.fdiv(_constant(b, 1.0, BLOCK), det)
+        t = b.fmul(b.fmul(b.fadd(b.fadd(b.fmul(e0, az), b.fmul(e1, bz)), b.fmul(e2, cz)), sz),
+                   inv)
+        return _block_result(context, b, signature, miss, t, b.fmul(e1, inv), b.fmul(e2, inv),
+                             lo_value, hi_value)
+
+    return signature, codegen
+
+
+@intrinsic
+def moller_trumbore_block(typingctx, blocks, block, ray, lo, hi):
+    """accel.kernels.moller_trumbore on the BLOCK triangles of block `block`, lane by lane:
+
+        mask, (t_0..t_3), (u_0..u_3), (v_0..v_3) = moller_trumbore_block(blocks, block, ray, lo,
+                                                                         hi)
+
+    ray = (ox, oy, oz, dx, dy, dz); mask as watertight_block's.
+    """
+    signature = _block_signature(blocks, block, ray, lo, hi)
+
+    def codegen(context, builder, signature, args):
+        blocks_value, block_value, ray_value, lo_value, hi_value = args
+        ox, oy, oz, dx, dy, dz = (_splat(builder, value, BLOCK)
+                                  for value in cgutils.unpack_tuple(builder, ray_value, 6))
+
+        def vertex(j):
+            return [_block_coordinate(context, builder, signature.args[0], blocks_value,
+                                      block_value, j, ir.Constant(_I64, axis))
+                    for axis in range(3)]
+
+        b = builder
+        (p0x, p0y, p0z), (p1x, p1y, p1z), (p2x, p2y, p2z) = vertex(0), vertex(1), vertex(2)
+        e1x, e1y, e1z = b.fsub(p1x, p0x), b.fsub(p1y, p0y), b.fsub(p1z, p0z)
+        e2x, e2y, e2z = b.fsub(p2x, p0x), b.fsub(p2y, p0y), b.fsub(p2z, p0z)
+
+        def dot(ax, ay, az, bx, by, bz):
+            return b.fadd(b.fadd(b.fmul(ax, bx), b.fmul(ay, by)), b.fmul(az, bz))
+
+        def cross(ax, ay, az, bx, by, bz):
+            return (b.fsub(b.fmul(ay, bz), b.fmul(az, by)), b.fsub(b.fmul(az, bx), b.fmul(ax, bz)),
+                    b.fsub(b.fmul(ax, by), b.fmul(ay, bx)))
+
+        s1x, s1y, s1z = cross(dx, dy, dz, e2x, e2y, e2z)
+        det = dot(s1x, s1y, s1z, e1x, e1y, e1z)
+        zero, one = _constant(b, 0.0, BLOCK), _constant(b, 1.0, BLOCK)
+        inv = b.fdiv(one, det)
+        sx, sy, sz = b.fsub(ox, p0x), b.fsub(oy, p0y), b.fsub(oz, p0z)
+        u = b.fmul(dot(s1x, s1y, s1z, sx, sy, sz), inv)
+        s2x, s2y, s2z = cross(sx, sy, sz, e1x, e1y, e1z)
+        v = b.fmul(dot(s2x, s2y, s2z, dx, dy, dz), inv)
+        t = b.fmul(dot(s2x, s2y, s2z, e2x, e2y, e2z), inv)
+        miss = b.or_(b.fcmp_ordered("==", det, zero),
+                     b.or_(b.or_(b.fcmp_ordered("<", u, zero), b.fcmp_ordered(">", u, one)),
+                           b.or_(b.fcmp_ordered("<", v, zero),
+                                 b.fcmp_ordered(">", b.fadd(u, v), one))))
+        return _block_result(context, b, signature, miss, t, u, v, lo_value, hi_value)
+
+    return signature, codegen
