@@ -19,15 +19,15 @@ Traversal does not walk the binary tree: `_collapse` folds it into an 8-wide tre
 takes its binary node's two children, then keeps opening the interior child of largest surface
 area until it has eight), so a ray visits fewer nodes and the slab test of a node's children is
 one vector operation (accel.simd: one AVX-512 instruction per step, or two AVX2 ones). A wide
-node is one 512-byte row (_node_rows): its children's six box planes as float64, and an int64
-payload per child: a row for an interior child, or a leaf's
+node is one 256-byte row (_node_rows): its children's six box planes as float32, rounded outward
+so a box never shrinks, and an int64 payload per child: a row for an interior child, or a leaf's
 first triangle block and its triangle and sphere counts. A leaf's triangles are stored by
 _fill_rows in blocks of four, as float64 coordinates (the mesh's own values: each lane of
 accel.simd's block test computes what the scalar test of accel.kernels computes on those values,
 bit for bit, so bvh and naive agree exactly), and tested four at a time. What each of these
 choices bought is measured side by side in benchmarks/results/accel_rays.md (its "Traversal
 changes" section): 8-wide with vector slab and block tests over the earlier 4-wide scalar
-traversal.
+traversal, float32 planes over float64 ones.
 """
 import time
 from collections import namedtuple
@@ -55,10 +55,10 @@ SAH_BINS = 16
 RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDTH = 8                # children per node of the traversal's tree (_closest's tournament: 8)
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
-NODE_COLUMNS = 64        # float64 columns of a wide node's row: 6 * WIDTH planes, WIDTH payloads
-PAYLOAD = 6 * WIDTH      # the first payload's column in the row's int64 view
+NODE_COLUMNS = 64        # float32 columns of a wide node's row: 6 * WIDTH planes, WIDTH payloads
+PAYLOAD = 6 * WIDTH // 2   # the first payload's column in the row's int64 view
 MAX_LEAF_SIZE = 0xffff   # a leaf payload holds its triangle and sphere counts in 16 bits each
-slab_test = make_slab_test(WIDTH, np.float64)
+slab_test = make_slab_test(WIDTH)
 
 
 @njit(cache=True, inline="always")
@@ -316,10 +316,29 @@ def _wide_rows(lower, upper, child_or_first, count):
     return wide[:used].copy()
 
 
+@njit(cache=True, inline="always")
+def _float32_down(x):
+    """The largest float32 at or below x (inf and -inf stay)."""
+    f = np.float32(x)
+    if np.float64(f) > x:
+        f = np.nextafter(f, np.float32(-np.inf))
+    return f
+
+
+@njit(cache=True, inline="always")
+def _float32_up(x):
+    """The smallest float32 at or above x."""
+    f = np.float32(x)
+    if np.float64(f) < x:
+        f = np.nextafter(f, np.float32(np.inf))
+    return f
+
+
 @njit(cache=True)
 def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
-    """The traversal's rows (see _node_rows) from _collapse's: the planes and each child's
-    payload; and the leaves as blocks of BLOCK triangles, in the order the rows reach them.
+    """The traversal's rows (see _node_rows) from _collapse's: the planes rounded outward to
+    float32, so a float32 box always contains its float64 box, and each child's payload; and the
+    leaves as blocks of BLOCK triangles, in the order the rows reach them.
 
     For each leaf slot (count > 0) of each row: its triangles fill ceil(triangles / BLOCK)
     consecutive blocks (NaN in unused lanes, which every triangle test misses), then its spheres
@@ -328,8 +347,9 @@ def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
     coordinates and the int64 primitive id of each lane (-1 unused)."""
     rows, width = wide.shape[0], WIDTH
     for r in range(rows):
-        for k in range(6 * WIDTH):
-            nodes[r, k] = wide[r, k]
+        for k in range(3 * WIDTH):
+            nodes[r, k] = _float32_down(wide[r, k])
+            nodes[r, 3 * WIDTH + k] = _float32_up(wide[r, 3 * WIDTH + k])
     links = wide[:, 6 * WIDTH:7 * WIDTH].astype(np.int64)
     counts = wide[:, 7 * WIDTH:8 * WIDTH].astype(np.int64)
     n_blocks = 0
@@ -376,15 +396,16 @@ def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
 
 
 def _node_rows(rows):
-    """An empty node array of `rows` 512-byte rows, one per wide node, each starting a cache line,
+    """An empty node array of `rows` 256-byte rows, one per wide node, each starting a cache line,
     and its int64 view (filled by _fill_rows).
 
-    Columns 0-47 (float64): the six planes lower x, y, z, upper x, y, z, WIDTH children each;
-    columns 48-55, read as int64: each child's payload. A payload is a row for an interior child, or for a leaf first_block | n_triangles
+    Columns 0-47 (float32): the six planes lower x, y, z, upper x, y, z, WIDTH children each,
+    rounded outward; columns 48-63, read as int64 columns PAYLOAD.. PAYLOAD + 7: each child's
+    payload. A payload is a row for an interior child, or for a leaf first_block | n_triangles
     << 32 | n_spheres << 48 (n_triangles + n_spheres > 0, so payload >> 32 is not 0), its
     triangles in blocks first_block.. and its spheres' ids in the `prims` entries after them
     (_fill_rows)."""
-    nodes = _aligned_empty(rows, NODE_COLUMNS)
+    nodes = _aligned_empty(rows, NODE_COLUMNS, np.float32)
     return nodes, nodes.view(np.int64)
 
 
@@ -623,7 +644,7 @@ class BVHAccelerator:
 
     def wide_tree(self):
         """The traversal's tree as float64 arrays, for tests and studies: (lower, upper) of
-        shape (rows, 3, WIDTH), each child's box as traversed, and
+        shape (rows, 3, WIDTH), each child's box as traversed (float32, rounded outward), and
         payloads (rows, WIDTH) as described in _node_rows."""
         planes = self._nodes[:, :6 * WIDTH].astype(np.float64).reshape(-1, 6, WIDTH)
         return planes[:, :3], planes[:, 3:], self.compiled.payloads[:, PAYLOAD:].copy()

@@ -13,13 +13,13 @@ into a multiply-add): each lane's t, u and v are bit for bit what watertight() o
 moller_trumbore() returns for that triangle, which is what keeps bvh equal to naive, primitive
 for primitive and t for t. A missed lane is t = NaN (u = v = 0), as the scalar kernels' MISS.
 The slab test reproduces the scalar traversal's max/min (numba's max(a, b) is `b if b > a else
-a`, an ordered compare) and its tolerance.
+a`, an ordered compare) and its tolerance; only its float32 box planes are new (rounded outward
+when the BVH is built, so a box can only grow).
 
 LLVM lowers an 8-lane float64 vector to one AVX-512 register or two AVX2 ones, whichever the
 machine has (numba compiles for the host CPU). Loads are declared with the element's alignment
 only, so an array that lost its 64-byte alignment (a copy) still works.
 """
-import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.core import cgutils
@@ -85,12 +85,12 @@ def _tuple(context, builder, signature, mask, vectors, lanes):
     return context.make_tuple(builder, signature.return_type, parts)
 
 
-def make_slab_test(width, dtype):
+def make_slab_test(width):
     """The slab test of a node's `width` children, as a numba intrinsic:
 
         mask, (t_0, ..., t_{width-1}) = slab_test(nodes, row, planes, ray, lo, hi)
 
-    nodes: C-contiguous rows of `dtype` (float32 or float64); row `row` holds six planes of `width` values each,
+    nodes: C-contiguous float32 rows; row `row` holds six planes of `width` values each,
     starting at the columns in `planes` = (near x, near y, near z, far x, far y, far z) (int64),
     the near plane of an axis being the one a ray along it meets first. ray = (ox, oy, oz, ix,
     iy, iz): origin and inverse direction (accel.kernels.inverse_direction). t_c is child c's
@@ -99,12 +99,9 @@ def make_slab_test(width, dtype):
     otherwise; bit c of mask is set where child c is hit. An empty slot's box (lower +inf, upper
     -inf) gives t0 = inf and t1 = -inf, a NaN tolerance, a miss.
     """
-    element_type = types.float32 if dtype == np.float32 else types.float64
-    element = _F32 if dtype == np.float32 else _F64
-
     @intrinsic
     def slab_test(typingctx, nodes, row, planes, ray, lo, hi):
-        _check_array(nodes, element_type, "nodes")
+        _check_array(nodes, types.float32, "nodes")
         signature = types.Tuple((types.int64, types.UniTuple(types.float64, width)))(
             nodes, row, planes, ray, lo, hi)
 
@@ -116,7 +113,7 @@ def make_slab_test(width, dtype):
             def plane_t(column, origin, inverse):   # (plane - o) * inverse, per lane
                 pointer = _row_pointer(context, builder, signature.args[0], nodes_value,
                                        row_value, column)
-                planes = _load(builder, pointer, element, width)
+                planes = _load(builder, pointer, _F32, width)
                 return builder.fmul(builder.fsub(planes, _splat(builder, origin, width)),
                                     _splat(builder, inverse, width))
 
