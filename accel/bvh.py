@@ -27,13 +27,13 @@ accel.simd's block test computes what the scalar test of accel.kernels computes 
 bit for bit, so bvh and naive agree exactly), and tested four at a time. What each of these
 choices bought is measured side by side in benchmarks/results/accel_rays.md (its "Traversal
 changes" section): 8-wide with vector slab and block tests over the earlier 4-wide scalar
-traversal, float32 planes over float64 ones.
+traversal, float32 planes over float64 ones, unsigned stack indices.
 """
 import time
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, uint64
 
 from . import compiled
 from .kernels import (
@@ -456,7 +456,7 @@ def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, be
             for lane in range(BLOCK):
                 t = ts[lane]
                 if (mask >> lane) & 1 and t <= best_t:
-                    p = prims[block * BLOCK + lane]
+                    p = prims[uint64(block * BLOCK + lane)]
                     if better(t, p, best_t, best_prim):
                         best_t, best_prim, best_u, best_v = t, p, us[lane], vs[lane]
     ox, oy, oz, dx, dy, dz = ray
@@ -491,7 +491,8 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, primitive tests).
 
     Ordered: at each node the nearest child hit is entered next and the others are pushed with
-    their entry t (in slot order); a popped entry beyond the nearest hit found is skipped."""
+    their entry t (in slot order); a popped entry beyond the nearest hit found is skipped. The
+    stack indices are unsigned, so numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
     planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
@@ -521,10 +522,10 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
                 t0, c0, t4, c4 = _nearer(t0, c0, t4, c4)
                 others = mask & ~(1 << c0)
                 for c in range(WIDTH):   # push the other children hit, without branches
-                    stack[top] = payloads[row, PAYLOAD + c]
-                    entry[top] = ts[c]
+                    stack[uint64(top)] = payloads[uint64(row), uint64(PAYLOAD + c)]
+                    entry[uint64(top)] = ts[c]
                     top += (others >> c) & 1
-                payload = payloads[row, PAYLOAD + c0]
+                payload = payloads[uint64(row), uint64(PAYLOAD + c0)]
                 continue
         else:
             tests += ((payload >> 32) & 0xffff) + ((payload >> 48) & 0xffff)
@@ -533,8 +534,8 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
         popped = False
         while top > 0:   # pop the next entry that starts before the nearest hit
             top -= 1
-            if entry[top] <= best_t:
-                payload = stack[top]
+            if entry[uint64(top)] <= best_t:
+                payload = stack[uint64(top)]
                 popped = True
                 break
         if not popped:
@@ -566,14 +567,14 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
             row = payload
             mask = slab_test(nodes, row, planes, slab_ray, lo, hi)[0]
             for c in range(WIDTH):
-                stack[top] = payloads[row, PAYLOAD + c]
+                stack[uint64(top)] = payloads[uint64(row), uint64(PAYLOAD + c)]
                 top += (mask >> c) & 1
         elif _leaf_any(record, payload, shear, ray, lo, hi):
             return True
         if top == 0:
             break
         top -= 1
-        payload = stack[top]
+        payload = stack[uint64(top)]
     return False
 
 
