@@ -14,8 +14,11 @@ with other leaf sizes, --leaf-sizes), so a slow spell of
 the machine touches all of them alike. Rays are accel_rays' (`benchmarks.accel_rays.make_rays`:
 random, camera, secondary and shadow rays, the last with any hit, the others closest hit);
 kernels are compiled, and each batch traced once, before timing. Rates are medians of the
-repeats. Compile times are not measured here (accel_rays does). Run time: about 10 minutes for
-the defaults, most of it compiling four revisions' kernels into empty caches.
+repeats. Then the same revisions render course scenes (RENDERS), in turns as well, and the
+report says whether their images are bit for bit the same (bvh's answers are naive's exactly at
+every revision, so they must be). Compile times are not measured here (accel_rays does). Run
+time: about 25 minutes for the defaults, a few of them compiling four revisions' kernels into
+empty caches.
 """
 import argparse
 import json
@@ -51,15 +54,30 @@ DEFAULT_LEAF = _default_leaf_size()
 
 # Runs inside each revision's process: reads one JSON request per line, answers with seconds.
 WORKER = r"""
-import json, sys, time
+import hashlib, json, sys, time
 import numba
 import accel, ptrace
 from benchmarks.accel_rays import make_rays, scene_light
 numba.set_num_threads(int(sys.argv[1]))
 print(json.dumps({"accel": accel.__file__}), flush=True)
 loaded, backends, batches = None, {}, {}
+scenes = {}
 for line in sys.stdin:
     request = json.loads(line)
+    if "render" in request:
+        path = request["render"]
+        if path not in scenes:
+            scenes[path] = ptrace.load(path)
+            ptrace.render(scenes[path], threads=int(sys.argv[1]),
+                          **dict(request["options"], resolution=(8, 6)))
+        stats = {}
+        start = time.perf_counter()
+        image = ptrace.render(scenes[path], threads=int(sys.argv[1]), stats=stats,
+                              **request["options"])
+        seconds = time.perf_counter() - start
+        print(json.dumps({"seconds": seconds, "rays": stats["rays"],
+                          "image": hashlib.sha256(image.tobytes()).hexdigest()}), flush=True)
+        continue
     if request["mesh"] != loaded:
         loaded, backends, batches = request["mesh"], {}, {}
         scene = ptrace.load(request["mesh"])
@@ -104,13 +122,16 @@ class Revision:
         if not Path(found).resolve().is_relative_to(Path(tree).resolve()):
             raise RuntimeError(f"{label}: imported accel from {found}, not from {tree}")
 
-    def seconds(self, **request):
+    def ask(self, **request):
         self.process.stdin.write(json.dumps(request) + "\n")
         self.process.stdin.flush()
         line = self.process.stdout.readline()
         if not line:
             raise RuntimeError(f"{self.label}: the worker stopped")
-        return json.loads(line)["seconds"]
+        return json.loads(line)
+
+    def seconds(self, **request):
+        return self.ask(**request)["seconds"]
 
     def close(self):
         self.process.stdin.close()
@@ -149,6 +170,56 @@ def measure(args, revisions, scenes):
                     f"{label} {rates[mesh, kind, split, label]:,.0f}" for label in times)
                     + f", embree {rates[mesh, kind, None, 'embree']:,.0f} rays/s", flush=True)
     return rates
+
+
+# renders timed in turns as the rays are: (scene, ptrace.render options)
+RENDERS = [
+    ("sky/CBbunny.dae", dict(spp=16, light_samples=4, max_depth=5, resolution=(480, 360))),
+    ("sky/CBspheres.dae", dict(spp=16, light_samples=4, max_depth=5, resolution=(480, 360))),
+    ("sky/CBcoil.dae", dict(spp=16, light_samples=4, max_depth=5, resolution=(480, 360))),
+]
+
+
+def measure_renders(args, revisions, scenes):
+    """{scene: {label: (median seconds, rays, image digest)}} for RENDERS (bvh, mean split)."""
+    results = {}
+    for scene, options in RENDERS[:args.renders]:
+        path = str(Path(scenes) / scene)
+        runs = {r.label: [] for r in revisions}
+        for _ in range(args.render_repeats):
+            for revision in revisions:
+                runs[revision.label].append(revision.ask(render=path, options=options))
+        results[scene] = {label: (statistics.median(run["seconds"] for run in found),
+                                  found[0]["rays"], {run["image"] for run in found})
+                          for label, found in runs.items()}
+        print(scene, ", ".join(f"{label} {value[0]:.2f} s"
+                               for label, value in results[scene].items()), flush=True)
+    return results
+
+
+def render_table(labels, renders):
+    lines = ["### Renders", "",
+             "Seconds of `ptrace.render` (bvh, mean split, 2 threads, kernels compiled "
+             "beforehand; median of the runs taken in turns), the first revision's time over each "
+             "later one's (*speed-up*), the last revision's rays per second, and whether every "
+             "revision's image is bit for bit the same (SHA-256 of the float32 pixels).", "",
+             "| scene | options | " + " | ".join(f"{label} s" for label in labels) + " | "
+             + " | ".join(f"speed-up: {label}" for label in labels[1:])
+             + " | rays/s (last) | same image |",
+             "|---|---|" + "---:|" * (2 * len(labels) - 1 + 1) + "---|"]
+    for scene, options in RENDERS:
+        if scene not in renders:
+            continue
+        found = renders[scene]
+        seconds = [found[label][0] for label in labels]
+        digests = set().union(*(found[label][2] for label in labels))
+        shown = ", ".join(f"{k}={v}" for k, v in options.items())
+        lines.append(f"| {scene} | {shown} | " + " | ".join(f"{s:.2f}" for s in seconds) + " | "
+                     + " | ".join(f"{seconds[0] / s:.2f}x" for s in seconds[1:]) + " | "
+                     + f"{found[labels[-1]][1] / seconds[-1]:,.0f} | "
+                     + ("yes" if len(digests) == 1 else f"NO ({len(digests)} images)") + " |")
+    lines.append("")
+    return "\n".join(lines)
 
 
 def tables(args, labels, rates):
@@ -203,6 +274,9 @@ def main(argv=None):
                              "(default: REVISIONS, the kept changes of issue 14.3)")
     parser.add_argument("--leaf-sizes", type=int, nargs="*", default=[2, 8],
                         help="other max_leaf_size values to time in this tree (default 2 8)")
+    parser.add_argument("--renders", type=int, default=len(RENDERS),
+                        help=f"how many of the {len(RENDERS)} renders to time (0: none)")
+    parser.add_argument("--render-repeats", type=int, default=3)
     parser.add_argument("--output", default="bvh_changes.md")
     args = parser.parse_args(argv)
     revisions_wanted = REVISIONS if not args.revisions else [
@@ -216,6 +290,7 @@ def main(argv=None):
             for commit, label in revisions_wanted:
                 revisions.append(Revision(commit, label, args.threads, scratch))
             rates = measure(args, revisions, scenes)
+            renders = measure_renders(args, revisions, scenes)
         finally:
             for revision in revisions:
                 revision.close()
@@ -225,7 +300,8 @@ def main(argv=None):
         f"{args.rays:,} rays per batch, {args.threads} threads, median of {args.repeats} runs "
         f"taken in turns (each revision's process, then Embree's, per repeat). Revisions: "
         f"{commits}. Load average (1 min) before the run {load:.1f}, after it "
-        f"{os.getloadavg()[0]:.1f}.\n\n" + tables(args, labels, rates))
+        f"{os.getloadavg()[0]:.1f}.\n\n" + tables(args, labels, rates)
+        + render_table(labels, renders))
     path = report.destination(args.output)
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(text)
