@@ -24,7 +24,7 @@ import study_checks as check
 
 N = 4000            # triangles per distribution (the report's --quick size)
 RAYS = 1000
-MAX_LEAF = 4        # the BVH's default max_leaf_size
+MAX_LEAF = stability.MAX_LEAF_SIZE   # the BVH's default max_leaf_size
 
 
 @pytest.fixture(scope="module", autouse=True)
