@@ -25,7 +25,8 @@ the embree backend splits a batch over numba's thread count too):
   area light when the scene has one (of the default meshes only CBbunny, whose light is the
   issue's target), otherwise accel.raygen.light_square(geometry), a small square above the
   bounds (a synthetic light above CBbunny's closed box would be hidden by its ceiling).
-Rates are rays per second, the median of --repeats runs after a warm-up call: closest hit
+Rates are rays per second, the median of --repeats runs after a warm-up call, the backends taking
+turns (each traces the batch once per round, so a slow spell of the machine touches all): closest hit
 (intersect) for random, camera and secondary rays; any hit (occluded) for shadow rays. naive
 tests every triangle, so it runs on the first min(n, --naive-budget / triangles) rays of the same
 batch (the tables give the count). The traversal table gives, per ray, the bvh's nodes visited
@@ -199,13 +200,15 @@ def measure(label, geometry, light, args):
         for threads in args.threads:
             numba.set_num_threads(threads)
             for name in names:
-                method, batch = getattr(backends[name], query), batches[name]
-                method(head(batch, 64 if name == "naive" else 4096))   # warm-up
-                times = []
-                for _ in range(args.repeats):
-                    seconds, answers[name] = timed(method, batch)
-                    times.append(seconds)
-                rates[ray_kind, threads, name] = len(batch) / statistics.median(times)
+                getattr(backends[name], query)(head(batches[name], 64 if name == "naive"
+                                                    else 4096))   # warm-up
+            times = {name: [] for name in names}
+            for _ in range(args.repeats):   # in turns, so a slow spell touches every backend
+                for name in names:
+                    seconds, answers[name] = timed(getattr(backends[name], query), batches[name])
+                    times[name].append(seconds)
+            for name in names:
+                rates[ray_kind, threads, name] = len(batches[name]) / statistics.median(times[name])
                 if query == "intersect" and name in ("bvh mean", "bvh sah"):
                     bvh = backends[name]     # the last timed run's work, whole batch
                     work[ray_kind, name] = (bvh.last_mean_visits, bvh.last_mean_triangle_tests)
@@ -448,7 +451,7 @@ def main(argv=None):
                         help="naive traces at least this many rays (or the whole batch)")
     parser.add_argument("--threads", type=int, nargs="+", default=[2],
                         help="thread counts (default 2; --threads 1 2 takes twice as long)")
-    parser.add_argument("--repeats", type=int, default=None, help="timed runs per rate (3)")
+    parser.add_argument("--repeats", type=int, default=None, help="timed runs per rate (5)")
     parser.add_argument("--meshes", nargs="*", default=MESHES, help="course scenes")
     parser.add_argument("--synthetic", type=int, nargs="*", default=None,
                         help="triangle counts of displaced tori, each 4 * rows**2 "
@@ -463,7 +466,7 @@ def main(argv=None):
                              "goes beside it with the extension .png")
     args = report.quick_defaults(
         parser.parse_args(argv), rays=(20_000, 1_000_000), naive_budget=(1e7, 1e8),
-        repeats=(1, 3), synthetic=(list(synthetic.QUICK_SERIES), list(synthetic.SERIES)))
+        repeats=(1, 5), synthetic=(list(synthetic.QUICK_SERIES), list(synthetic.SERIES)))
     quick = args.quick
     args.threads = sorted(set(args.threads))
     numba.set_num_threads(max(args.threads))
@@ -488,7 +491,8 @@ def main(argv=None):
              (f"{'Quick run (--quick): ' if quick else ''}"
               f"{args.rays:,} rays per batch (camera: the nearest 4:3 image); threads "
               f"{', '.join(map(str, args.threads))}; every rate is the median of {args.repeats} "
-              f"run{'s' if args.repeats > 1 else ''} after a warm-up call; naive traces at most "
+              f"run{'s' if args.repeats > 1 else ''} after a warm-up call, the backends taking "
+              "turns (one batch each per round); naive traces at most "
               f"{args.naive_budget:,.0f} ray-triangle tests (at least {args.naive_min} rays). "
               "Backends: naive and bvh mean/sah with the watertight triangle test (the "
               "default), bvh mean mt/sah mt with Möller–Trumbore "
