@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
@@ -37,14 +38,20 @@ def cornell():
 
 class Frames:
     """A Preview's publish(): every frame's stats with a copy of the radiance it showed (and
-    in self.shown, by the frame's seq, the whole Shown: its AOVs and denoised image)."""
+    in self.shown, by the frame's seq, the whole Shown: its AOVs and denoised image).
+
+    The Preview starts rendering in its constructor, so its first frame can be published before
+    preview() has stored it here: publish waits for that (`attached`)."""
 
     def __init__(self):
         self.queue = queue.Queue()
         self.preview = None
+        self.attached = threading.Event()
         self.shown = {}
 
     def __call__(self, message, png):
+        if not self.attached.wait(60):
+            raise RuntimeError("no Preview was attached to these Frames")
         shown = None if png is None else self.preview.shown[0].copy()
         if png is not None:
             self.shown[message["seq"]] = self.preview.shown
@@ -66,6 +73,7 @@ def preview(scene, settings, frames, **keywords):
     camera = course_camera(scene, W, H)
     backends = view_render.Backends(scene, lambda text: None)
     frames.preview = view_session.Preview(scene, settings, camera, backends, frames, **keywords)
+    frames.attached.set()
     return frames.preview
 
 
