@@ -4,8 +4,9 @@
 least surface-area cost (n_left * area_left + n_right * area_right); everything else is shared.
 
 Build: a node covers a contiguous range of the primitive order array. It becomes a leaf when it
-holds at most `max_leaf_size` primitives (8 by default, two blocks of the vector triangle test;
-the course's 4 measured slower, benchmarks/results/bvh_changes.md); otherwise it splits along the longest axis of its
+holds at most `max_leaf_size` primitives (the course's 4 by default, one block of the vector
+triangle test; leaves of 8 measured within a few percent of it either way,
+benchmarks/results/bvh_changes.md); otherwise it splits along the longest axis of its
 centroid bounds at the mean centroid. When that leaves one side empty (coincident centroids,
 rounding), or the node is deeper than `MEAN_SPLIT_DEPTH`, it splits by count instead (the lower
 half of the centroids sorted on that axis goes left), which always makes progress and bounds the
@@ -603,7 +604,7 @@ class BVHAccelerator:
     kind = "bvh"
     record_class = BVHRecord
 
-    def __init__(self, geometry, max_leaf_size=8, split="mean", triangle="watertight"):
+    def __init__(self, geometry, max_leaf_size=4, split="mean", triangle="watertight"):
         test = triangle_test(triangle)
         if split not in SPLITS:
             raise ValueError(f"unknown BVH split {split!r}; choose one of {', '.join(SPLITS)}")
