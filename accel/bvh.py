@@ -586,7 +586,7 @@ compiled.register(BVHRecord, new_scratch, closest_hit, any_hit)
 @njit(cache=True, parallel=True)
 def _intersect(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v,
                out_visits, out_tests):
-    """The batch closest hit, with each ray's visit and test counts (for the benchmarks)."""
+    """The batch closest hit, with each ray's visit and test counts (traversal_work)."""
     n_rays = origins.shape[0]
     for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
         scratch = new_scratch(record)
@@ -641,7 +641,6 @@ class BVHAccelerator:
         # keeps that within WIDE_STACK.
         if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
             raise RuntimeError("BVH deeper than the traversal stack")
-        self._last_work = None
         self.compiled = BVHRecord(self._nodes, payloads, self._blocks, self._prims,
                                   geometry.triangle_count, geometry.centers, geometry.radii, test)
 
@@ -653,6 +652,17 @@ class BVHAccelerator:
         return planes[:, :3], planes[:, 3:], self.compiled.payloads[:, PAYLOAD:].copy()
 
     def intersect(self, rays):
+        """The batch closest hit through the compiled face, as every backend's (and as the path
+        loop calls it): nothing counted, so its rays per second compare with Embree's."""
+        rays.validate()
+        return compiled.run_intersect(self.compiled, rays, Hits)
+
+    def traversal_work(self, rays):
+        """(wide nodes visited, primitive tests) per ray, averaged over a closest-hit trace of
+        `rays`, for benchmarks and tests: interior wide nodes only (leaves are counted by their
+        primitives; a block's unused lanes are not). A trace of its own, counting as it goes
+        (counting inside intersect() cost it 11-22% of its rays per second on CBbunny, random
+        and secondary rays). Not comparable with figures from before the 8-wide traversal."""
         rays.validate()
         n = len(rays)
         hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
@@ -660,21 +670,7 @@ class BVHAccelerator:
         tests = np.empty(n, dtype=np.int64)
         _intersect(self.compiled, rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t,
                    hits.prim, hits.u, hits.v, visits, tests)
-        self._last_work = (visits, tests)   # averaged only when asked for (see below)
-        return hits
-
-    @property
-    def last_mean_visits(self):
-        """Interior wide nodes visited per ray in the last intersect() (None before the
-        first); leaves are counted by last_mean_triangle_tests. Not comparable with figures
-        from before the 8-wide traversal (4-wide nodes, and before that binary nodes)."""
-        return None if self._last_work is None else _mean(self._last_work[0])
-
-    @property
-    def last_mean_triangle_tests(self):
-        """Primitive tests per ray in the last intersect() (None before the first): the
-        primitives of each leaf visited (a block's unused lanes are not counted)."""
-        return None if self._last_work is None else _mean(self._last_work[1])
+        return _mean(visits), _mean(tests)
 
     def occluded(self, rays):
         rays.validate()

@@ -210,8 +210,8 @@ def measure(label, geometry, light, args):
             for name in names:
                 rates[ray_kind, threads, name] = len(batches[name]) / statistics.median(times[name])
                 if query == "intersect" and name in ("bvh mean", "bvh sah"):
-                    bvh = backends[name]     # the last timed run's work, whole batch
-                    work[ray_kind, name] = (bvh.last_mean_visits, bvh.last_mean_triangle_tests)
+                    # untimed: a trace of the whole batch that counts its work
+                    work[ray_kind, name] = backends[name].traversal_work(batches[name])
             print(f"{label} {ray_kind} {threads}T: " + ", ".join(
                 f"{name} {rates[ray_kind, threads, name]:,.0f}" for name in names) + " rays/s",
                 flush=True)

@@ -289,7 +289,7 @@ def measure_distribution(name, n, rays_count, min_seconds=0.2):
         stats = bvh.stats()
         leaves = bvh.count[bvh.count > 0]
         hits, rate = rays_per_second(bvh, rays, min_seconds)
-        bvh.intersect(rays)
+        visits, tests = bvh.traversal_work(rays)
         rows[f"bvh-{split}"] = {
             "build_seconds": build_seconds, "nodes": stats["nodes"],
             "wide_nodes": stats["wide_nodes"], "depth": stats["max_depth"],
@@ -297,8 +297,7 @@ def measure_distribution(name, n, rays_count, min_seconds=0.2):
             "mean_leaf": float(leaves.mean()), "bytes": stats["bytes"],
             "allocated_bytes": allocated_node_bytes(geometry.primitive_count),
             "python_peak_bytes": python_peak, "rays_per_second": rate,
-            "mean_visits": bvh.last_mean_visits,
-            "mean_tests": getattr(bvh, "last_mean_triangle_tests", None),
+            "mean_visits": visits, "mean_tests": tests,
             "exact": same_hits(hits, reference)}
     embree = accel.build("embree", geometry)
     hits, rate = rays_per_second(embree, rays, min_seconds)

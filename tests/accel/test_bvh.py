@@ -214,8 +214,9 @@ def test_traversal_stops_at_the_nearest_hit(split):
     origins = np.column_stack([rng.random((n, 2)) * 1.6 - 0.8, np.full(n, 5.0)])
     directions = np.tile([0.0, 0.0, -1.0], (n, 1))
     backend = accel.build("bvh", accel.Geometry(vertices, faces), split=split)
-    hits = backend.intersect(accel.Rays(origins, directions))
+    rays = accel.Rays(origins, directions)
+    hits = backend.intersect(rays)
     assert np.isin(hits.prim, [0, 1]).all()
-    tests = backend.last_mean_triangle_tests
-    print(f"{split}: {tests:.2f} triangle tests and {backend.last_mean_visits:.2f} nodes per ray")
+    visits, tests = backend.traversal_work(rays)
+    print(f"{split}: {tests:.2f} triangle tests and {visits:.2f} nodes per ray")
     assert tests <= backend.max_leaf_size
