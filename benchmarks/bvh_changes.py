@@ -317,7 +317,9 @@ def main(argv=None):
     commits = ", ".join(f"{label}: {commit or 'this tree'}" for commit, label in revisions_wanted)
     text = report.header("BVH traversal changes side by side (issue 14.3)") + (
         f"{args.rays:,} rays per batch, {args.threads} threads, median of {args.repeats} runs "
-        f"taken in turns (each revision's process, then Embree's, per repeat). Revisions: "
+        f"taken in turns (each revision's process, then Embree's, per repeat); closest hit "
+        f"through the compiled face (`accel.compiled.run_intersect`) at every revision and for "
+        f"Embree, any hit through `occluded`. Revisions: "
         f"{commits}. Load average (1 min) before the run {load:.1f}, after it "
         f"{os.getloadavg()[0]:.1f}.\n\n" + tables(args, labels, rates)
         + render_table(labels, renders))
