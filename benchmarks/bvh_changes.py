@@ -40,7 +40,8 @@ REVISIONS = [
     ("11fa26c", "4-wide, scalar (before)"),
     ("e7e8a2d", "8-wide, vector tests"),
     ("6e6ee83", "+ float32 planes"),
-    (None, "+ unsigned indices (this tree)"),
+    ("bd6c4cc", "+ unsigned indices"),
+    (None, "+ one-hit shortcut (this tree)"),
 ]
 MESHES = ["meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae", "meshedit/maxplanck.dae"]
 KINDS = ("random", "camera", "secondary", "shadow")

@@ -69,6 +69,11 @@ MUTANTS = {
          (BVH, "slab_test(nodes, row, planes, slab_ray, lo, best_t)",
           "slab_test(nodes, row, planes, slab_ray, lo, hi)")],
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
+    "one-child-shortcut-for-several": (
+        "BVH closest hit enters the first child hit and drops the others whenever any is hit",
+        [(BVH, "if mask != 0 and mask & (mask - 1) == 0:   # one child hit",
+          "if mask != 0:   # one child hit")],
+        ["tests/accel/test_bvh.py"]),
     "block-swapped-barycentrics": (
         "the BVH's four-lane watertight test returns (v, u) for (u, v)",
         [(SIMD, "b.fmul(e1, inv), b.fmul(e2, inv),", "b.fmul(e2, inv), b.fmul(e1, inv),")],
