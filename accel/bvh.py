@@ -27,9 +27,9 @@ first triangle block and its triangle and sphere counts. A leaf's triangles are 
 _fill_rows in blocks of four, as float64 coordinates (the mesh's own values: each lane of
 accel.simd's block test computes what the scalar test of accel.kernels computes on those values,
 bit for bit, so bvh and naive agree exactly), and tested four at a time. What each of these
-choices bought is measured side by side in benchmarks/results/accel_rays.md (its "Traversal
-changes" section): 8-wide with vector slab and block tests over the earlier 4-wide scalar
-traversal, float32 planes over float64 ones, unsigned stack indices.
+choices bought is measured side by side in benchmarks/results/bvh_changes.md: 8-wide with
+vector slab and block tests over the earlier 4-wide scalar traversal, float32 planes over
+float64 ones, unsigned stack indices, entering a node's only child hit directly.
 """
 import time
 from collections import namedtuple
@@ -496,8 +496,10 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     Ordered: at each node the nearest child hit is entered next and the others are pushed with
     their entry t (in slot order); a popped entry beyond the nearest hit found is skipped. A node
     with one child hit enters it directly, skipping the nearest-child tournament and the pushes
-    (1.00-1.14x closest-hit rays per second, side by side in benchmarks/results/bvh_changes.md;
-    the same shortcut measured 0.99-1.05x for any hit, which does without it). The stack
+    (closest-hit rays per second over the same tree without it, three side-by-side runs on four
+    meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; the last run is
+    benchmarks/results/bvh_changes.md's; the same shortcut measured 0.99-1.05x for any hit,
+    which does without it). The stack
     indices are unsigned, so numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
