@@ -36,7 +36,7 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange, uint64
-from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.cpython.unsafe.numbers import trailing_zeros  # numba's own llvm.cttz intrinsic
 
 from . import compiled
 from .kernels import (
@@ -499,8 +499,8 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     (closest-hit rays per second over the same tree without it, three side-by-side runs on four
     meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; the last run is
     benchmarks/results/bvh_changes.md's; the same shortcut measured 0.99-1.05x for any hit,
-    which does without it). The stack
-    indices are unsigned, so numba emits no negative-index wraparound for them."""
+    which does without it). The stack indices are unsigned, so numba emits no negative-index
+    wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
     planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
@@ -669,9 +669,10 @@ class BVHAccelerator:
     def traversal_work(self, rays):
         """(wide nodes visited, primitive tests) per ray, averaged over a closest-hit trace of
         `rays`, for benchmarks and tests: interior wide nodes only (leaves are counted by their
-        primitives; a block's unused lanes are not). A trace of its own, counting as it goes
-        (counting inside intersect() cost it 11-22% of its rays per second on CBbunny, random
-        and secondary rays). Not comparable with figures from before the 8-wide traversal."""
+        primitives; a block's unused lanes are not). A trace of its own, counting as it goes:
+        when intersect() counted too, the plain face ran 1.11-1.22x its rays per second
+        (CBbunny, random and secondary rays). Not comparable with figures from before the
+        8-wide traversal."""
         rays.validate()
         n = len(rays)
         hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
