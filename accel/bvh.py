@@ -593,16 +593,15 @@ compiled.register(BVHRecord, new_scratch, closest_hit, any_hit)
 
 
 @njit(cache=True, parallel=True)
-def _intersect(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v,
-               out_visits, out_tests):
-    """The batch closest hit, with each ray's visit and test counts (traversal_work)."""
+def _count_work(record, origins, directions, tmin, tmax, out_visits, out_tests):
+    """Each ray's wide-node visits and primitive tests in a closest-hit trace (traversal_work)."""
     n_rays = origins.shape[0]
     for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
         scratch = new_scratch(record)
         for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            (out_t[r], out_prim[r], out_u[r], out_v[r], out_visits[r], out_tests[r]) = _closest(
+            out_visits[r], out_tests[r] = _closest(
                 record, scratch, origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
-                directions[r, 1], directions[r, 2], tmin[r], tmax[r])
+                directions[r, 1], directions[r, 2], tmin[r], tmax[r])[4:]
 
 
 def _mean(values):
@@ -674,12 +673,10 @@ class BVHAccelerator:
         (CBbunny, random and secondary rays). Not comparable with figures from before the
         8-wide traversal."""
         rays.validate()
-        n = len(rays)
-        hits = Hits(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
-        visits = np.empty(n, dtype=np.int64)
-        tests = np.empty(n, dtype=np.int64)
-        _intersect(self.compiled, rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t,
-                   hits.prim, hits.u, hits.v, visits, tests)
+        visits = np.empty(len(rays), dtype=np.int64)
+        tests = np.empty(len(rays), dtype=np.int64)
+        _count_work(self.compiled, rays.origins, rays.directions, rays.tmin, rays.tmax, visits,
+                    tests)
         return _mean(visits), _mean(tests)
 
     def occluded(self, rays):

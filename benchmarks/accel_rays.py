@@ -31,8 +31,9 @@ turns (each traces the batch once per round, so a slow spell of the machine touc
 tests every triangle, so it runs on the first min(n, --naive-budget / triangles) rays of the same
 batch (the tables give the count). The traversal table gives, per ray, the bvh's nodes visited
 and ray-triangle tests (closest hit; mean and sah splits with the watertight test), counted by
-an untimed trace of the whole batch (BVHAccelerator.traversal_work). Writes benchmarks/results/accel_rays.md (or --output; a relative path is taken
-inside benchmarks/results/) and a log-log chart beside it.
+an untimed trace of the whole batch (BVHAccelerator.traversal_work). Writes
+benchmarks/results/accel_rays.md (or --output; a relative path is taken inside
+benchmarks/results/) and a log-log chart beside it.
 
 Run time (estimated from quick-size rates on a 2-core machine): 6 backends x 4 kinds of 1M rays
 x 3 repeats on 12 meshes is about 10 minutes at 2 threads (of which the Möller–Trumbore variants

@@ -104,7 +104,7 @@ for line in sys.stdin:
     if request["kind"] == "shadow":
         query = backend.occluded
     else:   # the compiled face, as the path loop calls it: until 7da9a05, bvh.intersect also
-        # counted its work per ray, which cost it 11-22% against Embree's plain intersect
+        # counted its work per ray (the plain face ran 1.11-1.22x its rays per second)
         def query(rays, record=backend.compiled):
             rays.validate()
             return run_intersect(record, rays, Hits)
