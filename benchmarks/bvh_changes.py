@@ -3,15 +3,22 @@ commits, side by side with Embree, in one run.
 
     python -m benchmarks.bvh_changes [--rays 1000000] [--repeats 5] [--threads 2]
         [--meshes meshedit/cow.dae ...] [--splits mean sah] [--leaf-sizes 2 8]
-        [--revisions COMMIT=LABEL ... tree=LABEL] [--output bvh_changes.md]
+        [--revisions COMMIT=LABEL ... tree=LABEL] [--processes 1] [--output bvh_changes.md]
 
 Each revision (REVISIONS: the traversal before the change, then one commit per kept change; the
 last is this tree) runs in a process of its own, from a `git worktree` of that commit (this tree
 for the last) with its own numba cache, so each times its own code. The processes stay alive and
 take turns: for every mesh, ray kind and split, each repeat asks every revision in turn to trace
 the same batch once (and this tree's process to trace it with Embree, and with the BVH built
-with other leaf sizes, --leaf-sizes), so a slow spell of
-the machine touches all of them alike. Rays are accel_rays' (`benchmarks.accel_rays.make_rays`:
+with other leaf sizes, --leaf-sizes), so a slow spell of the machine touches all of them alike.
+
+With --processes N each revision runs in N processes, asked in turn like the others, and a
+revision's rate is the median of its processes' rates. A process can run the same code at a
+rate of its own for the whole run: in one run with three processes per revision, the fastest
+process of a revision over its slowest was 1.03x in the median cell and up to 1.16x (cow, camera
+rays), more than most single changes buy, so an A/B of one change wants N >= 3.
+
+Rays are accel_rays' (`benchmarks.accel_rays.make_rays`:
 random, camera, secondary and shadow rays, the last with any hit (`occluded`), the others closest
 hit through the compiled face (`accel.compiled.run_intersect`, what every backend's `intersect`
 is today: the same call at every revision and for Embree, where older revisions' bvh.intersect
@@ -122,16 +129,18 @@ for line in sys.stdin:
 
 
 class Revision:
-    """A process running WORKER at one commit's tree."""
+    """A process running WORKER at one commit's tree (the first of a commit's processes makes
+    its worktree, and closing it removes the worktree)."""
 
-    def __init__(self, commit, label, threads, scratch):
-        self.commit, self.label = commit, label
+    def __init__(self, commit, label, threads, scratch, first=True):
+        self.commit, self.label, self.first = commit, label, first
         if commit is None:
             tree = ROOT
         else:
             tree = Path(scratch) / commit
-            subprocess.run(["git", "worktree", "add", "--detach", str(tree), commit], cwd=ROOT,
-                           check=True, capture_output=True)
+            if first:
+                subprocess.run(["git", "worktree", "add", "--detach", str(tree), commit],
+                               cwd=ROOT, check=True, capture_output=True)
         self.tree = tree
         env = dict(os.environ, PYTHONPATH=str(tree),
                    NUMBA_CACHE_DIR=str(Path(scratch) / f"cache-{commit or 'tree'}"))
@@ -156,40 +165,56 @@ class Revision:
     def close(self):
         self.process.stdin.close()
         self.process.wait()
-        if self.commit is not None:
+        if self.commit is not None and self.first:
             subprocess.run(["git", "worktree", "remove", "--force", str(self.tree)], cwd=ROOT,
                            check=True, capture_output=True)
 
 
 def measure(args, revisions, scenes):
     """rates[(mesh, kind, split, label)], rates[(mesh, kind, None, "embree")] and, for this
-    tree's other leaf sizes, rates[(mesh, kind, split, f"leaf {n}")], rays/s."""
-    rates = {}
+    tree's other leaf sizes, rates[(mesh, kind, split, f"leaf {n}")], rays/s; and spreads[(mesh,
+    kind, split, label)], the fastest of a revision's processes over its slowest.
+
+    With several processes per revision (--processes), a revision's rate is the median of its
+    processes' rates (each the median of its repeats): a process's rate can sit apart from
+    another's at the same code for the whole run (its memory placed differently), so one
+    process per revision can show a step that is not the code's."""
+    rates, spreads = {}, {}
+    last = [r for r in revisions if r.label == revisions[-1].label]
     for mesh in args.meshes:
         path = str(Path(scenes) / mesh)
         for kind in KINDS:
             for split in args.splits:
-                times = {r.label: [] for r in revisions}
-                times.update({f"leaf {n}": [] for n in args.leaf_sizes})
-                embree = []
+                times = {(r.label, i): [] for i, r in enumerate(revisions)}
+                times.update({(f"leaf {n}", i): [] for n in args.leaf_sizes
+                              for i in range(len(last))})
+                embree = {i: [] for i in range(len(last))}
                 for repeat in range(args.repeats):
                     request = dict(mesh=path, kind=kind, split=split, rays=args.rays,
                                    warm=repeat == 0)
-                    for revision in revisions:
-                        times[revision.label].append(revision.seconds(backend="bvh", **request))
-                    for n in args.leaf_sizes:
-                        times[f"leaf {n}"].append(revisions[-1].seconds(backend="bvh", leaf=n,
-                                                                        **request))
-                    if split == args.splits[0]:
-                        embree.append(revisions[-1].seconds(backend="embree", **request))
-                for label, seconds in times.items():
-                    rates[mesh, kind, split, label] = args.rays / statistics.median(seconds)
-                if embree:
-                    rates[mesh, kind, None, "embree"] = args.rays / statistics.median(embree)
+                    for i, revision in enumerate(revisions):
+                        times[revision.label, i].append(revision.seconds(backend="bvh",
+                                                                         **request))
+                    for i, revision in enumerate(last):
+                        for n in args.leaf_sizes:
+                            times[f"leaf {n}", i].append(revision.seconds(backend="bvh", leaf=n,
+                                                                          **request))
+                        if split == args.splits[0]:
+                            embree[i].append(revision.seconds(backend="embree", **request))
+                per_process = {}
+                for (label, _), seconds in times.items():
+                    per_process.setdefault(label, []).append(args.rays
+                                                             / statistics.median(seconds))
+                for label, found in per_process.items():
+                    rates[mesh, kind, split, label] = statistics.median(found)
+                    spreads[mesh, kind, split, label] = max(found) / min(found)
+                if split == args.splits[0]:
+                    rates[mesh, kind, None, "embree"] = statistics.median(
+                        args.rays / statistics.median(seconds) for seconds in embree.values())
                 print(mesh, kind, split, ", ".join(
-                    f"{label} {rates[mesh, kind, split, label]:,.0f}" for label in times)
+                    f"{label} {rates[mesh, kind, split, label]:,.0f}" for label in per_process)
                     + f", embree {rates[mesh, kind, None, 'embree']:,.0f} rays/s", flush=True)
-    return rates
+    return rates, spreads
 
 
 # renders timed in turns as the rays are: (scene, ptrace.render options)
@@ -242,25 +267,37 @@ def render_table(labels, renders):
     return "\n".join(lines)
 
 
+def spread_text(args, labels, spreads):
+    """A sentence on how far apart one revision's processes were (--processes > 1)."""
+    if args.processes < 2:
+        return ""
+    cells = {key: value for key, value in spreads.items() if key[3] in labels}
+    worst = max(cells, key=cells.get)
+    return (f"Each revision ran in {args.processes} processes; a cell is the median of their "
+            f"rates. The fastest process of a revision over its slowest, over all cells: median "
+            f"{statistics.median(cells.values()):.2f}x, largest {cells[worst]:.2f}x ({worst[0]}, "
+            f"{worst[1]}, {worst[2]} split, {worst[3]}).\n\n")
+
+
 def tables(args, labels, rates):
     lines = []
     for split in args.splits:
         lines += [f"### bvh {split} split", "",
                   "Rays per second of bvh at each revision, Embree's, then each revision's rate "
                   "over the one before it (*step*) and over Embree's (*/ embree*).", "",
-                  "| mesh | rays | " + " | ".join(labels) + " | embree | "
-                  + " | ".join(f"step: {label}" for label in labels[1:]) + " | "
-                  + " | ".join(f"/ embree: {label}" for label in labels) + " |",
+                  "| " + " | ".join(["mesh", "rays", *labels, "embree",
+                                     *(f"step: {label}" for label in labels[1:]),
+                                     *(f"/ embree: {label}" for label in labels)]) + " |",
                   "|---|---|" + "---:|" * (2 * len(labels) + 1 + len(labels) - 1)]
         for mesh in args.meshes:
             for kind in KINDS:
                 rate = [rates[mesh, kind, split, label] for label in labels]
                 embree = rates[mesh, kind, None, "embree"]
-                lines.append(
-                    f"| {mesh} | {kind}{' (any hit)' if kind == 'shadow' else ''} | "
-                    + " | ".join(f"{r:,.0f}" for r in rate) + f" | {embree:,.0f} | "
-                    + " | ".join(f"{b / a:.2f}x" for a, b in zip(rate, rate[1:])) + " | "
-                    + " | ".join(f"{r / embree:.2f}" for r in rate) + " |")
+                lines.append("| " + " | ".join([
+                    mesh, kind + (" (any hit)" if kind == "shadow" else ""),
+                    *(f"{r:,.0f}" for r in rate), f"{embree:,.0f}",
+                    *(f"{b / a:.2f}x" for a, b in zip(rate, rate[1:])),
+                    *(f"{r / embree:.2f}" for r in rate)]) + " |")
         lines.append("")
         if args.leaf_sizes:
             sizes = sorted(args.leaf_sizes + [DEFAULT_LEAF])
@@ -297,6 +334,8 @@ def main(argv=None):
     parser.add_argument("--renders", type=int, default=len(RENDERS),
                         help=f"how many of the {len(RENDERS)} renders to time (0: none)")
     parser.add_argument("--render-repeats", type=int, default=3)
+    parser.add_argument("--processes", type=int, default=1,
+                        help="worker processes per revision (default 1; see measure())")
     parser.add_argument("--output", default="bvh_changes.md")
     args = parser.parse_args(argv)
     revisions_wanted = REVISIONS if not args.revisions else [
@@ -308,11 +347,12 @@ def main(argv=None):
         revisions = []
         try:
             for commit, label in revisions_wanted:
-                revisions.append(Revision(commit, label, args.threads, scratch))
-            rates = measure(args, revisions, scenes)
+                for i in range(args.processes):
+                    revisions.append(Revision(commit, label, args.threads, scratch, i == 0))
+            rates, spreads = measure(args, revisions, scenes)
             renders = measure_renders(args, revisions, scenes)
         finally:
-            for revision in revisions:
+            for revision in reversed(revisions):   # a commit's first process last: its worktree
                 revision.close()
     labels = [label for _, label in revisions_wanted]
     commits = ", ".join(f"{label}: {commit or 'this tree'}" for commit, label in revisions_wanted)
@@ -322,7 +362,8 @@ def main(argv=None):
         f"through the compiled face (`accel.compiled.run_intersect`) at every revision and for "
         f"Embree, any hit through `occluded`. Revisions: "
         f"{commits}. Load average (1 min) before the run {load:.1f}, after it "
-        f"{os.getloadavg()[0]:.1f}.\n\n" + tables(args, labels, rates)
+        f"{os.getloadavg()[0]:.1f}.\n\n" + spread_text(args, labels, spreads)
+        + tables(args, labels, rates)
         + render_table(labels, renders))
     path = report.destination(args.output)
     tmp = path.with_suffix(path.suffix + ".tmp")
