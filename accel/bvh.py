@@ -497,9 +497,10 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     their entry t (in slot order); a popped entry beyond the nearest hit found is skipped. A node
     with one child hit enters it directly, skipping the nearest-child tournament and the pushes
     (closest-hit rays per second over the same tree without it, three side-by-side runs on four
-    meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; the last run is
-    benchmarks/results/bvh_changes.md's; the same shortcut measured 0.99-1.05x for any hit,
-    which does without it). The stack indices are unsigned, so numba emits no negative-index
+    meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; in
+    benchmarks/results/bvh_changes.md's run, three processes per revision, 0.99-1.08x on random
+    and secondary rays; the same shortcut measured 0.99-1.05x for any hit, which does without
+    it). The stack indices are unsigned, so numba emits no negative-index
     wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
