@@ -177,8 +177,8 @@ def measure(args, revisions, scenes):
 
     With several processes per revision (--processes), a revision's rate is the median of its
     processes' rates (each the median of its repeats): a process's rate can sit apart from
-    another's at the same code for the whole run (its memory placed differently), so one
-    process per revision can show a step that is not the code's."""
+    another's at the same code for the whole run (where its memory landed, perhaps: not
+    measured), so one process per revision can show a step that is not the code's."""
     rates, spreads = {}, {}
     last = [r for r in revisions if r.label == revisions[-1].label]
     for mesh in args.meshes:
