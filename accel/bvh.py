@@ -500,8 +500,7 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; in
     benchmarks/results/bvh_changes.md's run, three processes per revision, 0.99-1.08x on random
     and secondary rays; the same shortcut measured 0.99-1.05x for any hit, which does without
-    it). The stack indices are unsigned, so numba emits no negative-index
-    wraparound for them."""
+    it). The stack indices are unsigned, so numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
     planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)

@@ -40,6 +40,7 @@ import tempfile
 from pathlib import Path
 
 from . import report
+from .accel_rays import scenes_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 # (commit, label); None is this tree
@@ -341,7 +342,7 @@ def main(argv=None):
     revisions_wanted = REVISIONS if not args.revisions else [
         (None if commit == "tree" else commit, label)
         for commit, _, label in (spec.partition("=") for spec in args.revisions)]
-    scenes = os.environ.get("PTRACE_SCENES", str(ROOT.parent / "shared" / "scenes" / "cs184"))
+    scenes = scenes_dir()
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as scratch:
         revisions = []
@@ -365,11 +366,7 @@ def main(argv=None):
         f"{os.getloadavg()[0]:.1f}.\n\n" + spread_text(args, labels, spreads)
         + tables(args, labels, rates)
         + render_table(labels, renders))
-    path = report.destination(args.output)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
-    print(f"wrote {path}")
+    print(f"wrote {report.write(args.output, text)}")
 
 
 if __name__ == "__main__":

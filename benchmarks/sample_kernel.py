@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 
 from . import report
+from .accel_rays import scenes_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,8 +103,7 @@ def main(argv=None):
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--output", default="sample_kernel.txt")
     args = parser.parse_args(argv)
-    scenes = os.environ.get("PTRACE_SCENES", str(ROOT.parent / "shared" / "scenes" / "cs184"))
-    args.mesh = str(Path(scenes) / args.mesh)
+    args.mesh = str(Path(scenes_dir()) / args.mesh)
     with tempfile.TemporaryDirectory() as folder:
         rate, counts, mappings = sample(args, folder)
         low, high, path = max(mappings, key=lambda m: sum(n for a, n in counts.items()
@@ -116,10 +116,7 @@ def main(argv=None):
             f"{inside:.1%} of them in the mapping {low:#x}-{high:#x} listed here (share of all "
             f"samples per instruction)\n")
     body = "".join(f"{share:6.1%}  {address:x}  {text}\n" for address, share, text in lines)
-    destination = report.destination(args.output)
-    temporary = destination.with_suffix(destination.suffix + ".tmp")
-    temporary.write_text(head + body)
-    temporary.replace(destination)
+    destination = report.write(args.output, head + body)
     print(head, end="")
     for address, share, text in sorted(lines, key=lambda line: -line[1])[:15]:
         print(f"{share:6.1%}  {address:x}  {text}")
