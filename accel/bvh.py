@@ -20,32 +20,39 @@ in `order` for a leaf; count[n] is 0 for an interior node and the number of prim
 Traversal does not walk the binary tree: `_collapse` folds it into an 8-wide tree (each wide node
 takes its binary node's two children, then keeps opening the interior child of largest surface
 area until it has eight), so a ray visits fewer nodes and the slab test of a node's children is
-one vector operation (accel.simd: one AVX-512 instruction per step, or two AVX2 ones). A wide
-node is one 256-byte row (_node_rows): its children's six box planes as float32, rounded outward
-so a box never shrinks, and an int64 payload per child: a row for an interior child, or a leaf's
-first triangle block and its triangle and sphere counts. A leaf's triangles are stored by
-_fill_rows in blocks of four, as float64 coordinates (the mesh's own values: each lane of
-accel.simd's block test computes what the scalar test of accel.kernels computes on those values,
-bit for bit, so bvh and naive agree exactly), and tested four at a time. What each of these
+one vector operation (accel.simd: one AVX2 instruction per step, in float32). A wide node is
+one 256-byte row (_node_rows): its children's six box planes as float32, rounded outward so a
+box never shrinks, and an int64 payload per child: a row for an interior child, or a leaf's
+first triangle block and its triangle and sphere counts. The slab test computes in float32, from
+the ray's origin moved outward and its inverse direction scaled outward per axis (_ray_planes),
+so that rounding can only keep a box, never lose one; which primitive is hit, and its t, come
+from the leaves' float64 tests alone.
+A leaf's triangles are stored by _fill_rows in blocks of four, as float64 coordinates (the
+mesh's own values: each lane of accel.simd's block test computes what the scalar test of
+accel.kernels computes on those values, bit for bit, so bvh and naive agree exactly), and
+tested four at a time. What each of these
 choices bought is measured side by side in benchmarks/results/bvh_changes.md: 8-wide with
 vector slab and block tests over the earlier 4-wide scalar traversal, float32 planes over
-float64 ones, unsigned stack indices, entering a node's only child hit directly.
+float64 ones, unsigned stack indices, entering a node's only child hit directly, float32 slab
+arithmetic over float64.
 """
 import time
 from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange, uint64
-from numba.cpython.unsafe.numbers import trailing_zeros  # numba's own llvm.cttz intrinsic
+from numba.cpython.unsafe.numbers import trailing_zeros, viewer  # numba's llvm.cttz, bitcast
 
 from . import compiled
 from .kernels import (
     NO_HIT,
     WATERTIGHT,
     better,
+    near_columns,
     shear_setup,
-    slab_setup,
     sphere_hit,
+    spheres_any,
+    spheres_closest,
     triangle_test,
 )
 from .simd import BLOCK, BLOCK_COLUMNS, make_slab_test, moller_trumbore_block, watertight_block
@@ -61,6 +68,14 @@ WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH 
 NODE_COLUMNS = 64        # float32 columns of a wide node's row: 6 * WIDTH planes, WIDTH payloads
 PAYLOAD = 6 * WIDTH // 2   # the first payload's column in the row's int64 view
 MAX_LEAF_SIZE = 0xffff   # a leaf payload holds its triangle and sphere counts in 16 bits each
+# The float32 slab test's margins (see _ray_planes). Float32 rounds a plane's difference from the
+# origin, its product with the inverse and the inverse itself (2^-24 each, relative), so near
+# inverses are shrunk and far ones grown by SLAB_SCALE: a near t can only come out smaller than
+# the exact one, a far t larger. The origins are moved ahead (near) and behind (far) by
+# SLAB_SHIFT * |o| (plus 2^-40), more than rounding them to float32 (and float64's rounding of
+# o + lo d, for a negative lo) can move them.
+SLAB_SCALE = 4.0 * 2.0 ** -24
+SLAB_SHIFT = 2.0 * 2.0 ** -24 + 2.0 ** -52
 slab_test = make_slab_test(WIDTH)
 
 
@@ -321,20 +336,24 @@ def _wide_rows(lower, upper, child_or_first, count):
 
 @njit(cache=True, inline="always")
 def _float32_down(x):
-    """The largest float32 at or below x (inf and -inf stay)."""
+    """The largest float32 at or below x (inf and -inf stay). Without branches or a libm call
+    (the traversal rounds every ray's origin and nearest hit this way, and which way the rounding
+    went is a coin toss a branch would mispredict): where float32(x) is above x, the float32
+    one step below it, by its bits as an integer (a float32 -0.0 steps to the negative
+    subnormal, +inf to the largest float32)."""
     f = np.float32(x)
-    if np.float64(f) > x:
-        f = np.nextafter(f, np.float32(-np.inf))
-    return f
+    bits = viewer(f, np.int32)
+    below = viewer(np.int32(bits - 1 if f > 0.0 else bits + 1), np.float32)
+    return below if np.float64(f) > x else f
 
 
 @njit(cache=True, inline="always")
 def _float32_up(x):
-    """The smallest float32 at or above x."""
+    """The smallest float32 at or above x, as _float32_down."""
     f = np.float32(x)
-    if np.float64(f) < x:
-        f = np.nextafter(f, np.float32(np.inf))
-    return f
+    bits = viewer(f, np.int32)
+    above = viewer(np.int32(bits - 1 if f < 0.0 else bits + 1), np.float32)
+    return above if np.float64(f) < x else f
 
 
 @njit(cache=True)
@@ -419,16 +438,68 @@ BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_
 @njit(cache=True)
 def new_scratch(record):
     """Traversal stack for one block of rays: payloads and the t where the ray enters each."""
-    return np.empty(WIDE_STACK, dtype=np.int64), np.empty(WIDE_STACK)
+    return np.empty(WIDE_STACK, dtype=np.int64), np.empty(WIDE_STACK, dtype=np.float32)
 
 
 @njit(cache=True, inline="always")
-def _ray_planes(ox, oy, oz, dx, dy, dz):
-    """What slab_test needs of a ray: its near and far plane columns, and (origin, inverse
-    direction)."""
-    ix, iy, iz, nx, ny, nz, fx, fy, fz = slab_setup(dx, dy, dz)
+def _inverse32(d):
+    """A direction component's near and far inverses for the float32 slab test (1/d shrunk and
+    grown by SLAB_SCALE), and whether float32 holds them: +inf for 0 (parallel: each t is then
+    +-inf by the sign of plane - origin, or NaN where they are equal, which culls nothing),
+    scaled 1/d where |1/d| is within [2^-100, 2^100]."""
+    if d == 0.0:
+        return np.float32(np.inf), np.float32(np.inf), True
+    q = 1.0 / d
+    return (np.float32(q * (1.0 - SLAB_SCALE)), np.float32(q * (1.0 + SLAB_SCALE)),
+            2.0 ** -100 <= abs(q) <= 2.0 ** 100)
+
+
+@njit(cache=True, inline="always")
+def _origins32(o, d, shift, inverse):
+    """A ray origin coordinate's float32 near and far origins for the slab test, the origin
+    being o + shift * d: the near one ahead of it along the axis's direction, the far one behind
+    it, each by SLAB_SHIFT of |o| + |shift * d| (at least its magnitude, and enough to cover
+    float64's rounding of o + shift * d too) plus 2^-40."""
+    step = shift * d
+    start = o + step
+    move = SLAB_SHIFT * (abs(o) + abs(step)) + 2.0 ** -40
+    if inverse > 0:
+        return np.float32(start + move), np.float32(start - move)
+    return np.float32(start - move), np.float32(start + move)
+
+
+@njit(cache=True, inline="always")
+def _ray_planes(ox, oy, oz, dx, dy, dz, lo):
+    """What slab_test needs of a ray: its near and far plane columns; its float32 near and far
+    origins and inverses; the t its slab t's are counted from (0, or lo if lo < 0: the slab
+    test's origin is then o + lo d, so that only t's >= 0 matter to it); and whether float32
+    cannot invert one of the direction's components (0 < |d| < 2^-100 or |d| > 2^100, which no
+    renderer makes: the ray is then answered by testing every primitive).
+
+    Why the slab test never misses a box the ray meets within [lo, hi] (tests/accel/test_simd.py
+    checks it against exact arithmetic): with lo32 <= the slab's lo (0 or lo) and hi32 >= its hi,
+    a box is met exactly when max(lo, near t's) <= min(hi, far t's), and then every far t is
+    >= 0. A near or far difference plane - origin errs outward, its sign included (the origins
+    are moved by more than their rounding); where it is >= 0 (a far t always, a near t whenever
+    it can exceed lo) the shrunk or grown inverse outweighs the three roundings of 2^-24, so the
+    computed near t is at most the exact one and the far t at least; a negative near t is below
+    lo32 and changes nothing."""
+    shift = min(lo, 0.0)
+    (nix, fix, x_ok), (niy, fiy, y_ok), (niz, fiz, z_ok) = (
+        _inverse32(dx), _inverse32(dy), _inverse32(dz))
+    nx, ny, nz, fx, fy, fz = near_columns(nix, niy, niz)
     planes = (nx * WIDTH, ny * WIDTH, nz * WIDTH, fx * WIDTH, fy * WIDTH, fz * WIDTH)
-    return planes, (ox, oy, oz, ix, iy, iz)
+    near_x, far_x = _origins32(ox, dx, shift, nix)
+    near_y, far_y = _origins32(oy, dy, shift, niy)
+    near_z, far_z = _origins32(oz, dz, shift, niz)
+    ray = (near_x, near_y, near_z, far_x, far_y, far_z, nix, niy, niz, fix, fiy, fiz)
+    return planes, ray, shift, not (x_ok and y_ok and z_ok)
+
+
+@njit(cache=True, inline="always")
+def _hi32(t, shift):
+    """A float32 at or above t - shift, for the slab test's hi (t - shift rounded up)."""
+    return _float32_up((t - shift) * (1.0 + 2.0 ** -52))
 
 
 @njit(cache=True, inline="always")
@@ -448,20 +519,28 @@ def _nearer(ta, a, tb, b):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v):
-    """Fold a leaf's primitives into the closest hit so far."""
-    prims, n_tri = record.prims, record.n_tri
-    first = payload & 0xffffffff
-    n_blocks = (((payload >> 32) & 0xffff) + BLOCK - 1) // BLOCK
+def _blocks_closest(record, first, n_blocks, shear, ray, lo, best_t, best_prim, best_u, best_v):
+    """Fold the triangles of blocks first.. first + n_blocks into the closest hit so far."""
     for block in range(first, first + n_blocks):
         mask, ts, us, vs = _block_test(record, block, shear, ray, lo, best_t)
         if mask != 0:
             for lane in range(BLOCK):
                 t = ts[lane]
                 if (mask >> lane) & 1 and t <= best_t:
-                    p = prims[uint64(block * BLOCK + lane)]
+                    p = record.prims[uint64(block * BLOCK + lane)]
                     if better(t, p, best_t, best_prim):
                         best_t, best_prim, best_u, best_v = t, p, us[lane], vs[lane]
+    return best_t, best_prim, best_u, best_v
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v):
+    """Fold a leaf's primitives into the closest hit so far."""
+    prims, n_tri = record.prims, record.n_tri
+    first = payload & 0xffffffff
+    n_blocks = (((payload >> 32) & 0xffff) + BLOCK - 1) // BLOCK
+    best_t, best_prim, best_u, best_v = _blocks_closest(
+        record, first, n_blocks, shear, ray, lo, best_t, best_prim, best_u, best_v)
     ox, oy, oz, dx, dy, dz = ray
     start = (first + n_blocks) * BLOCK
     for i in range(start, start + ((payload >> 48) & 0xffff)):
@@ -473,13 +552,21 @@ def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, be
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def _blocks_any(record, first, n_blocks, shear, ray, lo, hi):
+    """True if a triangle of blocks first.. first + n_blocks is hit with lo <= t <= hi."""
+    for block in range(first, first + n_blocks):
+        if _block_test(record, block, shear, ray, lo, hi)[0] != 0:
+            return True
+    return False
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def _leaf_any(record, payload, shear, ray, lo, hi):
     """True if any of a leaf's primitives is hit with lo <= t <= hi."""
     first = payload & 0xffffffff
     n_blocks = (((payload >> 32) & 0xffff) + BLOCK - 1) // BLOCK
-    for block in range(first, first + n_blocks):
-        if _block_test(record, block, shear, ray, lo, hi)[0] != 0:
-            return True
+    if _blocks_any(record, first, n_blocks, shear, ray, lo, hi):
+        return True
     ox, oy, oz, dx, dy, dz = ray
     start = (first + n_blocks) * BLOCK
     for i in range(start, start + ((payload >> 48) & 0xffff)):
@@ -487,6 +574,21 @@ def _leaf_any(record, payload, shear, ray, lo, hi):
         if sphere_hit(record.centers, record.radii, p, ox, oy, oz, dx, dy, dz, lo, hi) <= hi:
             return True
     return False
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _every_closest(record, shear, ray, lo, hi):
+    """The closest hit by testing every primitive, for a ray with a direction component float32
+    cannot invert (_ray_planes): (t, prim, u, v, 0, tests)."""
+    best_t, best_prim, best_u, best_v = _blocks_closest(
+        record, 0, record.blocks.shape[0], shear, ray, lo, hi, NO_HIT, 0.0, 0.0)
+    ox, oy, oz, dx, dy, dz = ray
+    best_t, best_prim, best_u, best_v = spheres_closest(
+        record.centers, record.radii, record.n_tri, ox, oy, oz, dx, dy, dz, lo, best_t,
+        best_prim, best_u, best_v)
+    if best_prim == NO_HIT:
+        best_t = np.inf
+    return best_t, best_prim, best_u, best_v, 0, record.n_tri + record.centers.shape[0]
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -503,13 +605,18 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     it). The stack indices are unsigned, so numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
-    planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
+    planes, slab_ray, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
+    if wild:
+        return _every_closest(record, shear, ray, lo, hi)
     best_t = hi
     best_prim = NO_HIT
     best_u = 0.0
     best_v = 0.0
+    lo32 = _float32_down(lo - shift)
+    hi32 = _hi32(hi, shift)
+    best_s = hi - shift   # best_t on the slab's scale: a pushed entry t is compared with it
     visits = 0
     tests = 0
     top = 0
@@ -518,7 +625,7 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
         if payload >> 32 == 0:   # a wide node
             visits += 1
             row = payload
-            mask, ts = slab_test(nodes, row, planes, slab_ray, lo, best_t)
+            mask, ts = slab_test(nodes, row, planes, slab_ray, lo32, hi32)
             if mask != 0 and mask & (mask - 1) == 0:   # one child hit: enter it, push nothing
                 payload = payloads[uint64(row), uint64(PAYLOAD + trailing_zeros(mask))]
                 continue
@@ -542,10 +649,12 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
             tests += ((payload >> 32) & 0xffff) + ((payload >> 48) & 0xffff)
             best_t, best_prim, best_u, best_v = _leaf_closest(
                 record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v)
+            hi32 = _hi32(best_t, shift)
+            best_s = best_t - shift
         popped = False
         while top > 0:   # pop the next entry that starts before the nearest hit
             top -= 1
-            if entry[uint64(top)] <= best_t:
+            if entry[uint64(top)] <= best_s:
                 payload = stack[uint64(top)]
                 popped = True
                 break
@@ -568,15 +677,20 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     the nearest first measured slower for shadow rays), and the first primitive hit ends it."""
     nodes, payloads = record.nodes, record.payloads
     stack = scratch[0]
-    planes, slab_ray = _ray_planes(ox, oy, oz, dx, dy, dz)
+    planes, slab_ray, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
+    if wild:   # a direction float32 cannot invert: every primitive
+        return (_blocks_any(record, 0, record.blocks.shape[0], shear, ray, lo, hi)
+                or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
+    lo32 = _float32_down(lo - shift)
+    hi32 = _hi32(hi, shift)
     top = 0
     payload = 0
     while nodes.shape[0] > 0:
         if payload >> 32 == 0:
             row = payload
-            mask = slab_test(nodes, row, planes, slab_ray, lo, hi)[0]
+            mask = slab_test(nodes, row, planes, slab_ray, lo32, hi32)[0]
             for c in range(WIDTH):
                 stack[uint64(top)] = payloads[uint64(row), uint64(PAYLOAD + c)]
                 top += (mask >> c) & 1

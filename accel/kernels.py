@@ -1,5 +1,5 @@
 """Primitive tests shared by every backend: triangles (watertight by default, Möller–Trumbore as an
-option), analytic spheres; and the per-ray set-up of the BVH's slab tests.
+option), analytic spheres; and which box planes a BVH ray meets first.
 
 All three backends call these same functions, so naive and bvh compute bit-identical t values.
 A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course). Between two
@@ -202,16 +202,6 @@ def sphere_hit(centers, radii, sphere, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, inline="always")
-def inverse_direction(d):
-    """1/d for the slab test; a zero component becomes 1e300 (finite, signed like +0), so
-    (plane - o) * inverse is never NaN: a ray parallel to a slab is inside it (t from -1e300
-    to +1e300, or up to inf) or outside it (an empty interval), never wrongly culled."""
-    if d == 0.0:
-        return 1e300
-    return 1.0 / d
-
-
-@njit(cache=True, inline="always")
 def near_columns(ix, iy, iz):
     """The near and far box planes (0, 1, 2: lower x, y, z; 3, 4, 5: upper x, y, z) of a ray
     with inverse direction (ix, iy, iz): the lower plane is near where the inverse is
@@ -220,17 +210,6 @@ def near_columns(ix, iy, iz):
     ny = 1 if iy > 0.0 else 4
     nz = 2 if iz > 0.0 else 5
     return nx, ny, nz, (nx + 3) % 6, (ny + 3) % 6, (nz + 3) % 6
-
-
-@njit(cache=True, inline="always")
-def slab_setup(dx, dy, dz):
-    """What a BVH traversal needs of a ray's direction: its inverse_direction() and the near and
-    far planes (near_columns)."""
-    ix = inverse_direction(dx)
-    iy = inverse_direction(dy)
-    iz = inverse_direction(dz)
-    nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
-    return ix, iy, iz, nx, ny, nz, fx, fy, fz
 
 
 @njit(cache=True, inline="always")

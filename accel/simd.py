@@ -12,12 +12,14 @@ accel.kernels, in the same order, with no fast-math flags (so nothing is reassoc
 into a multiply-add): each lane's t, u and v are bit for bit what watertight() or
 moller_trumbore() returns for that triangle, which is what keeps bvh equal to naive, primitive
 for primitive and t for t. A missed lane is t = NaN (u = v = 0), as the scalar kernels' MISS.
-The slab test reproduces the scalar traversal's max/min (numba's max(a, b) is `b if b > a else
-a`, an ordered compare) and its tolerance; only its float32 box planes are new (rounded outward
-when the BVH is built, so a box can only grow).
+The slab test need not match anything bit for bit, only never miss a box the ray meets: it
+computes in float32 on the float32 box planes (rounded outward when the BVH is built, so a box
+can only grow), from ray origins moved outward by more than float32's rounding can move a t
+(accel.bvh._ray_planes), which tests/accel/test_simd.py checks against exact rational
+arithmetic on grazing rays.
 
-LLVM lowers an 8-lane float64 vector to one AVX-512 register or two AVX2 ones, whichever the
-machine has (numba compiles for the host CPU). Loads are declared with the element's alignment
+LLVM lowers an 8-lane float32 vector to one AVX2 register and a 4-lane float64 one to another
+(numba compiles for the host CPU). Loads are declared with the element's alignment
 only, so an array that lost its 64-byte alignment (a copy) still works.
 """
 from llvmlite import ir
@@ -86,36 +88,47 @@ def _tuple(context, builder, signature, mask, vectors, lanes):
 
 
 def make_slab_test(width):
-    """The slab test of a node's `width` children, as a numba intrinsic:
+    """The slab test of a node's `width` children in float32, as a numba intrinsic:
 
         mask, (t_0, ..., t_{width-1}) = slab_test(nodes, row, planes, ray, lo, hi)
 
     nodes: C-contiguous float32 rows; row `row` holds six planes of `width` values each,
     starting at the columns in `planes` = (near x, near y, near z, far x, far y, far z) (int64),
-    the near plane of an axis being the one a ray along it meets first. ray = (ox, oy, oz, ix,
-    iy, iz): origin and inverse direction (accel.kernels.inverse_direction). t_c is child c's
-    entry t, max(lo, near planes' t), when the box is hit, t0 <= t1 + |t1| 4e-16 with t1 =
-    min(hi, far planes' t) (the scalar traversal's tolerance for the slab t's rounding), and inf
-    otherwise; bit c of mask is set where child c is hit. An empty slot's box (lower +inf, upper
-    -inf) gives t0 = inf and t1 = -inf, a NaN tolerance, a miss.
+    the near plane of an axis being the one a ray along it meets first. ray = (near origin x, y,
+    z, far origin x, y, z, near inverse x, y, z, far inverse x, y, z) and lo, hi: float32
+    (accel.bvh._ray_planes). Per child: t0 = max(lo, (near plane - near origin) * near inverse),
+    t1 = min(hi, (far plane - far origin) * far inverse) over the three axes, and the child is
+    hit where t0 <= t1; t_c is its t0, inf where missed. The caller moves the origins and scales
+    the inverses outward so that t0 is at most the exact entry t and t1 at least the exact exit
+    t: a box that the ray meets within [lo, hi] is never missed. A NaN t (0 * inf, for an
+    origin on the plane of an axis the ray is parallel to) is skipped by the max or min that
+    meets it first (numba's max(a, b) is `b if b > a else a`), and may hide the axis it is
+    paired with: either way the box can only be kept, never lost. An empty slot's box (lower
+    +inf, upper -inf) gives +-inf on every axis, never NaN, so it is always missed.
     """
     @intrinsic
     def slab_test(typingctx, nodes, row, planes, ray, lo, hi):
         _check_array(nodes, types.float32, "nodes")
-        signature = types.Tuple((types.int64, types.UniTuple(types.float64, width)))(
+        signature = types.Tuple((types.int64, types.UniTuple(types.float32, width)))(
             nodes, row, planes, ray, lo, hi)
 
         def codegen(context, builder, signature, args):
             nodes_value, row_value, planes_value, ray_value, lo_value, hi_value = args
             plane_columns = cgutils.unpack_tuple(builder, planes_value, 6)
-            ox, oy, oz, ix, iy, iz = cgutils.unpack_tuple(builder, ray_value, 6)
+            values = cgutils.unpack_tuple(builder, ray_value, 12)
+            vector = _vector(_F32, width)
+
+            def splat(value):
+                one = builder.insert_element(ir.Constant(vector, None), value,
+                                             ir.Constant(_I32, 0))
+                return builder.shuffle_vector(one, ir.Constant(vector, None),
+                                              ir.Constant(_vector(_I32, width), [0] * width))
 
             def plane_t(column, origin, inverse):   # (plane - o) * inverse, per lane
                 pointer = _row_pointer(context, builder, signature.args[0], nodes_value,
                                        row_value, column)
-                planes = _load(builder, pointer, _F32, width)
-                return builder.fmul(builder.fsub(planes, _splat(builder, origin, width)),
-                                    _splat(builder, inverse, width))
+                planes = builder.load(builder.bitcast(pointer, vector.as_pointer()), align=4)
+                return builder.fmul(builder.fsub(planes, splat(origin)), splat(inverse))
 
             def larger(acc, value):    # numba's max(acc, value): value if value > acc else acc
                 return builder.select(builder.fcmp_ordered(">", value, acc), value, acc)
@@ -123,18 +136,12 @@ def make_slab_test(width):
             def smaller(acc, value):
                 return builder.select(builder.fcmp_ordered("<", value, acc), value, acc)
 
-            t0 = _splat(builder, lo_value, width)
-            t1 = _splat(builder, hi_value, width)
-            for axis, (origin, inverse) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
-                t0 = larger(t0, plane_t(plane_columns[axis], origin, inverse))
-            for axis, (origin, inverse) in enumerate(((ox, ix), (oy, iy), (oz, iz))):
-                t1 = smaller(t1, plane_t(plane_columns[3 + axis], origin, inverse))
-            fabs = cgutils.get_or_insert_function(
-                builder.module, ir.FunctionType(_vector(_F64, width), [_vector(_F64, width)]),
-                f"llvm.fabs.v{width}f64")
-            slack = builder.fmul(builder.call(fabs, [t1]), _constant(builder, 4e-16, width))
-            hit = builder.fcmp_ordered("<=", t0, builder.fadd(t1, slack))
-            entries = builder.select(hit, t0, _constant(builder, float("inf"), width))
+            near = [plane_t(plane_columns[a], values[a], values[6 + a]) for a in range(3)]
+            far = [plane_t(plane_columns[3 + a], values[3 + a], values[9 + a]) for a in range(3)]
+            t0 = larger(larger(splat(lo_value), near[0]), larger(near[1], near[2]))
+            t1 = smaller(smaller(splat(hi_value), far[0]), smaller(far[1], far[2]))
+            hit = builder.fcmp_ordered("<=", t0, t1)
+            entries = builder.select(hit, t0, splat(ir.Constant(_F32, float("inf"))))
             return _tuple(context, builder, signature, _lanes_mask(builder, hit, width),
                           [entries], width)
 

@@ -49,7 +49,8 @@ REVISIONS = [
     ("e7e8a2d", "8-wide, vector tests"),
     ("6e6ee83", "+ float32 planes"),
     ("bd6c4cc", "+ unsigned indices"),
-    (None, "+ one-hit shortcut (this tree)"),
+    ("b55d6cb", "+ one-hit shortcut"),
+    (None, "+ float32 slab (this tree)"),
 ]
 MESHES = ["meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae", "meshedit/maxplanck.dae"]
 KINDS = ("random", "camera", "secondary", "shadow")

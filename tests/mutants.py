@@ -66,9 +66,12 @@ MUTANTS = {
         "BVH traversal opens boxes beyond the nearest hit found so far",
         [(BVH, "            if entry[uint64(top)] <= best_t:\n",
           "            if True:\n"),
-         (BVH, "slab_test(nodes, row, planes, slab_ray, lo, best_t)",
-          "slab_test(nodes, row, planes, slab_ray, lo, hi)")],
+         (BVH, "            hi32 = _hi32(best_t, shift)\n", "")],
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
+    "slab-inverses-not-scaled": (
+        "the float32 slab test's inverses are not scaled outward",
+        [(BVH, "SLAB_SCALE = 4.0 * 2.0 ** -24", "SLAB_SCALE = 0.0")],
+        ["tests/accel/test_simd.py", "-k", "slab"]),
     "one-child-shortcut-for-several": (
         "BVH closest hit enters the first child hit and drops the others whenever any is hit",
         [(BVH, "if mask != 0 and mask & (mask - 1) == 0:   # one child hit",

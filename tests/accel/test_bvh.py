@@ -160,10 +160,11 @@ def test_bad_options_are_refused():
 
 
 def test_axis_aligned_rays_on_box_planes_match_naive():
-    """The slab test orders planes by the direction's sign and maps a zero component to a
-    finite 1e300 inverse (never NaN): rays along the axes (two zero components) whose origin
-    lies exactly on node box planes in those two components, with tmin > 0, must give naive's
-    answers bit for bit, closest hit and any hit."""
+    """The slab test orders planes by the direction's sign and maps a zero component to an
+    infinite inverse (a plane difference of 0 then gives NaN, which culls nothing): rays along
+    the axes (two zero components) whose origin lies exactly on node box planes in those two
+    components, with tmin > 0, must give naive's answers bit for bit, closest hit and any
+    hit."""
     rng = np.random.default_rng(11)
     # 400 axis-aligned unit squares (two triangles each) at integer coordinates
     corners = rng.integers(0, 8, size=(400, 3)).astype(np.float64)
@@ -197,6 +198,33 @@ def test_axis_aligned_rays_on_box_planes_match_naive():
         np.testing.assert_array_equal(hits.prim, expected.prim)
         np.testing.assert_array_equal(hits.t, expected.t)
         np.testing.assert_array_equal(bvh.occluded(rays), naive.occluded(rays))
+
+
+def test_directions_float32_cannot_invert_match_naive(scenes_dir):
+    """Direction components whose inverse is beyond the float32 slab test's range (tiny or huge,
+    some axes or all three, which then test every primitive), with tmin 0 and 1e-3: bvh answers
+    as naive does, bit for bit, closest hit and any hit."""
+    geometry = ptrace.load(scenes_dir / "meshedit/cow.dae").geometry
+    base = raygen.sphere_rays(geometry, 600, seed=9)
+    naive, bvh = accel.build("naive", geometry), accel.build("bvh", geometry)
+    scales = np.ones((6, 600, 3))
+    scales[0] = 1e-40                    # every axis: no box can cull
+    scales[1] = 1e39
+    scales[2, :, 0] = 1e-40              # one axis
+    scales[3, :, 1] = 1e39
+    scales[4, :, :2] = 1e-35             # two axes
+    scales[5] = [1e-33, 1.0, 1e33]
+    hit = []
+    for scale in scales:
+        for tmin in (0.0, 1e-3):
+            rays = accel.Rays(base.origins, base.directions * scale, tmin)
+            expected = naive.intersect(rays)
+            hits = bvh.intersect(rays)
+            np.testing.assert_array_equal(hits.prim, expected.prim)
+            np.testing.assert_array_equal(hits.t, expected.t)
+            np.testing.assert_array_equal(bvh.occluded(rays), naive.occluded(rays))
+            hit.append((expected.prim >= 0).mean())
+    assert min(hit[:3]) > 0.2   # every axis scaled alike (t in range): hitting as often
 
 
 @pytest.mark.parametrize("split", ["mean", "sah"])

@@ -5,14 +5,14 @@ scalar test's float64 arithmetic; the slab test must keep the scalar traversal's
 tests compare them directly, bit for bit, on random and degenerate cases, so a difference shows
 here and not only as a rare mismatch on a course mesh.
 """
+from fractions import Fraction
+
 import numpy as np
 from numba import njit
 
-from accel.bvh import WIDTH, slab_test
+from accel.bvh import WIDTH, _float32_down, _float32_up, _hi32, _ray_planes, slab_test
 from accel.kernels import (
-    inverse_direction,
     moller_trumbore,
-    near_columns,
     shear_setup,
     watertight,
 )
@@ -103,54 +103,137 @@ def test_block_tests_equal_the_scalar_kernels_lane_by_lane():
 
 
 @njit
-def _slab_both(nodes, origins, directions, lo, hi, out_vector, out_scalar):
-    """slab_test's (mask, entries) per ray and row, and the scalar traversal's formula for the
-    same planes (the 4-wide code it replaced: max/min over the near and far planes' t and the
-    tolerance t0 <= t1 + |t1| 4e-16)."""
+def _slab_vector(nodes, origins, directions, lo, hi, out):
+    """slab_test's (mask bit, entry t) per ray, row and child, as the traversal calls it (the
+    entry on the ray's own scale: plus the shift of a negative lo, rounded down)."""
     for r in range(origins.shape[0]):
-        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
-        ix = inverse_direction(directions[r, 0])
-        iy = inverse_direction(directions[r, 1])
-        iz = inverse_direction(directions[r, 2])
-        nx, ny, nz, fx, fy, fz = near_columns(ix, iy, iz)
-        planes = (nx * WIDTH, ny * WIDTH, nz * WIDTH, fx * WIDTH, fy * WIDTH, fz * WIDTH)
+        planes, ray, shift, _ = _ray_planes(origins[r, 0], origins[r, 1], origins[r, 2],
+                                            directions[r, 0], directions[r, 1], directions[r, 2],
+                                            lo)
+        lo32, hi32 = _float32_down(lo - shift), _hi32(hi, shift)
         for row in range(nodes.shape[0]):
-            mask, entries = slab_test(nodes, row, planes, (ox, oy, oz, ix, iy, iz), lo, hi)
+            mask, entries = slab_test(nodes, row, planes, ray, lo32, hi32)
             for c in range(WIDTH):
-                t0 = max(lo, (np.float64(nodes[row, nx * WIDTH + c]) - ox) * ix,
-                         (np.float64(nodes[row, ny * WIDTH + c]) - oy) * iy,
-                         (np.float64(nodes[row, nz * WIDTH + c]) - oz) * iz)
-                t1 = min(hi, (np.float64(nodes[row, fx * WIDTH + c]) - ox) * ix,
-                         (np.float64(nodes[row, fy * WIDTH + c]) - oy) * iy,
-                         (np.float64(nodes[row, fz * WIDTH + c]) - oz) * iz)
-                out_scalar[r, row, c] = t0 if t0 <= t1 + abs(t1) * 4e-16 else np.inf
-                out_vector[r, row, c] = entries[c]
-                out_vector[r, row, WIDTH + c] = (mask >> c) & 1
+                out[r, row, c, 0] = (mask >> c) & 1
+                out[r, row, c, 1] = np.nextafter(entries[c] + shift, -np.inf)
 
 
-def test_slab_test_equals_the_scalar_slab_test():
-    """slab_test: each child's entry t is bit for bit the scalar formula's (inf where missed),
-    the mask is set exactly where it is finite, and an empty slot (lower +inf, upper -inf) is
-    always missed: on random boxes, flat ones, rays along axes (a zero direction component) and
-    rays starting inside boxes."""
-    rng = np.random.default_rng(11)
-    rows = 30
+def _exact_interval(low, high, origin, direction, lo, hi):
+    """(t0, t1) of the ray's segment [lo, hi] in the box, in exact rational arithmetic: the box
+    is met where t0 <= t1 (an axis the ray is parallel to keeps everything or nothing)."""
+    t0, t1 = (Fraction(lo) if np.isfinite(lo) else lo), (Fraction(hi) if np.isfinite(hi) else hi)
+    for a in range(3):
+        lower, upper, o, d = (Fraction(float(x)) for x in (low[a], high[a], origin[a],
+                                                             direction[a]))
+        if d == 0:
+            if not lower <= o <= upper:
+                return 1, 0
+            continue
+        ta, tb = (lower - o) / d, (upper - o) / d
+        t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
+    return t0, t1
+
+
+def _slab_cases(rng):
+    """Rows of random boxes (some flat, two empty slots) and rays: random ones, rays parallel to
+    one or two axes (some from origins on box planes), far origins, and rays grazing a box:
+    aimed at a point of a box's edge, so float64 rounding puts them just inside or just outside
+    it."""
+    rows = 12
     nodes = np.zeros((rows, 64), dtype=np.float32)
-    low = rng.normal(size=(rows, 3, WIDTH))
-    high = low + rng.random((rows, 3, WIDTH)) * 2.0
-    high[:5, 2] = low[:5, 2]                      # flat boxes
-    low[5, :, 5:], high[5, :, 5:] = np.inf, -np.inf   # empty slots
+    low = rng.normal(size=(rows, 3, WIDTH)).astype(np.float32)
+    high = low + (rng.random((rows, 3, WIDTH)) * 2.0).astype(np.float32)
+    high[:2, 2] = low[:2, 2]                      # flat boxes
+    low[2, :, 6:], high[2, :, 6:] = np.inf, -np.inf   # empty slots
     nodes[:, :3 * WIDTH] = low.reshape(rows, -1)
     nodes[:, 3 * WIDTH:6 * WIDTH] = high.reshape(rows, -1)
-    origins = rng.normal(size=(200, 3))
-    directions = rng.normal(size=(200, 3))
-    directions[:30, 0] = 0.0
-    directions[30:40, :2] = 0.0
-    out_vector = np.empty((200, rows, 2 * WIDTH))
-    out_scalar = np.empty((200, rows, WIDTH))
-    for lo, hi in ((0.0, np.inf), (0.5, 2.0)):
-        _slab_both(nodes, origins, directions, lo, hi, out_vector, out_scalar)
-        np.testing.assert_array_equal(out_vector[..., :WIDTH], out_scalar)
-        np.testing.assert_array_equal(out_vector[..., WIDTH:], np.isfinite(out_scalar))
-        assert not out_vector[:, 5, WIDTH + 5:].any()   # empty slots: never entered
-        assert 0.02 < out_vector[..., WIDTH:].mean() < 0.95   # boxes entered, and missed
+    n = 240
+    origins = rng.normal(size=(n, 3)) * 3.0
+    directions = rng.normal(size=(n, 3))
+    directions[:20, 0] = 0.0
+    directions[20:30, :2] = 0.0
+    directions[30:50, 1] = 0.0
+    origins[30:50, 1] = low[3, 1, :].repeat(3)[:20]   # on box planes of that axis
+    origins[50:60] += 1e7 * directions[50:60]
+    directions[50:60] *= -1.0
+    for r in range(60, n):   # grazing: through a point on an edge of a random box
+        row, c = rng.integers(3, rows), rng.integers(WIDTH)
+        edge = rng.permutation(3)
+        point = np.empty(3)
+        point[edge[0]] = low[row, edge[0], c] if rng.random() < 0.5 else high[row, edge[0], c]
+        point[edge[1]] = low[row, edge[1], c] if rng.random() < 0.5 else high[row, edge[1], c]
+        point[edge[2]] = rng.uniform(low[row, edge[2], c], high[row, edge[2], c])
+        origins[r] = point - rng.uniform(0.6, 1.9) * directions[r]
+    return nodes, low, high, origins, directions
+
+
+def test_slab_test_never_misses_a_box_the_ray_meets():
+    """The float32 slab test against exact rational arithmetic: every child box that the ray's
+    segment [lo, hi] meets, grazing edges included, is hit, with an entry t at most the exact
+    one; an empty slot is never hit; and a box missed by more than a relative 1e-5 is missed
+    (except by a ray from a box plane it is parallel to, which culls less). Float32 rounding
+    alone loses some of the grazing boxes: this fails without the origins moved outward."""
+    rng = np.random.default_rng(11)
+    nodes, low, high, origins, directions = _slab_cases(rng)
+    out = np.empty((len(origins), nodes.shape[0], WIDTH, 2))
+    on_plane = np.zeros(len(origins), dtype=bool)
+    on_plane[30:50] = True
+    met = missed = grazing_met = grazing_missed = 0
+    for lo, hi in ((0.0, np.inf), (0.5, 2.0), (-1.0, 3.0)):
+        _slab_vector(nodes, origins, directions, lo, hi, out)
+        for r in range(len(origins)):
+            for row in range(nodes.shape[0]):
+                for c in range(WIDTH):
+                    hit, entry = out[r, row, c]
+                    if not np.isfinite(low[row, 0, c]):
+                        assert not hit, "an empty slot was hit"
+                        continue
+                    t0, t1 = _exact_interval(low[row, :, c], high[row, :, c], origins[r],
+                                             directions[r], lo, hi)
+                    if t0 <= t1:
+                        met += 1
+                        grazing_met += r >= 60
+                        assert hit, f"ray {r} misses row {row} child {c}, which it meets"
+                        assert entry <= t0
+                    else:
+                        missed += 1
+                        scale = max(abs(float(t0)), abs(float(t1)), 1.0)
+                        if float(t0) - float(t1) > 1e-5 * scale:
+                            grazing_missed += r >= 60
+                            if not on_plane[r]:
+                                assert not hit, f"ray {r} hits row {row} child {c}: far off"
+    assert met > 500 and missed > 5000
+    assert grazing_met > 100 and grazing_missed > 100
+
+
+@njit
+def _rounded(values, out):
+    for i in range(values.shape[0]):
+        out[i, 0] = _float32_down(values[i])
+        out[i, 1] = _float32_up(values[i])
+
+
+def test_float32_rounding_down_and_up():
+    """_float32_down / _float32_up (bit steps, no branches) against numpy's nextafter: the
+    nearest float32 at or below / at or above each value, on random values of every magnitude,
+    exact float32 values, zeros, subnormals, values beyond float32's range and infinities."""
+    rng = np.random.default_rng(5)
+    f32 = np.finfo(np.float32)
+    values = np.concatenate([
+        rng.normal(size=2000) * 10.0 ** rng.integers(-45, 39, size=2000),
+        rng.normal(size=200).astype(np.float32).astype(np.float64),
+        [0.0, -0.0, 1e-46, -1e-46, 7e-46, -7e-46, 1.4e-45, float(f32.max), -float(f32.max),
+         float(f32.max) * (1 + 1e-12), -float(f32.max) * (1 + 1e-12), 1e39, -1e39,
+         np.inf, -np.inf]])
+    out = np.empty((len(values), 2), dtype=np.float32)
+    _rounded(values, out)
+    with np.errstate(over="ignore"):   # beyond float32's range: inf, stepped back where needed
+        nearest = values.astype(np.float32)
+        down = np.where(nearest.astype(np.float64) > values,
+                        np.nextafter(nearest, np.float32(-np.inf)), nearest)
+        up = np.where(nearest.astype(np.float64) < values,
+                      np.nextafter(nearest, np.float32(np.inf)), nearest)
+    np.testing.assert_array_equal(out[:, 0], down)
+    np.testing.assert_array_equal(out[:, 1], up)
+    assert (out[:, 0].astype(np.float64) <= values).all()
+    assert (out[:, 1].astype(np.float64) >= values).all()
