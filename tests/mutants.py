@@ -64,7 +64,7 @@ MUTANTS = {
         ["tests/accel/test_backends.py", "-k", "barycentrics"]),
     "no-tmax-shrink": (
         "BVH traversal opens boxes beyond the nearest hit found so far",
-        [(BVH, "            if entry[uint64(top)] <= best_t:\n",
+        [(BVH, "            if entry[uint64(top)] <= best_s:\n",
           "            if True:\n"),
          (BVH, "            hi32 = _hi32(best_t, shift)\n", "")],
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
