@@ -337,9 +337,9 @@ def _wide_rows(lower, upper, child_or_first, count):
 @njit(cache=True, inline="always")
 def _float32_down(x):
     """The largest float32 at or below x (inf and -inf stay). Without branches or a libm call
-    (the traversal rounds every ray's origin and nearest hit this way, and which way the rounding
-    went is a coin toss a branch would mispredict): where float32(x) is above x, the float32
-    one step below it, by its bits as an integer (a float32 -0.0 steps to the negative
+    (the traversal rounds every ray's lo and hi and each nearer hit this way, and which way the
+    rounding went is a coin toss a branch would mispredict): where float32(x) is above x, the
+    float32 one step below it, by its bits as an integer (a float32 -0.0 steps to the negative
     subnormal, +inf to the largest float32)."""
     f = np.float32(x)
     bits = viewer(f, np.int32)
