@@ -469,10 +469,11 @@ def _origins32(o, d, shift, inverse):
 
 
 @njit(cache=True, inline="always")
-def _ray_planes(ox, oy, oz, dx, dy, dz, lo):
+def _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi):
     """What slab_test needs of a ray: its near and far plane columns; its float32 near and far
-    origins and inverses; the t its slab t's are counted from (0, or lo if lo < 0: the slab
-    test's origin is then o + lo d, so that only t's >= 0 matter to it); and whether float32
+    origins and inverses; its float32 lo and hi (rounded down and up); the t its slab t's are
+    counted from (0, or lo if lo < 0: the slab test's origin is then o + lo d, so that only t's
+    >= 0 matter to it); and whether float32
     cannot invert one of the direction's components (0 < |d| < 2^-100 or |d| > 2^100, which no
     renderer makes: the ray is then answered by testing every primitive).
 
@@ -493,7 +494,8 @@ def _ray_planes(ox, oy, oz, dx, dy, dz, lo):
     near_y, far_y = _origins32(oy, dy, shift, niy)
     near_z, far_z = _origins32(oz, dz, shift, niz)
     ray = (near_x, near_y, near_z, far_x, far_y, far_z, nix, niy, niz, fix, fiy, fiz)
-    return planes, ray, shift, not (x_ok and y_ok and z_ok)
+    lo32, hi32 = _float32_down(lo - shift), _hi32(hi, shift)
+    return planes, ray, lo32, hi32, shift, not (x_ok and y_ok and z_ok)
 
 
 @njit(cache=True, inline="always")
@@ -605,7 +607,7 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     it). The stack indices are unsigned, so numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
-    planes, slab_ray, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo)
+    planes, slab_ray, lo32, hi32, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
     if wild:
@@ -614,8 +616,6 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     best_prim = NO_HIT
     best_u = 0.0
     best_v = 0.0
-    lo32 = _float32_down(lo - shift)
-    hi32 = _hi32(hi, shift)
     best_s = hi - shift   # best_t on the slab's scale: a pushed entry t is compared with it
     visits = 0
     tests = 0
@@ -677,14 +677,12 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     the nearest first measured slower for shadow rays), and the first primitive hit ends it."""
     nodes, payloads = record.nodes, record.payloads
     stack = scratch[0]
-    planes, slab_ray, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo)
+    planes, slab_ray, lo32, hi32, _, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
     if wild:   # a direction float32 cannot invert: every primitive
         return (_blocks_any(record, 0, record.blocks.shape[0], shear, ray, lo, hi)
                 or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
-    lo32 = _float32_down(lo - shift)
-    hi32 = _hi32(hi, shift)
     top = 0
     payload = 0
     while nodes.shape[0] > 0:

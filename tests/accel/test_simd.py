@@ -10,7 +10,7 @@ from fractions import Fraction
 import numpy as np
 from numba import njit
 
-from accel.bvh import WIDTH, _float32_down, _float32_up, _hi32, _ray_planes, slab_test
+from accel.bvh import WIDTH, _float32_down, _float32_up, _ray_planes, slab_test
 from accel.kernels import (
     moller_trumbore,
     shear_setup,
@@ -107,10 +107,9 @@ def _slab_vector(nodes, origins, directions, lo, hi, out):
     """slab_test's (mask bit, entry t) per ray, row and child, as the traversal calls it (the
     entry on the ray's own scale: plus the shift of a negative lo, rounded down)."""
     for r in range(origins.shape[0]):
-        planes, ray, shift, _ = _ray_planes(origins[r, 0], origins[r, 1], origins[r, 2],
-                                            directions[r, 0], directions[r, 1], directions[r, 2],
-                                            lo)
-        lo32, hi32 = _float32_down(lo - shift), _hi32(hi, shift)
+        planes, ray, lo32, hi32, shift, _ = _ray_planes(
+            origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0], directions[r, 1],
+            directions[r, 2], lo, hi)
         for row in range(nodes.shape[0]):
             mask, entries = slab_test(nodes, row, planes, ray, lo32, hi32)
             for c in range(WIDTH):
