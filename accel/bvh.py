@@ -17,10 +17,11 @@ Layout of that binary tree (structure of arrays): lower[n], upper[n] boxes; chil
 the left child index (the right child is the next node) for an interior node, or the first entry
 in `order` for a leaf; count[n] is 0 for an interior node and the number of primitives for a leaf.
 
-Traversal does not walk the binary tree: `_collapse` folds it into an 8-wide tree (each wide node
-takes its binary node's two children, then keeps opening the interior child of largest surface
-area until it has eight), so a ray visits fewer nodes and the slab test of a node's children is
-one vector operation (accel.simd: one AVX2 instruction per step, in float32). A wide node is
+Traversal does not walk the binary tree: `_collapse` folds it into an 8-wide tree, so a ray
+visits fewer nodes and the slab test of a node's children is one vector operation (accel.simd:
+one AVX2 instruction per step, in float32). Which binary nodes become wide nodes is chosen for
+the least sum of wide-node surface areas (the expected nodes a ray visits; _slot_costs, after
+Ylitie, Karras and Laine 2017), leaves as built. A wide node is
 one 256-byte row (_node_rows): its children's six box planes as float32, rounded outward so a
 box never shrinks, and an int64 payload per child: a row for an interior child, or a leaf's
 first triangle block and its triangle and sphere counts. The slab test computes in float32, from
@@ -259,45 +260,94 @@ def _aligned_empty(rows, columns, dtype=np.float64):
 
 
 @njit(cache=True)
+def _slot_costs(lower, upper, child_or_first, count):
+    """The collapse's choices (Ylitie, Karras and Laine, "Efficient incoherent ray traversal on
+    GPUs through compressed wide BVHs", HPG 2017, without their leaf packing: the leaves stay
+    the build's). The cost of a wide tree is the sum of the half areas of its nodes: a ray that
+    meets the root's box meets a box with the probability of its area over the root's (for rays
+    uniform in direction and position), so the sum is the expected wide nodes visited per ray,
+    over the root's half area. Bottom up, for every binary node b and i = 1.. WIDTH slots of
+    the wide node that holds it: cost[b, i], the least cost of b's subtree laid out in at most i
+    slots. A leaf takes one slot and costs nothing; an interior node takes one slot as a wide
+    node of its own (its half area, plus its two children's subtrees laid out in WIDTH slots
+    between them) or, with i >= 2, is opened: its two children's subtrees laid out in i slots
+    between them. Returns (cost, choice, split): choice[b, i] is -1 where b takes one slot, 0
+    where b does as well in i - 1 slots, j > 0 where b is opened with j slots for its left child
+    and i - j for its right; split[b] is the left child's share of a wide node of b's own."""
+    n = lower.shape[0]
+    cost = np.zeros((n, WIDTH + 1))
+    choice = np.full((n, WIDTH + 1), -1, dtype=np.int8)
+    split = np.zeros(n, dtype=np.int8)
+    for b in range(n - 1, -1, -1):   # a node's children come after it
+        if count[b] > 0:
+            continue
+        left = child_or_first[b]
+        right = left + 1
+        best, best_j = np.inf, 1
+        for j in range(1, WIDTH):
+            value = cost[left, j] + cost[right, WIDTH - j]
+            if value < best:
+                best, best_j = value, j
+        cost[b, 1] = _half_area(lower[b, 0], lower[b, 1], lower[b, 2], upper[b, 0],
+                                upper[b, 1], upper[b, 2]) + best
+        split[b] = best_j
+        for i in range(2, WIDTH + 1):
+            value, how = cost[b, i - 1], 0
+            for j in range(1, i):
+                opened = cost[left, j] + cost[right, i - j]
+                if opened < value:
+                    value, how = opened, j
+            cost[b, i], choice[b, i] = value, how
+    return cost, choice, split
+
+
+@njit(cache=True)
 def _collapse(lower, upper, child_or_first, count, wide):
     """Fold the binary tree into WIDTH-wide float64 rows of `wide`; row 0 is the root. A row holds
     the six planes lower x, y, z, upper x, y, z of its WIDTH children, then each child's link (a
     wide row for an interior child, its first `order` entry for a leaf), then its count (0 for
-    an interior child); an unused slot has an empty box (lower +inf, upper -inf). _node_rows and
-    _fill_rows turn these rows into the traversal's. Returns the number of rows used (at most
-    the binary tree's node count)."""
+    an interior child); an unused slot has an empty box (lower +inf, upper -inf). Which binary
+    nodes become wide nodes is _slot_costs' least-cost choice; a row's children are in the
+    binary tree's left-to-right order. _node_rows and _fill_rows turn these rows into the
+    traversal's. Returns the number of rows used (at most the binary tree's node count)."""
     n = lower.shape[0]
     if n == 0:
         return 0
+    cost, choice, split = _slot_costs(lower, upper, child_or_first, count)
     todo_binary = np.empty(n, dtype=np.int64)   # binary node to become wide row todo_wide
     todo_wide = np.empty(n, dtype=np.int64)
     todo_binary[0], todo_wide[0] = 0, 0
     top = 1
     used = 1
     kids = np.empty(WIDTH, dtype=np.int64)
+    place_node = np.empty(WIDTH + 1, dtype=np.int64)   # subtrees still to lay out, and in
+    place_slots = np.empty(WIDTH + 1, dtype=np.int64)  # how many slots (a stack, left on top)
     while top > 0:
         top -= 1
         b, w = todo_binary[top], todo_wide[top]
+        m = 0
         if count[b] > 0:   # a leaf root: one child
             kids[0] = b
             m = 1
         else:
-            kids[0], kids[1] = child_or_first[b], child_or_first[b] + 1
-            m = 2
-        while m < WIDTH:   # open the interior child of largest area
-            best, best_area = -1, -1.0
-            for j in range(m):
-                if count[kids[j]] == 0:
-                    c = kids[j]
-                    area = _half_area(lower[c, 0], lower[c, 1], lower[c, 2], upper[c, 0],
-                                      upper[c, 1], upper[c, 2])
-                    if area > best_area:
-                        best, best_area = j, area
-            if best < 0:
-                break
-            c = kids[best]
-            kids[best], kids[m] = child_or_first[c], child_or_first[c] + 1
-            m += 1
+            left = child_or_first[b]
+            place_node[0], place_slots[0] = left + 1, WIDTH - split[b]
+            place_node[1], place_slots[1] = left, split[b]
+            k = 2
+            while k > 0:
+                k -= 1
+                c, i = place_node[k], place_slots[k]
+                while choice[c, i] == 0:
+                    i -= 1
+                j = choice[c, i]
+                if j < 0:   # c takes one slot
+                    kids[m] = c
+                    m += 1
+                else:       # c is opened: its left child's subtree first
+                    left = child_or_first[c]
+                    place_node[k], place_slots[k] = left + 1, i - j
+                    place_node[k + 1], place_slots[k + 1] = left, j
+                    k += 2
         for k in range(WIDTH):
             if k >= m:
                 for a in range(3):

@@ -77,6 +77,10 @@ MUTANTS = {
         [(BVH, "if mask != 0 and mask & (mask - 1) == 0:   # one child hit",
           "if mask != 0:   # one child hit")],
         ["tests/accel/test_bvh.py"]),
+    "collapse-not-least-cost": (
+        "the BVH's collapse opens a node into its children where keeping it costs less",
+        [(BVH, "if opened < value:", "if opened > value:")],
+        ["tests/accel/test_bvh.py", "-k", "least_cost"]),
     "block-swapped-barycentrics": (
         "the BVH's four-lane watertight test returns (v, u) for (u, v)",
         [(SIMD, "b.fmul(e1, inv), b.fmul(e2, inv),", "b.fmul(e2, inv), b.fmul(e1, inv),")],
