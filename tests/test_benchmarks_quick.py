@@ -249,3 +249,21 @@ def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypat
     assert "| CBbunny | 0.0125 | 0.0063 |" in text
     assert (tmp_path / "error_vs_time_CBbunny.png").exists()
     assert json.loads((tmp_path / "evt.json").read_text()) == data
+
+
+def test_repeated_rays_quick(tmp_path):
+    """benchmarks.repeated_rays in its smallest mode: a row per ray kind and repeat count, each
+    a positive time per trace for every backend and a rate ratio that is their quotient."""
+    from benchmarks import repeated_rays
+    output = tmp_path / "repeated_rays.md"
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert repeated_rays.main(["--quick", "--output", str(output)]) == 0
+    rows = [line.strip("|").split("|") for line in output.read_text().splitlines()
+            if line.startswith("| meshedit/cow.dae")]
+    assert [(r[1].strip(), int(r[2])) for r in rows] == [
+        (kind, times) for kind in repeated_rays.KINDS for times in repeated_rays.TIMES]
+    for row in rows:
+        mean, sah, embree, mean_ratio, sah_ratio = (float(c) for c in row[3:8])
+        assert min(mean, sah, embree) > 0
+        assert mean_ratio == pytest.approx(embree / mean, abs=0.006)
+        assert sah_ratio == pytest.approx(embree / sah, abs=0.006)
