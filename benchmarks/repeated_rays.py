@@ -15,7 +15,6 @@ kept. Writes benchmarks/results/repeated_rays.md (or --output, relative to it); 
 small mesh, a small batch, one repeat, into a new temporary directory unless --output is given.
 """
 import argparse
-import os
 import statistics
 import tempfile
 import time
