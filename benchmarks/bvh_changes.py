@@ -27,8 +27,8 @@ kernels are compiled, and each batch traced once, before timing. Rates are media
 repeats. Then the same revisions render course scenes (RENDERS), in turns as well, and the
 report says whether their images are bit for bit the same (bvh's answers are naive's exactly at
 every revision, so they must be). Compile times are not measured here (accel_rays does). Run
-time: about 25 minutes for the defaults, a few of them compiling four revisions' kernels into
-empty caches.
+time: about 25 minutes for the defaults with one process per revision, 36 with --processes 3
+(seven revisions), a few of them compiling the revisions' kernels into empty caches.
 """
 import argparse
 import json
@@ -50,7 +50,8 @@ REVISIONS = [
     ("6e6ee83", "+ float32 planes"),
     ("bd6c4cc", "+ unsigned indices"),
     ("b55d6cb", "+ one-hit shortcut"),
-    (None, "+ float32 slab (this tree)"),
+    ("78772cd", "+ float32 slab"),
+    (None, "+ least-cost collapse (this tree)"),
 ]
 MESHES = ["meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae", "meshedit/maxplanck.dae"]
 KINDS = ("random", "camera", "secondary", "shadow")
