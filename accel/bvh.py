@@ -313,7 +313,7 @@ def _collapse(lower, upper, child_or_first, count, wide):
     n = lower.shape[0]
     if n == 0:
         return 0
-    cost, choice, split = _slot_costs(lower, upper, child_or_first, count)
+    choice, split = _slot_costs(lower, upper, child_or_first, count)[1:]
     todo_binary = np.empty(n, dtype=np.int64)   # binary node to become wide row todo_wide
     todo_wide = np.empty(n, dtype=np.int64)
     todo_binary[0], todo_wide[0] = 0, 0
