@@ -12,9 +12,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit, prange
 
-from .errors import PtraceError, SceneError
+from .errors import PtraceError, SceneError, require_regular_file
 
 BASE_WIDTH, BASE_HEIGHT = 800, 600
+# how far a camera's axes may be from unit length and right angles (a file's rounding; the
+# course writes six digits)
+ROTATION_TOLERANCE = 1e-3
 FOCAL_DISTANCE = 4.7   # the course's default -d (its -b defaults to 0.25 in 3-2; ours to 0)
 
 
@@ -41,6 +44,19 @@ class Camera:
         if not distance > 0.0 or not np.isfinite(distance):
             raise PtraceError(f"the focal distance (-d) must be a finite number > 0, got "
                               f"{self.focal_distance!r}")
+        rotation = np.asarray(self.camera_to_world, dtype=np.float64)
+        if rotation.shape != (3, 3) or not np.isfinite(rotation).all() or not np.allclose(
+                rotation.T @ rotation, np.eye(3), atol=ROTATION_TOLERANCE) \
+                or not np.linalg.det(rotation) > 0:
+            raise PtraceError("the camera's rotation (camera-to-world) must be a rotation: "
+                              "three unit axes at right angles, right-handed (a degenerate one "
+                              "gives no rays)")
+        for name in ("position", "target"):
+            if not np.isfinite(np.asarray(getattr(self, name), dtype=np.float64)).all():
+                raise PtraceError(f"the camera's {name} must be finite")
+        if not 0 < float(self.screen_dist) < np.inf:
+            raise PtraceError(f"the camera's screen distance must be a finite number > 0, got "
+                              f"{self.screen_dist!r}")
         object.__setattr__(self, "lens_radius", radius)
         object.__setattr__(self, "focal_distance", distance)
 
@@ -146,6 +162,7 @@ def course_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT):
 
 def load_camera_settings(path, width, height):
     """Read the course's camera settings file (the `D` key's dump, docs/course.md#camera-file)."""
+    require_regular_file(path, "camera settings file")
     try:
         with open(path) as handle:
             numbers = np.array(handle.read().split(), dtype=np.float64)

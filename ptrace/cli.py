@@ -27,7 +27,8 @@ class _UsageError(Exception):
     pass
 
 
-def _int_at_least(name, minimum):
+def _int_at_least(name, minimum, maximum=None):
+    """A parser of integers in [minimum, maximum] (no maximum: any size) for a flag `name`."""
     def parse(text):
         try:
             value = int(text)
@@ -37,8 +38,23 @@ def _int_at_least(name, minimum):
             bound = "at least 1" if minimum == 1 else f"at least {minimum}" if minimum else \
                 "not negative"
             raise argparse.ArgumentTypeError(f"{name} must be {bound}, got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer from {minimum} to "
+                                             f"{maximum}, got {value}")
         return value
     return parse
+
+
+def _int_range(name, setting):
+    """A parser of the integer setting `setting` in its ptrace.settings.RANGES range."""
+    from .settings import RANGES
+    return _int_at_least(name, *RANGES[setting])
+
+
+def _range_text(setting):
+    from .settings import RANGES
+    low, high = RANGES[setting]
+    return f"{low} to {high:,}".replace(",", "_") if high > 10 ** 6 else f"{low} to {high}"
 
 
 def _positive_int(name):
@@ -64,6 +80,7 @@ def _positive_float(name):
 def build_parser():
     import accel
 
+    from .renderer import MAX_SIDE, PIXEL_BYTES
     from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
@@ -72,12 +89,13 @@ def build_parser():
     add("-t", "--threads", type=_positive_int("threads"), default=None,
         help="render threads (default: all cores; with --workers or --scheduler, threads per "
              "task on each worker, default its share of its machine's cores)")
-    add("-s", "--spp", type=_positive_int("samples per pixel"), default=1,
-        help="camera rays per pixel (default 1)")
-    add("-l", "--light-samples", type=_positive_int("light samples"), default=1,
-        help="samples per area light per shading point (default 1)")
-    add("-m", "--max-depth", type=_nonnegative_int("max depth"), default=1,
-        help="maximum ray depth (default 1)")
+    add("-s", "--spp", type=_int_range("samples per pixel (-s)", "spp"), default=1,
+        help=f"camera rays per pixel, {_range_text('spp')} (default 1)")
+    add("-l", "--light-samples", type=_int_range("light samples (-l)", "light_samples"),
+        default=1, help=f"samples per area light per shading point, "
+                        f"{_range_text('light_samples')} (default 1)")
+    add("-m", "--max-depth", type=_int_range("max depth (-m)", "max_depth"), default=1,
+        help=f"maximum ray depth, {_range_text('max_depth')} (default 1)")
     add("-a", "--adaptive", nargs=2, metavar=("BATCH", "TOL"), default=None,
         help="adaptive sampling: samples per batch and tolerance")
     add("-H", "--hemisphere", action="store_true",
@@ -88,8 +106,11 @@ def build_parser():
     add("--sampler", choices=SAMPLERS, default="sobol",
         help="random numbers: sobol (Owen-scrambled Sobol', stratified; default) or "
              "independent (uniform, like the course)")
-    add("-r", "--resolution", nargs=2, type=_positive_int("resolution"), metavar=("W", "H"),
-        default=(800, 600), help="image size; keeps the focal length, so it crops (default 800 600)")
+    add("-r", "--resolution", nargs=2, type=_int_at_least("resolution (-r)", 1, MAX_SIDE),
+        metavar=("W", "H"), default=(800, 600),
+        help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
+             f"{PIXEL_BYTES} bytes a pixel) within half the machine's memory; keeps the focal "
+             f"length, so it crops (default 800 600)")
     add("-f", "--output", default=None, metavar="FILE",
         help="output image, .png (the course's 8-bit curve) or .exr (linear float); "
              "default SCENE_NAME.png in the current directory")
@@ -110,7 +131,8 @@ def build_parser():
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
         help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
              "(binned surface area heuristic)")
-    add("--seed", type=_nonnegative_int("seed"), default=0, help="random seed (default 0)")
+    add("--seed", type=_int_range("seed (--seed)", "seed"), default=0,
+        help=f"random seed, {_range_text('seed')} (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",
         help="path (light transport) or normals (the course's normal shading)")
     add("--aov", default=None, metavar="LIST",
@@ -214,11 +236,13 @@ def run(argv):
     from .camera import course_camera, load_camera_settings
     from .errors import PtraceError
     from .features import denoise, denoised_path, require_denoiser
-    from .image import FORMATS, rate_colours, rate_path, write_image
+    from .image import FORMATS, check_output_path, rate_colours, rate_path, write_images
+    from .renderer import check_frame
+    from .settings import Settings
     args = build_parser().parse_args(argv)
     _one_line_warnings()
     if args.adaptive is not None:
-        batch = _positive_int("adaptive batch")(args.adaptive[0])
+        batch = _int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
         tolerance = _positive_float("adaptive tolerance")(args.adaptive[1])
         args.adaptive = (batch, tolerance)
     output = args.output
@@ -239,9 +263,14 @@ def run(argv):
     if args.denoise:
         require_denoiser()
     aovs = {} if (aov_names or args.denoise) else None
-    out_dir = os.path.dirname(os.path.abspath(output))
-    if not args.info and not (os.path.isdir(out_dir) and os.access(out_dir, os.W_OK)):
-        raise PtraceError(f"{output}: cannot write to directory {out_dir}")
+    if not args.info:   # every file this run writes, checked before anything is rendered
+        for path in [output, rate_path(output)] + ([denoised_path(output)] if args.denoise
+                                                   else []):
+            check_output_path(path)
+        # the numbers, before the scene is read (Settings and the frame check again in render)
+        Settings(spp=args.spp, light_samples=args.light_samples, max_depth=args.max_depth,
+                 seed=args.seed, adaptive=args.adaptive)
+        check_frame(*args.resolution, args.crop, features=aovs is not None)
     scene = load(args.scene)
     if args.environment is not None:
         from .environment import load_environment
@@ -282,12 +311,14 @@ def run(argv):
                            hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
                            bvh_split=args.bvh_split, notice=None if args.quiet else _notice,
                            aovs=aovs)
-            write_image(output, image, extra=[(name, aovs[name]) for name in aov_names])
-            write_image(rate_path(output), None,
-                        eight_bit=rate_colours(stats["samples"] / args.spp))
+            images = [dict(path=output, radiance=image,
+                           extra=[(name, aovs[name]) for name in aov_names]),
+                      dict(path=rate_path(output),
+                           eight_bit=rate_colours(stats["samples"] / args.spp))]
             if args.denoise:
-                write_image(denoised_path(output),
-                            denoise(image, aovs["albedo"], aovs["normal"]))
+                images.append(dict(path=denoised_path(output),
+                                   radiance=denoise(image, aovs["albedo"], aovs["normal"])))
+            write_images(images)   # all of them or none
         finally:
             if client is not None:
                 distributed.shutdown(client, cluster)

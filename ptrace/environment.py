@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .errors import PtraceError
+from .errors import PtraceError, require_regular_file
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 FLOOR = 1e-3          # of the table's mean: the density's lower bound (see the docstring)
@@ -62,6 +62,7 @@ def load_environment(spec):
         values = None
     if values is not None and len(values) in (1, 3):
         return Environment.constant(values * 3 if len(values) == 1 else values)
+    require_regular_file(text, "environment map")
     import OpenImageIO as oiio
     buffer = oiio.ImageBuf(text)
     if buffer.has_error:

@@ -4,6 +4,8 @@ Anything else that escapes is a bug in ptrace (an internal error): the CLI print
 `ptrace: internal error: ...` with the traceback and exits 1, and a Dask tile task re-raises
 it chained to its cause (ptrace.distributed.TileTaskError), never as a PtraceError.
 """
+import os
+import stat
 
 
 class PtraceError(Exception):
@@ -20,3 +22,18 @@ class SceneError(PtraceError):
 
     def __reduce__(self):   # picklable (a Dask worker sends it back whole)
         return type(self), (self.path, self.message)
+
+
+def require_regular_file(path, what):
+    """Refuse, before anything opens it, a path that exists but is not a regular file: a FIFO
+    or /dev/stdin would block the reader for ever, a directory or a device is never a scene,
+    environment or camera file. A missing path is left to the reader (its own message)."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return
+    if not stat.S_ISREG(mode):
+        kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)"
+                if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or
+                stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a file")
+        raise PtraceError(f"{path}: the {what} must be a regular file, but this is {kind}")

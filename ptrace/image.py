@@ -1,6 +1,7 @@
 """Image output through OpenImageIO: the course's 8-bit PNG curve, or linear float EXR.
 
-Files are written whole or not at all: into a temporary file beside the target, then renamed.
+Files are written whole or not at all: into a temporary file beside the target, checked (the
+writer's error state, fsync, the file read back), then renamed.
 """
 import os
 import tempfile
@@ -35,20 +36,40 @@ def rate_path(path):
     return root + "_rate.png"
 
 
-def write_image(path, radiance, eight_bit=None, extra=()):
-    """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float).
-
-    eight_bit, if given, is written as it is instead (for the rate image). extra, for an .exr:
-    (name, (H, W) or (H, W, 3) array) pairs written as more channels after R, G, B, named by
-    ptrace.features.AOV_CHANNELS (albedo.R, normal.X, depth.Z, ...)."""
-    import OpenImageIO as oiio
+def check_output_path(path):
+    """Refuse, before anything is rendered, an output path that cannot be written: a wrong
+    extension, a missing or unwritable folder (tried by creating and removing a file there, so
+    a read-only filesystem counts too), or a directory or other non-file at the path."""
     path = os.fspath(path)
     extension = os.path.splitext(path)[1].lower()
     if extension not in FORMATS:
         raise PtraceError(f"{path}: output must end in {' or '.join(FORMATS)}")
     directory = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(directory):
-        raise PtraceError(f"{path}: output directory {directory} does not exist")
+        raise PtraceError(f"cannot write {path}: the folder {directory} does not exist")
+    if os.path.isdir(path):
+        raise PtraceError(f"cannot write {path}: it is a directory")
+    if os.path.lexists(path) and not os.path.islink(path) and not os.path.isfile(path):
+        raise PtraceError(f"cannot write {path}: it exists and is not a regular file")
+    try:
+        handle, probe = tempfile.mkstemp(prefix=".ptrace-probe-", dir=directory)
+        os.close(handle)
+        os.remove(probe)
+    except OSError as error:
+        raise PtraceError(f"cannot write {path}: cannot create a file in {directory} "
+                          f"({_reason(error)})") from None
+    return extension
+
+
+def _reason(error):
+    """An OSError in the words a user reads: 'no space left on device', 'permission denied'."""
+    text = error.strerror or str(error) or type(error).__name__
+    return text[:1].lower() + text[1:]
+
+
+def _pixels(path, extension, radiance, eight_bit, extra):
+    """(pixels (H, W, C), OpenImageIO type, channel names) of what write_image writes."""
+    import OpenImageIO as oiio
     if eight_bit is not None:
         pixels, pixel_type = np.ascontiguousarray(eight_bit, dtype=np.uint8), oiio.UINT8
     elif extension == ".png":
@@ -66,30 +87,126 @@ def write_image(path, radiance, eight_bit=None, extra=()):
             layers.append(array.reshape(array.shape[:2] + (-1,)))
             names += AOV_CHANNELS[name]
         pixels = np.ascontiguousarray(np.concatenate(layers, axis=2))
+    return pixels, pixel_type, names
+
+
+class _WriteFailed(Exception):
+    """A write that did not produce a whole file (the reason in words)."""
+
+
+def _write_temporary(temporary, pixels, pixel_type, names):
+    """Write pixels into `temporary` and prove that they are there: OpenImageIO's error state
+    after every call (on a full disk its write and close can return success while it records
+    the short write), fsync (a filesystem may report a lost write only then), and the file read
+    back whole with the same size and channels."""
+    import OpenImageIO as oiio
     height, width, channels = pixels.shape
+    output = oiio.ImageOutput.create(temporary)
+    if output is None:
+        raise _WriteFailed(oiio.geterror() or "no image writer for this format")
+    spec = oiio.ImageSpec(width, height, channels, pixel_type)
+    if channels == len(names):
+        spec.channelnames = tuple(names)
+    opened = False
     try:
-        handle, temporary = tempfile.mkstemp(prefix=".ptrace-", suffix=extension, dir=directory)
-        os.close(handle)
-    except OSError as error:
-        raise PtraceError(f"{path}: cannot write to {directory} ({error.strerror})") from None
-    try:
-        output = oiio.ImageOutput.create(temporary)
-        spec = oiio.ImageSpec(width, height, channels, pixel_type)
-        if channels == len(names):
-            spec.channelnames = tuple(names)
-        if output is None or not output.open(temporary, spec):
-            message = oiio.geterror() if output is None else output.geterror()
-            raise PtraceError(f"{path}: cannot write image ({message})")
-        ok = output.write_image(pixels)
-        output.close()
-        if not ok:
-            raise PtraceError(f"{path}: cannot write image ({output.geterror()})")
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
+        opened = bool(output.open(temporary, spec))
+        if not opened:
+            raise _WriteFailed(output.geterror() or "cannot open the file")
+        if not output.write_image(pixels) or output.has_error:
+            raise _WriteFailed(output.geterror() or "the pixels were not written")
     finally:
-        if os.path.exists(temporary):
-            os.remove(temporary)
-    return path
+        if opened:
+            closed = output.close()
+    if not closed or output.has_error:
+        raise _WriteFailed(output.geterror() or "the file could not be closed")
+    with open(temporary, "rb") as handle:
+        os.fsync(handle.fileno())
+        size = os.fstat(handle.fileno()).st_size
+    if size <= 0:
+        raise _WriteFailed("the file is empty after writing")
+    check = oiio.ImageBuf(temporary)
+    back = None if check.has_error else check.get_pixels(pixel_type)
+    if back is None or back.shape != pixels.shape:
+        raise _WriteFailed("the file does not read back whole")
+
+
+def _failure(path, directory, error):
+    """One line for a failed write; a full filesystem is named as such whatever the writer said."""
+    if isinstance(error, OSError):
+        reason = _reason(error)
+    else:
+        reason = (str(error).strip().splitlines() or ["unknown error"])[0]
+    try:
+        stat = os.statvfs(directory)
+        if stat.f_bavail * stat.f_frsize < 64 * 1024:
+            reason = "no space left on device"
+    except OSError:
+        pass
+    return PtraceError(f"cannot write {path}: {reason}")
+
+
+def write_images(images):
+    """Write several images, each a dict of write_image's keywords (path, radiance, eight_bit,
+    extra), whole or not at all: all are written to temporary files beside their targets and
+    checked, and only then renamed over them, so a failure leaves every old file byte-identical
+    and no temporary file behind (whatever the way out, Ctrl-C included)."""
+    staged = []   # (temporary, path)
+    try:
+        for image in images:
+            path = os.fspath(image["path"])
+            extension = check_output_path(path)
+            pixels, pixel_type, names = _pixels(path, extension, image.get("radiance"),
+                                                image.get("eight_bit"), image.get("extra", ()))
+            directory = os.path.dirname(os.path.abspath(path))
+            try:
+                handle, temporary = tempfile.mkstemp(prefix=".ptrace-", suffix=extension,
+                                                     dir=directory)
+                os.close(handle)
+            except OSError as error:
+                raise _failure(path, directory, error) from None
+            staged.append((temporary, path))
+            try:
+                _write_temporary(temporary, pixels, pixel_type, names)
+                os.chmod(temporary, 0o644)
+            except (OSError, _WriteFailed) as error:
+                raise _failure(path, directory, error) from None
+        for temporary, path in staged:
+            try:
+                os.replace(temporary, path)
+            except OSError as error:
+                raise _failure(path, os.path.dirname(os.path.abspath(path)), error) from None
+            _sync_directory(os.path.dirname(os.path.abspath(path)))
+    finally:
+        for temporary, _ in staged:
+            if os.path.exists(temporary):
+                os.remove(temporary)
+    return [path for _, path in staged]
+
+
+def _sync_directory(directory):
+    """fsync a folder after a rename into it, so the new name survives a crash (best effort:
+    not every filesystem lets a folder be opened for it)."""
+    try:
+        handle = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(handle)
+    except OSError:
+        pass
+    finally:
+        os.close(handle)
+
+
+def write_image(path, radiance, eight_bit=None, extra=()):
+    """Write (H, W, 3) linear radiance, top row first, as .png (course curve) or .exr (float),
+    whole or not at all (write_images).
+
+    eight_bit, if given, is written as it is instead (for the rate image). extra, for an .exr:
+    (name, (H, W) or (H, W, 3) array) pairs written as more channels after R, G, B, named by
+    ptrace.features.AOV_CHANNELS (albedo.R, normal.X, depth.Z, ...)."""
+    write_images([dict(path=path, radiance=radiance, eight_bit=eight_bit, extra=extra)])
+    return os.fspath(path)
 
 
 def read_image(path):

@@ -6,6 +6,7 @@ cluster (ptrace.distributed). Random numbers are keyed by (seed, pixel, sample, 
 pass sizes depend only on -s and -a, so an image does not depend on threads, chunks, tiles or
 backend.
 """
+import os
 import sys
 import warnings
 
@@ -20,15 +21,52 @@ from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
 
+MAX_SIDE = 1 << 20   # pixels per side of the image (-r), a crop's window included
+# bytes held per rendered pixel: the pixel coordinates, the sums (rgb, l, l2, count), the image in
+# float64 and float32, the sample counts and the output file's pixels (the feature buffers add
+# FEATURE_BYTES); a render whose buffers pass MEMORY_FRACTION of the machine's memory is refused
+# rather than left to fail (or swap) part-way
+PIXEL_BYTES, FEATURE_BYTES, MEMORY_FRACTION = 160, 128, 0.5
 
-def _check_frame(width, height, crop):
-    if width < 1 or height < 1:
-        raise PtraceError(f"resolution must be at least 1x1, got {width}x{height}")
+
+def machine_memory():
+    """Bytes of memory this process may use: the machine's physical memory, or a smaller cgroup
+    limit (a container's)."""
+    total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    try:
+        with open("/sys/fs/cgroup/memory.max") as handle:
+            limit = handle.read().strip()
+        if limit.isdigit():
+            total = min(total, int(limit))
+    except OSError:
+        pass
+    return total
+
+
+def check_frame(width, height, crop=None, features=False):
+    """Refuse an image size or crop the render cannot make: each side from 1 to MAX_SIDE, the
+    crop inside the image, and the per-pixel buffers of the rendered cell within MEMORY_FRACTION
+    of the machine's memory (the message says how much they would need)."""
+    for value in (width, height):
+        if not (isinstance(value, (int, np.integer)) and 1 <= value <= MAX_SIDE):
+            raise PtraceError(f"resolution (-r) must be from 1 to {MAX_SIDE} pixels per side, "
+                              f"got {width}x{height}")
     if crop is not None:
         x, y, dx, dy = crop
         if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > width or y + dy > height:
             raise PtraceError(f"crop cell x={x} y={y} dx={dx} dy={dy} is not inside the "
                               f"{width}x{height} image")
+    pixels = int(crop[2]) * int(crop[3]) if crop is not None else int(width) * int(height)
+    need = pixels * (PIXEL_BYTES + (FEATURE_BYTES if features else 0))
+    memory = machine_memory()
+    if need > MEMORY_FRACTION * memory:
+        raise PtraceError(f"a {pixels}-pixel render: the image buffers would need "
+                          f"{need / 2 ** 30:.1f} GiB, more than {MEMORY_FRACTION:.0%} of this "
+                          f"machine's {memory / 2 ** 30:.1f} GiB; render a smaller -r or a crop "
+                          f"(-p)")
+
+
+_check_frame = check_frame   # the name ptrace.view imports
 
 
 def scene_warnings(scene, settings):
@@ -74,8 +112,9 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     try:
         settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
                                          **options)
-        width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else map(int, resolution)
-        _check_frame(width, height, crop)
+        width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else resolution
+        check_frame(width, height, crop, features=aovs is not None)
+        width, height = int(width), int(height)
         previous_threads = numba.get_num_threads()
         worker_threads = None
         if client is not None:   # threads applies on the workers, not here

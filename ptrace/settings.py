@@ -16,9 +16,31 @@ DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere
 SAMPLERS = ("sobol", "independent")   # --sampler
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
+# The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
+# take them as int64; within these ranges every sample has its own random numbers: the Sobol
+# sampler's point index (sample * light samples + j) is 32 bits, and a vertex's light dimensions
+# (2 per light sample) stay below the emitter-selection ones (2**23). A value outside is refused
+# rather than passed on (a uint64 beyond int64 would compile a new kernel and render black).
+RANGES = {
+    "seed": (0, 2 ** 63 - 1),
+    "spp": (1, 2 ** 32),
+    "light_samples": (1, 2 ** 16),
+    "max_depth": (0, 10_000),
+    "rr_depth": (1, 10_000),
+}
+NAMES = {"seed": "seed (--seed)", "spp": "samples per pixel (-s)",
+         "light_samples": "light samples (-l)", "max_depth": "max depth (-m)",
+         "rr_depth": "the roulette depth"}
+
 
 def _is_int(value):
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def check_integer(name, value, low, high):
+    """Refuse anything but an integer in [low, high], naming the setting and its range."""
+    if not (_is_int(value) and low <= value <= high):
+        raise PtraceError(f"{name} must be an integer from {low} to {high}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -54,23 +76,18 @@ class Settings:
     bvh_split: str = "mean"
 
     def __post_init__(self):
-        if not (_is_int(self.spp) and self.spp >= 1):
-            raise PtraceError(f"samples per pixel must be a positive integer, got {self.spp!r}")
+        for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
+            check_integer(NAMES[name], getattr(self, name), *RANGES[name])
+        if self.spp * self.light_samples > RANGES["spp"][1]:
+            raise PtraceError(f"samples per pixel (-s) times light samples (-l) must be at most "
+                              f"{RANGES['spp'][1]} (the sampler's 32-bit point index), got "
+                              f"{self.spp} x {self.light_samples}")
         if self.accel not in accel.KINDS:
             raise PtraceError(f"unknown accelerator {self.accel!r}; choose one of "
                               f"{', '.join(accel.KINDS)}")
         if self.integrator not in INTEGRATORS:
             raise PtraceError(f"unknown integrator {self.integrator!r}; choose one of "
                               f"{', '.join(INTEGRATORS)}")
-        if not (_is_int(self.seed) and self.seed >= 0):
-            raise PtraceError(f"seed must be a non-negative integer, got {self.seed!r}")
-        if not (_is_int(self.light_samples) and self.light_samples >= 1):
-            raise PtraceError("light samples must be at least 1")
-        if not (_is_int(self.max_depth) and self.max_depth >= 0):
-            raise PtraceError("max depth must not be negative")
-        if not (_is_int(self.rr_depth) and self.rr_depth >= 1):
-            raise PtraceError(f"the roulette depth must be a positive integer, got "
-                              f"{self.rr_depth!r}")
         if self.direct not in DIRECT:
             raise PtraceError(f"unknown direct-light estimator {self.direct!r}; choose one of "
                               f"{', '.join(DIRECT)}")
@@ -83,7 +100,8 @@ class Settings:
         if self.bvh_split != "mean" and self.accel != "bvh":
             raise PtraceError(f"a BVH split applies only to the bvh accelerator, not "
                               f"{self.accel}")
-        if not 0.0 < self.rr_cap <= 1.0:
+        if not (isinstance(self.rr_cap, (int, float, np.floating, np.integer))
+                and 0.0 < self.rr_cap <= 1.0):
             raise PtraceError(f"the roulette cap must be in (0, 1], got {self.rr_cap!r}")
         set_ = object.__setattr__
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
@@ -97,9 +115,15 @@ class Settings:
             except (TypeError, ValueError):
                 raise PtraceError(f"adaptive must be (batch, tolerance), got {self.adaptive!r}") \
                     from None
-            if not (_is_int(batch) and batch >= 1) or not tolerance > 0:
-                raise PtraceError(f"adaptive sampling needs a batch >= 1 and a tolerance > 0, "
-                                  f"got {batch} {tolerance}")
+            try:
+                good = (_is_int(batch) and 1 <= batch <= RANGES["spp"][1]
+                        and 0 < float(tolerance) < float("inf"))
+            except (TypeError, ValueError):
+                good = False
+            if not good:
+                raise PtraceError(f"adaptive sampling needs a batch between 1 and "
+                                  f"{RANGES['spp'][1]} and a finite tolerance > 0, got {batch!r} "
+                                  f"{tolerance!r}")
             set_(self, "adaptive", (int(batch), float(tolerance)))
 
     @classmethod

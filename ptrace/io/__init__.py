@@ -1,7 +1,7 @@
 """Scene loading: load(path) picks the reader by the file extension."""
 import os
 
-from ..errors import SceneError
+from ..errors import SceneError, require_regular_file
 from .collada import load_collada
 from .meshes import MESH_EXTENSIONS, load_mesh
 
@@ -11,6 +11,7 @@ SUPPORTED_EXTENSIONS = (".dae",) + MESH_EXTENSIONS
 def load(path):
     """Read a scene file (.dae in the CS184 dialect, or a plain mesh) into a Scene."""
     extension = os.path.splitext(str(path))[1].lower()
+    require_regular_file(path, "scene file")
     if extension == ".dae":
         return load_collada(path)
     if extension in MESH_EXTENSIONS:
