@@ -126,7 +126,8 @@ def _write_temporary(temporary, pixels, pixel_type, names):
         raise _WriteFailed("the file is empty after writing")
     check = oiio.ImageBuf(temporary)
     back = None if check.has_error else check.get_pixels(pixel_type)
-    if back is None or back.shape != pixels.shape:
+    if back is None or check.has_error or back.shape != pixels.shape:
+        check.geterror()   # read, so that OpenImageIO does not print it when check is freed
         raise _WriteFailed("the file does not read back whole")
 
 
