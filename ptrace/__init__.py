@@ -1,4 +1,6 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
+# first: numba's cache set up (a fallback folder, unreadable files recompiled) before any kernel
+from . import jit  # noqa: F401, I001
 from .camera import Camera, course_camera
 from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError

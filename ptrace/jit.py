@@ -1,17 +1,197 @@
-"""What numba's on-disk cache holds, so a cold first run can say that it is compiling."""
-from .integrator import render_pixels
+"""numba's on-disk cache: where it goes, what happens when it is broken, and whether it is cold.
+
+Imported first by the ptrace package, before any kernel is decorated, so that:
+- with no writable cache folder anywhere numba looks (NUMBA_CACHE_DIR, the __pycache__ beside
+  ptrace's and accel's sources, the user's cache folder) ptrace still imports: the cache goes to
+  a per-user folder under the temporary directory (owned by the user, mode 0700), else a fresh
+  temporary folder (kept for this run only), else nowhere (every run compiles);
+- a cache file that cannot be read back (garbage in an index or data file, a truncated pickle)
+  counts as missing: the kernel is recompiled and the file rewritten, not an UnpicklingError;
+  a cache file that cannot be saved (a full disk) leaves the compiled kernel in use.
+Each of these says so in one note (cache_notes(); render() warns with them once).
+"""
+import os
+import stat
+import tempfile
 
 # A small render of scenes/cornell.dae with an empty cache on the 2-core development machine
 # took 43-52 s of wall time (2026-12-02, after the estimator work and the watertight test; load
 # 1-2.5; a warm run takes about 2 s): benchmarks/results/first_images.md predates that work.
 COLD_COMPILE_SECONDS = 45
 
+_NOTES = []   # one line per kind, in the order they happened
 
-def is_cold(record_class, dispatcher=render_pixels):
+
+def _note(text):
+    if text not in _NOTES:
+        _NOTES.append(text)
+
+
+def cache_notes(clear=False):
+    """The notes about numba's cache so far (a fallback folder, a corrupt file recompiled);
+    clear=True empties the list, so that each is told once."""
+    notes = list(_NOTES)
+    if clear:
+        del _NOTES[:]
+    return notes
+
+
+def _kernel_folders():
+    """The folders whose sources hold cached kernels: ptrace's and accel's (found without
+    importing accel, whose kernels would be decorated before the cache is set up)."""
+    import importlib.util
+    here = os.path.dirname(os.path.abspath(__file__))
+    spec = importlib.util.find_spec("accel")
+    folders = [here]
+    if spec is not None and spec.origin:
+        folders.append(os.path.dirname(os.path.abspath(spec.origin)))
+    return folders
+
+
+def _numba_finds_a_cache(folder):
+    """Whether numba's own locators (in their order) find a writable cache folder for a
+    kernel defined in `folder`: the same test numba makes when it decorates one."""
+    from numba.core import caching
+    implementation = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+
+    def probe():
+        pass
+    source = os.path.join(folder, "__init__.py")
+    if not os.path.exists(source):
+        source = os.path.abspath(__file__)
+    for locator in implementation._locator_classes:
+        try:
+            if locator.from_function(probe, source) is not None:
+                return True
+        except Exception:   # noqa: BLE001 - a locator that fails finds nothing
+            continue
+    return False
+
+
+def _writable(folder):
+    try:
+        os.makedirs(folder, exist_ok=True)
+        tempfile.TemporaryFile(dir=folder).close()
+        return True
+    except OSError:
+        return False
+
+
+def _private_folder():
+    """<tmp>/ptrace-numba-<uid>, made mode 0700 if missing, and used only if it is a real folder
+    (not a link) owned by this user that no one else can write (another user's planted cache
+    would be code run here); else None."""
+    uid = os.getuid() if hasattr(os, "getuid") else 0
+    folder = os.path.join(tempfile.gettempdir(), f"ptrace-numba-{uid}")
+    try:
+        os.mkdir(folder, 0o700)
+    except FileExistsError:
+        pass
+    except OSError:
+        return None
+    try:
+        info = os.lstat(folder)
+    except OSError:
+        return None
+    if not stat.S_ISDIR(info.st_mode) or info.st_uid != uid or info.st_mode & 0o077:
+        return None
+    return folder if _writable(folder) else None
+
+
+def _use_folder(folder):
+    import numba
+    os.environ["NUMBA_CACHE_DIR"] = folder   # numba's compiler reloads its config from here
+    numba.config.CACHE_DIR = folder
+
+
+def _disable_caching():
+    """Every kernel compiles in each process: cache=True is ignored."""
+    from numba.core import dispatcher
+    dispatcher.Dispatcher.enable_caching = lambda self: None
+
+
+def configure_cache(folders=None):
+    """Give numba a writable cache folder for kernels in `folders` (default ptrace's and
+    accel's), or turn caching off, with a note saying which; nothing changes when numba finds
+    one itself."""
+    folders = _kernel_folders() if folders is None else folders
+    try:
+        if all(_numba_finds_a_cache(folder) for folder in folders):
+            return None
+    except Exception:   # noqa: BLE001 - numba's internals moved: leave numba to it
+        return None
+    folder = _private_folder()
+    lasting = folder is not None
+    if folder is None:
+        try:
+            folder = tempfile.mkdtemp(prefix="ptrace-numba-")
+        except OSError:
+            folder = None
+    where = "beside ptrace's sources, in NUMBA_CACHE_DIR or in the user's cache folder"
+    if folder is None:
+        _disable_caching()
+        _note(f"numba's cache: no writable folder {where} or in the temporary folder; the "
+              f"kernels are compiled anew in every run")
+        return None
+    _use_folder(folder)
+    _note(f"numba's cache: no writable folder {where}; compiled kernels are kept in {folder}"
+          + ("" if lasting else " for this run only"))
+    return folder
+
+
+def _guard_cache_files():
+    """A cache file numba cannot read back counts as missing (recompile and rewrite it), and
+    one it cannot save leaves the compiled kernel in use; each says so in a note."""
+    from numba.core import caching
+    index_file, cache = caching.IndexDataCacheFile, caching.Cache
+    if getattr(index_file, "_ptrace_guarded", False):
+        return
+    load_index, load_overload = index_file._load_index, cache.load_overload
+    save_overload = cache.save_overload
+
+    def guarded_load_index(self):
+        try:
+            return load_index(self)
+        except Exception as error:   # noqa: BLE001 - garbage in the file: any unpickling error
+            _note(f"numba's cache: {self._index_path} could not be read "
+                  f"({type(error).__name__}); recompiling and rewriting it")
+            return {}
+
+    def guarded_load_overload(self, sig, target_context):
+        try:
+            return load_overload(self, sig, target_context)
+        except Exception as error:   # noqa: BLE001 - as above, for a data file
+            _note(f"numba's cache: a compiled kernel in {self._cache_path} could not be read "
+                  f"({type(error).__name__}); recompiling it")
+            return None
+
+    def guarded_save_overload(self, sig, data):
+        try:
+            return save_overload(self, sig, data)
+        except Exception as error:   # noqa: BLE001 - a full or read-only cache folder
+            _note(f"numba's cache: a compiled kernel could not be saved in {self._cache_path} "
+                  f"({error}); it is compiled again next run")
+
+    index_file._load_index = guarded_load_index
+    cache.load_overload = guarded_load_overload
+    cache.save_overload = guarded_save_overload
+    index_file._ptrace_guarded = True
+
+
+try:
+    _guard_cache_files()
+except (ImportError, AttributeError):   # numba's internals moved: its own behaviour stays
+    pass
+configure_cache()
+
+
+def is_cold(record_class, dispatcher=None):
     """True if numba's cache has no compiled render kernel for this backend's record type (the
     kernel that dominates compile time; the others come and go with it). Reads only the cache's
     index; any surprise in numba's internals counts as warm (no message rather than a wrong
     one)."""
+    if dispatcher is None:
+        from .integrator import render_pixels as dispatcher
     try:
         index = dispatcher._cache._cache_file._load_index()
     except Exception:   # noqa: BLE001 - numba internals: never let a notice break a render
@@ -21,4 +201,3 @@ def is_cold(record_class, dispatcher=render_pixels):
         if any(getattr(t, "instance_class", None) is record_class for t in signature):
             return False
     return True
-

@@ -17,6 +17,7 @@ from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
 from .errors import PtraceError
 from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
 from .features import FEATURES, aov_images
+from .jit import cache_notes
 from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
@@ -127,8 +128,11 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
                                   f"{numba.config.NUMBA_NUM_THREADS}, got {threads}")
             numba.set_num_threads(threads)
         try:
-            return _render(scene, settings, width, height, crop, camera, progress, stats,
-                           client, worker_threads, notice, phases, aovs)
+            image = _render(scene, settings, width, height, crop, camera, progress, stats,
+                            client, worker_threads, notice, phases, aovs)
+            for text in cache_notes(clear=True):   # a fallback cache folder, a file recompiled
+                warnings.warn(text, RuntimeWarning, stacklevel=2)
+            return image
         finally:
             numba.set_num_threads(previous_threads)
     finally:

@@ -1,0 +1,120 @@
+"""numba's cache handled (ptrace.jit): a cache file with garbage in it is recompiled with a note,
+not an unpickling traceback; with no writable cache folder anywhere numba looks, ptrace still
+imports and caches in a private per-user folder (or a fresh temporary one) with a note. Every
+test runs in a subprocess on its own cache folder or a copy of the sources, so the suite's cache
+is never touched, and compiles only a one-line function (or nothing)."""
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from ptrace import cli, jit
+
+from console import SHIPPED
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+TINY = "from numba import njit\n\n\n@njit(cache=True)\ndef add_one(x):\n    return x + 1\n"
+
+
+def python(code, env, cwd):
+    return subprocess.run([sys.executable, "-c", code], env=env, cwd=cwd, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    """A module with one cached kernel, compiled once into its own cache folder."""
+    (tmp_path / "mod").mkdir()
+    (tmp_path / "mod" / "tiny.py").write_text(TINY)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path / "mod"), str(REPO)]))
+    first = python("import tiny; print(tiny.add_one(1))", env, tmp_path)
+    assert first.stdout.strip() == "2", first.stderr
+    return env, tmp_path
+
+
+WITH_PTRACE = ("import ptrace, tiny; print(tiny.add_one(1)); "
+               "print('\\n'.join(ptrace.jit.cache_notes()))")
+
+
+@pytest.mark.parametrize("pattern, garbage", [("*.nbi", b"\x80\x04\x95garbage"),
+                                              ("*.nbc", b"garbage\n")])
+def test_a_corrupt_cache_file_is_recompiled_with_a_note(tiny, pattern, garbage):
+    env, folder = tiny
+    files = list((folder / "cache").rglob(pattern))
+    assert files
+    for path in files:
+        path.write_bytes(garbage)
+    plain = python("import tiny; print(tiny.add_one(1))", env, folder)
+    assert plain.returncode != 0 and "Traceback" in plain.stderr   # numba alone: a traceback
+    for path in files:
+        path.write_bytes(garbage)   # (in case numba alone rewrote one)
+    guarded = python(WITH_PTRACE, env, folder)
+    assert guarded.returncode == 0 and "Traceback" not in guarded.stderr, guarded.stderr
+    out = guarded.stdout.strip().splitlines()
+    assert out[0] == "2"
+    assert len(out) == 2 and out[1].startswith("numba's cache: ") and "recompiling" in out[1]
+    again = python("import tiny; print(tiny.add_one(1))", env, folder)   # rewritten whole
+    assert again.returncode == 0 and again.stdout.strip() == "2", again.stderr
+
+
+def unwritable_copy(tmp_path):
+    """ptrace and accel copied where numba finds no cache folder: each package's __pycache__
+    is a file (so it cannot be made, even by root), HOME's .cache is a file, no NUMBA_CACHE_DIR,
+    and TMPDIR a folder of the test's own."""
+    copy = tmp_path / "copy"
+    for package in ("ptrace", "accel"):
+        shutil.copytree(REPO / package, copy / package,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    for folder in [p for p in copy.rglob("*") if p.is_dir()] + [copy]:
+        (folder / "__pycache__").write_text("not a folder")
+    (tmp_path / "home").mkdir()
+    (tmp_path / "home" / ".cache").write_text("not a folder")
+    (tmp_path / "tmp").mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    env.update(HOME=str(tmp_path / "home"), PYTHONPATH=str(copy), PYTHONDONTWRITEBYTECODE="1",
+               TMPDIR=str(tmp_path / "tmp"))
+    return copy, env
+
+
+IMPORT_AND_RUN = ("import ptrace, ptrace.sampling as s; print(ptrace.__file__); "
+                  "print(s.uniform(1, 2, 3, 4)); print('\\n'.join(ptrace.jit.cache_notes()))")
+
+
+def test_no_writable_cache_folder_falls_back_to_a_private_one(tmp_path):
+    copy, env = unwritable_copy(tmp_path)
+    result = python(IMPORT_AND_RUN, env, tmp_path)
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    path, number, note = result.stdout.strip().splitlines()
+    assert path.startswith(str(copy))
+    assert 0.0 <= float(number) < 1.0
+    folder = tmp_path / "tmp" / f"ptrace-numba-{os.getuid()}"
+    assert note.startswith("numba's cache: no writable folder") and str(folder) in note
+    assert "this run only" not in note
+    assert list(folder.rglob("*.nbi"))   # the kernel was cached there
+    assert folder.stat().st_mode & 0o777 == 0o700
+
+
+def test_a_private_folder_that_is_not_ours_is_not_used(tmp_path):
+    """A file (or another user's folder) at the private folder's name: a fresh temporary
+    folder is used instead, for this run only."""
+    copy, env = unwritable_copy(tmp_path)
+    (tmp_path / "tmp" / f"ptrace-numba-{os.getuid()}").write_text("planted")
+    result = python(IMPORT_AND_RUN, env, tmp_path)
+    assert result.returncode == 0, result.stderr
+    note = result.stdout.strip().splitlines()[-1]
+    assert "for this run only" in note and str(tmp_path / "tmp" / "ptrace-numba-") in note
+
+
+def test_the_cli_says_a_cache_note_in_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(jit, "_NOTES", ["numba's cache: a test note"])
+    code = cli.main(["--integrator", "normals", "-r", "4", "3", "-f", str(tmp_path / "x.png"),
+                     str(SHIPPED)])
+    err = capsys.readouterr().err
+    assert code == 0
+    assert err.count("numba's cache: a test note") == 1
+    assert "ptrace: warning: numba's cache: a test note" in err.splitlines()
+    assert jit.cache_notes() == []   # told once
