@@ -36,4 +36,4 @@ def require_regular_file(path, what):
         kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)"
                 if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or
                 stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else "not a file")
-        raise PtraceError(f"{path}: the {what} must be a regular file, but this is {kind}")
+        raise SceneError(path, f"the {what} must be a regular file, but this is {kind}")

@@ -31,12 +31,34 @@ def apply(matrix, point):
 
 # --- materials (1.5) ------------------------------------------------------------------------
 
+def colour(document, element, what):
+    """Three numbers of element's text, each >= 0 (every colour, radiance, reflectance,
+    transmittance and conductor eta and k of the dialect): a negative one is refused rather than
+    rendered as light taken away."""
+    values = document.vector(element, 3, what)
+    if (values < 0).any():
+        document.fail(f"{document.describe(element)}: negative {what} "
+                      f"({' '.join(f'{v:g}' for v in values)}); it must be at least 0")
+    return tuple(values)
+
+
 def _rgb(document, parent, tag):
-    return tuple(document.vector(document.require_child(parent, tag), 3, tag))
+    return colour(document, document.require_child(parent, tag), tag)
+
+
+# what a BSDF's scalar must be: ior > 0 (a ratio of speeds), roughness >= 0 (parsed, unused),
+# alpha > 0 (the Beckmann width divides by it)
+SCALAR_RULES = {"ior": (0.0, False), "roughness": (0.0, True), "alpha": (0.0, False)}
 
 
 def _number(document, parent, tag):
-    return document.scalar(document.require_child(parent, tag), tag)
+    element = document.require_child(parent, tag)
+    value = document.scalar(element, tag)
+    low, inclusive = SCALAR_RULES[tag]
+    if not (value >= low if inclusive else value > low):
+        document.fail(f"{document.describe(element)}: {tag} {value:g} must be "
+                      f"{'at least' if inclusive else 'greater than'} {low:g}")
+    return value
 
 
 def _emission(document, element):
@@ -89,7 +111,7 @@ def read_effect(document, effect):
         for shader in COMMON_SHADERS:
             color = document.find_path(technique, shader, "diffuse", "color")
             if color is not None:
-                return {"kind": DIFFUSE, "albedo": tuple(document.vector(color, 3, "colour"))}
+                return {"kind": DIFFUSE, "albedo": colour(document, color, "colour")}
     document.notes.append(f"{document.describe(effect)}: no diffuse colour; albedo 0.5")
     return {"kind": DIFFUSE, "albedo": DEFAULT_ALBEDO}
 
@@ -150,8 +172,8 @@ def read_light(document, light, node, world):
     if kind_element.tag not in LIGHT_NAMES:
         document.fail(f"{document.describe(light)}: unknown light type <{kind_element.tag}> "
                       f"(known: {', '.join(LIGHT_NAMES)})")
-    radiance = document.vector(document.require_child(kind_element, "color"), 3, "colour")
-    record = {"kind": LIGHT_NAMES.index(kind_element.tag), "radiance": tuple(radiance)}
+    radiance = colour(document, document.require_child(kind_element, "color"), "light colour")
+    record = {"kind": LIGHT_NAMES.index(kind_element.tag), "radiance": radiance}
     if record["kind"] == AMBIENT:
         return record
     centre = apply(world, (0, 0, 0))
@@ -167,6 +189,9 @@ def read_light(document, light, node, world):
         record.update(position=centre, edge_x=edge_x, edge_y=edge_y,
                       direction=_unit(document, node, front - centre, "area light normal"),
                       area=float(np.linalg.norm(edge_x) * np.linalg.norm(edge_y)))
+        if not record["area"] > 0:
+            document.fail(f"{document.describe(node)}: the area light has zero area (its node "
+                          f"scales it to nothing)")
     elif record["kind"] == SPOT:
         record.update(position=centre,
                       direction=_unit(document, node, front - centre, "spot light direction"))
@@ -205,6 +230,9 @@ def read_camera(document, camera, world):
                 document.fail(f"{document.describe(aspect_element)}: aspect ratio {aspect} "
                               f"is not positive")
             vfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov) / 2) / aspect))
+    if not 0 <= znear < zfar:
+        document.fail(f"{document.describe(perspective)}: znear {znear:g} and zfar {zfar:g}: "
+                      f"camera rays run from znear to zfar, so 0 <= znear < zfar is needed")
     for name, degrees in (("xfov", hfov), ("yfov", vfov)):
         if not 0 < degrees < 180:
             document.fail(f"{document.describe(camera)}: {name} {degrees} is not between "
