@@ -27,6 +27,7 @@ REPORT = ROOT / "benchmarks" / "results" / "mutants.md"
 INTEGRATOR, KERNELS, BVH = "ptrace/integrator.py", "accel/kernels.py", "accel/bvh.py"
 SIMD = "accel/simd.py"
 RR_TEST = "tests/ptrace/test_roulette_rule.py"
+PROMISES = "tests/ptrace/test_hostile_promises.py"
 
 # name -> (what the bug is, [(file, text, replacement)], [pytest arguments])
 MUTANTS = {
@@ -117,6 +118,27 @@ MUTANTS = {
         [("ptrace/distributed.py", 'settings = job["settings"]',
           'settings = type(job["settings"])(**{**vars(job["settings"]), "roulette": True})')],
         ["tests/ptrace/test_distributed.py", "-k", "option"]),
+    "last-vertex-delta-only-under-mis": (
+        "at the last vertex a mirror's or glass's ray is traced only under MIS, so under "
+        "--direct light, -H or with point lights the mirror shows no light",
+        [(INTEGRATOR, "if vertex == options.max_depth and not (delta or mis):",
+          "if vertex == options.max_depth and not mis:")],
+        [PROMISES, "-k", "last_vertex"]),
+    "face-anywhere-in-the-plane": (
+        "an emissive panel anywhere in a light's plane is taken for the light's face (the "
+        "light's centre need not lie on it)",
+        [("ptrace/lights.py", "if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):",
+          "if False:")],
+        [PROMISES, "-k", "sideways"]),
+    "gltf-wrap-t-for-s": (
+        "a glTF sampler's wrapT is read for the texture's u wrap as well as its v wrap",
+        [("ptrace/io/materials.py", 'return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),',
+          'return (GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT),')],
+        ["tests/ptrace/test_hostile_gltf_wrap.py"]),
+    "embree-grazing-refines-t-only": (
+        "on a grazing hit the embree backend recomputes t in float64 but keeps float32 u and v",
+        [("accel/embree.py", "best_t, best_u, best_v = t, u, v", "best_t = t")],
+        [PROMISES, "-k", "embree"]),
 }
 
 
