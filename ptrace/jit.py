@@ -178,8 +178,58 @@ def _guard_cache_files():
     index_file._ptrace_guarded = True
 
 
+_DEPENDENCY_FOLDERS = []
+
+
+def _folders_digest(folders):
+    """sha256 over the contents of every .py file under the folders (by path relative to its
+    folder), so that any edit to any of them changes it."""
+    import hashlib
+    digest = hashlib.sha256()
+    for folder in folders:
+        for root, dirs, files in os.walk(folder):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(root, name)
+                    digest.update(os.path.relpath(path, folder).encode() + b"\0")
+                    with open(path, "rb") as source:
+                        digest.update(source.read())
+    return digest.digest()
+
+
+def depend_on_folders(folders):
+    """Make the cached kernels defined under `folders` depend on every source file there, not
+    only on the file that defines each: numba's cache checks a kernel's own file alone, so after
+    an edit to a module it calls (and inlines), the old kernel would be loaded (an editable
+    install updated with `git pull` would render with stale code). Called for ptrace's and
+    accel's folders on import."""
+    from numba.core import caching
+    mixin = caching._SourceFileBackedLocatorMixin
+    folders = [os.path.abspath(folder) for folder in folders]
+    _DEPENDENCY_FOLDERS.extend(f for f in folders if f not in _DEPENDENCY_FOLDERS)
+    if getattr(mixin, "_ptrace_stamp", None) is not None:
+        return
+    own_stamp = mixin.get_source_stamp
+    digests = {}
+
+    def stamp(self):
+        base = own_stamp(self)
+        path = os.path.abspath(self._py_file)
+        for folder in _DEPENDENCY_FOLDERS:
+            if path.startswith(folder + os.sep):
+                if folder not in digests:
+                    digests[folder] = _folders_digest([folder])
+                return (base, digests[folder])
+        return base
+
+    mixin.get_source_stamp = stamp
+    mixin._ptrace_stamp = stamp
+
+
 try:
     _guard_cache_files()
+    depend_on_folders(_kernel_folders())
 except (ImportError, AttributeError):   # numba's internals moved: its own behaviour stays
     pass
 configure_cache()

@@ -118,3 +118,34 @@ def test_the_cli_says_a_cache_note_in_one_line(tmp_path, capsys, monkeypatch):
     assert err.count("numba's cache: a test note") == 1
     assert "ptrace: warning: numba's cache: a test note" in err.splitlines()
     assert jit.cache_notes() == []   # told once
+
+
+CALLEE = "from numba import njit\n\nSCALE = {scale}\n\n\n@njit(cache=True)\ndef scale(x):\n    return SCALE * x\n"
+CALLER = ("from numba import njit\n\nfrom kernels.callee import scale\n\n\n@njit(cache=True)\n"
+          "def twice_scaled(x):\n    return 2 * scale(x)\n")
+RUN_CALLER = ("import ptrace.jit, os; ptrace.jit.depend_on_folders([os.path.abspath('kernels')]); "
+              "import kernels.caller as c; print(c.twice_scaled(1))")
+
+
+def test_an_edit_to_a_called_module_recompiles_its_callers(tmp_path):
+    """numba's cache checks a kernel's own file only: after an edit to a module it calls, the
+    caller's old compiled code (with the callee inlined) would be loaded. Under
+    depend_on_folders (ptrace's and accel's folders on import) every source file counts."""
+    package = tmp_path / "kernels"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "callee.py").write_text(CALLEE.format(scale=3))
+    (package / "caller.py").write_text(CALLER)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(REPO)]))
+    plain = "import kernels.caller as c; print(c.twice_scaled(1))"
+    assert python(plain, env, tmp_path).stdout.strip() == "6"
+    (package / "callee.py").write_text(CALLEE.format(scale=5))
+    stale = python(plain, env, tmp_path)
+    assert stale.stdout.strip() == "6", stale.stderr   # numba alone: the stale kernel
+    first = python(RUN_CALLER, env, tmp_path)
+    assert first.stdout.strip() == "10", first.stderr
+    (package / "callee.py").write_text(CALLEE.format(scale=7))
+    again = python(RUN_CALLER, env, tmp_path)
+    assert again.stdout.strip() == "14", again.stderr
+    assert python(RUN_CALLER, env, tmp_path).stdout.strip() == "14"   # and cached so
