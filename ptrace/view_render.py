@@ -37,9 +37,10 @@ BLOCK_RAYS = 1 << 19        # the most rays one kernel call may trace (paths x p
 BLOCK_SECONDS = 0.1         # and, once a call has been timed, about this long
 NAIVE_PRIMITIVES_PER_RAY = 64   # a naive ray tests every primitive: this many cost about one
                                 # accelerated ray
-VIEW_BYTES_PER_PIXEL = 768  # a session's per-pixel buffers at their peak: the sums of the image,
-                            # of its job and of the pass under way, the AOVs' sums beside each
-                            # (denoised toggle), the frames kept, shown and encoded
+VIEW_BYTES_PER_PIXEL = 1024  # a session's per-pixel buffers at their peak, rounded up: the
+                             # sums of the image, of its job and of the pass under way, the
+                             # AOVs' sums beside each (denoised toggle), the frames kept, shown,
+                             # encoded and saved (tracemalloc's peak of a whole render and Save)
 MEMORY_FRACTION = 0.5       # what every session's buffers together may take of the memory
 # a frame as shown: radiance top row first, samples, target spp, the rate image (rate view),
 # exposure, the AOV images (while their sums are kept) and the denoised radiance (toggle on)
