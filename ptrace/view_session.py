@@ -1,9 +1,10 @@
 """One `ptrace view` viewer's session (Preview): its own camera, settings and render thread
 over the shared scene and backends (ptrace.view_render). The render reuses ptrace.tiles: the
-pass schedule of ptrace.render (Passes) through TileWork.trace, so N samples here are bit for
-bit ptrace.render's N samples. Each pass is traced into fresh sums and then added to the
-image's (0 + x is x, so the bits are the same), which lets a camera move or a setting abort a
-pass at any block without leaving half a pass behind. After a reset, and while the camera
+pass schedule of ptrace.render (Passes) through TileWork.trace, in the short kernel calls of
+ptrace.view_render.Blocks, so N samples here are bit for bit ptrace.render's N samples. Each
+pass is traced into fresh sums and then added to the image's (0 + x is x, so the bits are the
+same), which lets a camera move, a setting or a closed page abort a pass at any call without
+leaving half a pass behind. After a reset, and while the camera
 moves, a throwaway frame of 1 sample at reduced resolution is shown first.
 
 The denoised toggle: while it is on, each full-resolution frame (not a quick one, not the rate
