@@ -2,15 +2,20 @@
 
 A tornado server (HTTP and WebSocket in one well-kept library, already in the tree through
 dask.distributed) bound to 127.0.0.1 on a free port serves one page (view_page.html) and one
-socket, both only with the unguessable token of the printed URL. Each socket is its own
-session (ptrace.view_session.Preview): its own camera, settings and render thread over the
-shared scene and backends (ptrace.view_render.Backends); closing the socket stops its render.
+socket, both only with the unguessable token of the printed URL, which no log line shows
+(_Redact). Each socket is its own session (ptrace.view_session.Preview): its own camera,
+settings and render thread over the shared scene and backends (ptrace.view_render.Backends);
+every message is checked (ptrace.view_messages) and answered, an error with an error reply;
+closing the socket stops its render within one kernel call (ptrace.view_render.Blocks), and a
+session counts against the cap until its render thread has ended.
 """
 import argparse
 import asyncio
 import hmac
 import json
+import logging
 import os
+import re
 import secrets
 import sys
 import threading
@@ -20,13 +25,47 @@ import numba
 
 import accel
 
+from . import view_messages, view_render
 from .errors import PtraceError
 from .image import FORMATS
-from .view_render import Backends, denoiser_missing
+from .view_render import Backends, denoiser_missing, page_settings
 from .view_session import Preview
 
 VIEW_SPP = 1024                 # -s without a value: a preview has something to refine
-MAX_SESSIONS = 4                # more sockets than this are refused
+MAX_SESSIONS = 4                # more sessions than this (open, or closed and still stopping)
+                                # are refused; fewer when their buffers would not fit memory
+LOGGERS = ("tornado.access", "tornado.application", "tornado.general", "asyncio")
+
+
+class _Redact(logging.Filter):
+    """Takes every viewer's token out of the log records of tornado and asyncio (tornado logs
+    a request's URL, which carries the token, in its access log and beside any uncaught error,
+    with the request's repr and the traceback)."""
+    QUERY = re.compile(r"(token=)[^&\s'\"]*")
+    tokens = set()
+
+    def _clean(self, text):
+        for token in self.tokens:
+            text = text.replace(token, "[token]")
+        return self.QUERY.sub(r"\1[token]", text)
+
+    def filter(self, record):
+        try:
+            text = record.getMessage()
+        except Exception:   # noqa: BLE001 - a record logging cannot format is still redacted
+            text = f"{record.msg} {record.args!r}"
+        record.msg, record.args = self._clean(text), ()
+        if record.exc_info:
+            record.exc_text = logging.Formatter().formatException(record.exc_info)
+            record.exc_info = None
+        if record.exc_text:
+            record.exc_text = self._clean(record.exc_text)
+        if record.stack_info:
+            record.stack_info = self._clean(record.stack_info)
+        return True
+
+
+_redact = _Redact()
 
 
 # --- the server -------------------------------------------------------------------------
@@ -45,9 +84,13 @@ class ViewServer:
         self.threads, self.crop, self.outputs = threads, crop, outputs
         self.denoise = denoise          # the page's denoised toggle starts on (--denoise)
         self.notice = notice or (lambda text: None)
+        view_render.check_settings(scene, settings, view_render.FLAG_NAMES)
+        self.max_sessions = view_render.sessions_that_fit(camera.width, camera.height,
+                                                          MAX_SESSIONS, "resolution")
         self.backends = Backends(scene, self._notice)
         self.token = secrets.token_urlsafe(32)
         self.sockets = set()
+        self.sessions = []              # every Preview whose render thread may still run
         self.server = None
         self.port = None
 
@@ -63,6 +106,10 @@ class ViewServer:
         import tornado.httpserver
         import tornado.netutil
         import tornado.web
+        _redact.tokens.add(self.token)
+        for name in LOGGERS:
+            if _redact not in logging.getLogger(name).filters:
+                logging.getLogger(name).addFilter(_redact)
         handlers = _handlers(self)
         app = tornado.web.Application(handlers, websocket_max_message_size=1 << 16)
         sockets = tornado.netutil.bind_sockets(0, address="127.0.0.1")
@@ -72,7 +119,7 @@ class ViewServer:
         return f"http://127.0.0.1:{self.port}/?token={self.token}"
 
     def stop(self):
-        sessions = [socket.session for socket in list(self.sockets) if socket.session]
+        sessions = list(self.sessions)
         for socket in list(self.sockets):
             socket.close(1001, "the server is stopping")
         for session in sessions:
@@ -122,22 +169,22 @@ def _handlers(view):
         session = None
 
         def open(self):
-            if len(view.sockets) >= MAX_SESSIONS:
-                self.close(4003, f"{MAX_SESSIONS} viewers are open already")
+            view.sessions = [session for session in view.sessions if session.running()]
+            if len(view.sessions) >= view.max_sessions:
+                self.close(4003, f"{view.max_sessions} viewers are open (or still stopping) "
+                                 f"already")
                 return
             self.loop = tornado.ioloop.IOLoop.current()
             view.sockets.add(self)
             width, height = view.camera.width, view.camera.height
-            s = view.settings
+            mode = "normals" if view.settings.integrator == "normals" else "image"
             self.send({"type": "hello", "scene": os.path.basename(view.scene.path),
-                       "width": width, "height": height, "spp": s.spp,
-                       "max_depth": s.max_depth, "light_samples": s.light_samples,
-                       "estimator": "hemisphere" if s.hemisphere else s.direct,
-                       "accel": s.accel, "accels": list(accel.KINDS),
-                       "mode": "normals" if s.integrator == "normals" else "image",
-                       "denoise": view.denoise, "denoiser_missing": denoiser_missing(),
+                       "width": width, "height": height, "accels": list(accel.KINDS),
+                       **page_settings(view.settings, mode, view.denoise),
+                       "denoiser_missing": denoiser_missing(),
                        "outputs": [os.path.abspath(p) for p in view.outputs]}, None)
             self.session = view.new_session(self.publish)
+            view.sessions.append(self.session)
 
         def publish(self, message, png):   # from any thread
             self.loop.add_callback(self.send, message, png)
@@ -153,23 +200,28 @@ def _handlers(view):
                 pass
 
         def on_message(self, text):
+            """Every message gets its reply, or an error reply, and the socket stays open."""
+            if self.session is None:
+                return
             try:
-                message = json.loads(text)
-                if not isinstance(message, dict):
-                    raise ValueError("not an object")
-                reply = self.session.handle(message)
-            except PtraceError as error:
-                reply = {"type": "error", "message": str(error)}
-            except (ValueError, KeyError, TypeError) as error:
-                reply = {"type": "error", "message": f"bad message: {error}"}
+                reply = self.session.handle(view_messages.parse(text))
+            except PtraceError as error:    # with the settings kept, for the page's fields
+                session = self.session
+                reply = {"type": "error", "message": str(error), "settings": page_settings(
+                    session.settings, session.mode, session.denoise)}
+            except OSError as error:            # Save's files
+                reply = {"type": "error", "message": f"cannot write: {error}"}
+            except Exception as error:   # noqa: BLE001 - a bug, told as one; the session goes on
+                reply = {"type": "error",
+                         "message": f"internal error: {type(error).__name__}: {error}"}
+                print(f"ptrace: {reply['message']}", file=sys.stderr, flush=True)
             if reply is not None:
                 self.send(reply, None)
 
         def on_close(self):
             view.sockets.discard(self)
-            if self.session is not None:
-                self.session.stop()
-                threading.Thread(target=self.session.join, daemon=True).start()
+            if self.session is not None:    # its render thread ends after its kernel calls
+                self.session.stop()         # under way, and removes its files
 
     return [(r"/", Page), (r"/socket", Socket)]
 
@@ -234,6 +286,7 @@ def prepare(args):
         bvh_split=args.bvh_split)
     width, height = args.resolution
     _check_frame(width, height, args.crop)
+    view_render.sessions_that_fit(width, height, MAX_SESSIONS, "-r")
     scene = load(args.scene)
     if args.environment is not None:
         from .environment import load_environment

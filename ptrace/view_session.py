@@ -1,9 +1,10 @@
 """One `ptrace view` viewer's session (Preview): its own camera, settings and render thread
 over the shared scene and backends (ptrace.view_render). The render reuses ptrace.tiles: the
-pass schedule of ptrace.render (Passes) through TileWork.trace, so N samples here are bit for
-bit ptrace.render's N samples. Each pass is traced into fresh sums and then added to the
-image's (0 + x is x, so the bits are the same), which lets a camera move or a setting abort a
-pass at any block without leaving half a pass behind. After a reset, and while the camera
+pass schedule of ptrace.render (Passes) through TileWork.trace, in the short kernel calls of
+ptrace.view_render.Blocks, so N samples here are bit for bit ptrace.render's N samples. Each
+pass is traced into fresh sums and then added to the image's (0 + x is x, so the bits are the
+same), which lets a camera move, a setting or a closed page abort a pass at any call without
+leaving half a pass behind. After a reset, and while the camera
 moves, a throwaway frame of 1 sample at reduced resolution is shown first.
 
 The denoised toggle: while it is on, each full-resolution frame (not a quick one, not the rate
@@ -23,12 +24,12 @@ import time
 import numba
 import numpy as np
 
-from . import view_render
+from . import view_messages, view_render
 from .errors import PtraceError
 from .features import FEATURES, aov_images, denoise
 from .image import course_8bit, rate_colours
 from .tiles import Passes, new_sums
-from .view_render import Shown, denoiser_missing, mean_image, png_bytes, settings_of, write_frame
+from .view_render import Blocks, Shown, denoiser_missing, mean_image, png_bytes, write_frame
 
 QUICK_SECONDS = 0.06            # the budget of a frame while the camera moves
 PUSH_SECONDS = 0.25             # within a pass, the screen is refreshed at most this often
@@ -67,8 +68,9 @@ class Preview:
                  outputs=("view.png", "view.exr"), denoise=False):
         self.scene, self.backends, self.publish = scene, backends, publish
         self.threads, self.outputs = threads, outputs
-        self.settings, self.camera = settings, camera
+        self.settings, self.camera, self.home = settings, camera, camera
         self.width, self.height = camera.width, camera.height
+        view_render.check_settings(scene, settings, view_render.FLAG_NAMES)
         self.mode = "normals" if settings.integrator == "normals" else "image"
         self.exposure, self.paused, self.stopped, self.moving = 0.0, False, False, False
         self.cond = threading.Condition()
@@ -88,7 +90,7 @@ class Preview:
         self.denoise = denoise                          # the toggle; the image's AOV sums:
         self.features = np.zeros((self.width * self.height, FEATURES)) if denoise else None
         self.merged, self.last_denoised = 0, (None, None)   # changes of the sums; a cache
-        self.job = None
+        self.job, self.blocks = None, None      # blocks: the render thread's Blocks
         self.temporary = tempfile.mkdtemp(prefix="ptrace-view-")
         self._reset(crop)
         self.thread = threading.Thread(target=self._run, name="ptrace-view", daemon=True)
@@ -97,9 +99,12 @@ class Preview:
     # --- requests (from the IOLoop's thread) -----------------------------------------------
 
     def handle(self, message):
-        kind = message.get("type")
+        """Act on one message of the page (checked by ptrace.view_messages.check first: a bad
+        one raises PtraceError and changes nothing); returns the reply or None."""
+        message = view_messages.check(message)
+        kind = message["type"]
         if kind == "probe":
-            return self.probe(int(message["x"]), int(message["y"]))
+            return self.probe(message["x"], message["y"])
         if kind == "save":
             return self.save()
         with self.cond:
@@ -108,16 +113,16 @@ class Preview:
             elif kind == "settings":
                 self._settings(message)
             elif kind == "cell":
-                x, y, dx, dy = (int(message[k]) for k in ("x", "y", "dx", "dy"))
+                x, y, dx, dy = (message[k] for k in ("x", "y", "dx", "dy"))
                 if dx < 1 or dy < 1 or x < 0 or y < 0 or x + dx > self.width \
                         or y + dy > self.height:
                     raise PtraceError(f"cell {x} {y} {dx} {dy} is not inside the image")
                 self._reset((x, y, dx, dy))
             elif kind == "pause":
-                self.paused = bool(message["paused"])
+                self.paused = message["paused"]
                 self._redraw("image")
             elif kind == "exposure":
-                self.exposure = float(np.clip(float(message["stops"]), -20, 20))
+                self.exposure = float(np.clip(message["stops"], -20, 20))
                 self._redraw("image")
             else:
                 raise PtraceError(f"unknown message type {kind!r}")
@@ -131,19 +136,10 @@ class Preview:
         self.redraw = "frame" if "frame" in (what, self.redraw) else what
 
     def _camera(self, message):
-        camera, op = self.camera, message.get("op")
-        if op == "orbit":
-            camera = view_render.orbit(camera, -float(message["dx"]) * np.pi / self.width,
-                                       -float(message["dy"]) * np.pi / self.width)
-        elif op == "pan":
-            camera = view_render.pan(camera, float(message["dx"]), float(message["dy"]))
-        elif op == "zoom":
-            factor = float(np.clip(float(message["factor"]), 0.1, 10.0))
-            camera = view_render.zoom(camera, factor)
-        elif op != "still":
-            raise PtraceError(f"unknown camera operation {op!r}")
-        self.camera = camera
-        self.request, self.request_at = int(message.get("id", 0)), time.perf_counter()
+        self.camera = view_render.moved(      # raises, keeping the camera, if not usable
+            self.camera, self.home, message["op"], message.get("dx", 0.0),
+            message.get("dy", 0.0), message.get("factor", 1.0))
+        self.request, self.request_at = message.get("id", 0), time.perf_counter()
         if not message.get("moving"):
             self._reset(None)
         elif not self.moving:       # the first move abandons the pass under way
@@ -153,8 +149,9 @@ class Preview:
             self.redraw = "frame"
 
     def _settings(self, message):
-        settings, mode = settings_of(self.settings, self.mode, message)   # validates
-        denoise = bool(message.get("denoise", self.denoise))
+        settings, mode = view_render.settings_of(self.scene, self.settings, self.mode,
+                                                 message)       # checks them
+        denoise = message.get("denoise", self.denoise)
         if denoise and self.missing:
             raise PtraceError(self.missing)
         self.mode, self.denoise = mode, denoise
@@ -193,16 +190,15 @@ class Preview:
 
     def join(self, timeout=None):
         self.thread.join(timeout)
-        shutil.rmtree(self.temporary, ignore_errors=True)
+        if not self.thread.is_alive():
+            shutil.rmtree(self.temporary, ignore_errors=True)
+
+    def running(self):
+        """Whether the render thread (and so any kernel call of this session) still runs."""
+        return self.thread.is_alive()
 
     def probe(self, x, y):
-        """Radiance (linear, before exposure) and samples of pixel (x, y from the bottom)."""
-        shown = self.shown
-        if shown is None or not (0 <= x < self.width and 0 <= y < self.height):
-            raise PtraceError(f"pixel {x} {y} is not in the image")
-        row = self.height - 1 - y
-        return {"type": "probe", "x": x, "y": y, "radiance": shown[0][row, x].tolist(),
-                "samples": int(shown[1][row, x])}
+        return view_render.probe(self.shown, x, y)
 
     def save(self):
         """PNG and EXR of the last full-resolution frame: what is on screen, except that a quick
@@ -225,31 +221,41 @@ class Preview:
     def _run(self):
         if self.threads is not None:
             numba.set_num_threads(self.threads)
-        while True:
-            with self.cond:
-                while not self.stopped and self.redraw is None and (
-                        self.paused or self.job.done or self.moving):
-                    self.cond.wait()
-                if self.stopped:
-                    return
-                generation, job, redraw, self.redraw = self.generation, self.job, self.redraw, None
-                camera, settings, moving = self.camera, self.settings, self.moving
-            try:
-                if redraw == "frame":
-                    self._frame(generation, camera, settings, job, moving)
-                elif redraw == "image":
-                    self._show(generation, job, None, "redraw")
-                else:
-                    self._pass(generation, job)
-            except _Abort:
+        self.blocks = Blocks(numba.get_num_threads())
+        try:
+            while self._step():
                 pass
-            except Exception as error:   # noqa: BLE001 - told to the page; the server goes on
-                if not isinstance(error, PtraceError):
-                    error = f"internal error: {type(error).__name__}: {error}"
-                    print(f"ptrace: {error}", file=sys.stderr, flush=True)
-                self.publish({"type": "error", "message": str(error)}, None)
-                with self.cond:
-                    job.done = True
+        finally:                    # the session's threads and files end with this thread
+            self.blocks.close()
+            shutil.rmtree(self.temporary, ignore_errors=True)
+
+    def _step(self):
+        """Wait for work, do one piece of it (a frame, a redraw or a pass); False once stopped."""
+        with self.cond:
+            while not self.stopped and self.redraw is None and (
+                    self.paused or self.job.done or self.moving):
+                self.cond.wait()
+            if self.stopped:
+                return False
+            generation, job, redraw, self.redraw = self.generation, self.job, self.redraw, None
+            camera, settings, moving = self.camera, self.settings, self.moving
+        try:
+            if redraw == "frame":
+                self._frame(generation, camera, settings, job, moving)
+            elif redraw == "image":
+                self._show(generation, job, None, "redraw")
+            else:
+                self._pass(generation, job)
+        except _Abort:
+            pass
+        except Exception as error:   # noqa: BLE001 - told to the page; the server goes on
+            if not isinstance(error, PtraceError):
+                error = f"internal error: {type(error).__name__}: {error}"
+                print(f"ptrace: {error}", file=sys.stderr, flush=True)
+            self.publish({"type": "error", "message": str(error)}, None)
+            with self.cond:
+                job.done = True
+        return True
 
     def _check(self, generation):
         if self.generation != generation or self.stopped:
@@ -267,14 +273,12 @@ class Preview:
         ys, xs = np.mgrid[0:small.height, 0:small.width]
         sums = new_sums(xs.size)
         start = time.perf_counter()
-        work.trace(xs.reshape(-1), ys.reshape(-1), 0, 1, sums, np.arange(xs.size),
-                   lambda _: self._check(generation))
+        self.blocks.trace(work, xs.reshape(-1), ys.reshape(-1), 0, 1, sums, np.arange(xs.size),
+                          view_render.path_rays(self.scene, one), lambda: self._check(generation))
         self.paths_per_second = xs.size / max(time.perf_counter() - start, 1e-6)
         image = mean_image(sums, small.width, small.height)
         scale = max(1, scale)
-        full = np.zeros((self.height, self.width, 3), np.float32)
-        big = np.repeat(np.repeat(image, scale, axis=0), scale, axis=1)
-        full[:big.shape[0], :big.shape[1]] = big[:self.height, :self.width]
+        full = view_render.upscaled(image, scale, self.width, self.height)
         if not moving:
             with self.cond:
                 self._check(generation)
@@ -298,18 +302,20 @@ class Preview:
         progress = {"pixels": 0, "last": time.perf_counter()}
         start = time.perf_counter()
 
-        def on_block(samples):
+        def on_block(pixels, rays):
             self._check(generation)
-            progress["pixels"] += samples // n
+            progress["pixels"] += pixels
             now = time.perf_counter()
             if now - progress["last"] > max(PUSH_SECONDS, 4 * self.show_seconds):
                 self._show(generation, job, (active, temp, features, progress["pixels"]),
-                           "progress", rays=work.rays_traced, seconds=now - start)
+                           "progress", rays=rays, seconds=now - start)
                 progress["last"] = time.perf_counter()
                 self.show_seconds = progress["last"] - now
 
-        work.trace(rows % self.width, rows // self.width, first, n, temp,
-                   np.arange(active.shape[0]), on_block, features)
+        path = view_render.path_rays(self.scene, job.settings, features is not None)
+        rays = self.blocks.trace(work, rows % self.width, rows // self.width, first, n, temp,
+                                 np.arange(active.shape[0]), path,
+                                 lambda: self._check(generation), on_block, features)
         seconds = time.perf_counter() - start
         self.paths_per_second = n * active.shape[0] / max(seconds, 1e-6)
         with self.cond:
@@ -323,7 +329,7 @@ class Preview:
                 self.features[job.rows] = job.features
             self.merged += 1
             job.seconds += seconds
-            job.rays += work.rays_traced
+            job.rays += rays
             job.samples += n * active.shape[0]
             job.current = None
         self._show(generation, job, None, "pass")

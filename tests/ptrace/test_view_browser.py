@@ -4,6 +4,7 @@ elsewhere they are skipped with the reason. Every wait is on a condition (WebDri
 import os
 import pathlib
 import shutil
+import time
 
 import numpy as np
 import pytest
@@ -231,3 +232,32 @@ def test_the_denoised_toggle_changes_the_image_and_labels_it(browser, serve):
     assert label.is_displayed() and label.text.endswith("denoised (biased)")
     shown = next(iter(server.server.sockets)).session.shown
     np.testing.assert_array_equal(after, course_8bit(shown.denoised))
+
+
+def test_a_refused_setting_is_said_and_leaving_the_page_stops_its_render(browser, serve):
+    """A value the viewer refuses is said on the page, its field shows the value kept and the
+    render goes on; leaving a page that renders expensive paths stops its render within a
+    second (the session's thread ends)."""
+    server = serve(spp=4096, max_depth=2)
+    open_page(browser, server)
+
+    def set_field(name, value):
+        browser.execute_script("arguments[0].value = arguments[1]; arguments[0].dispatchEvent("
+                               "new Event('change'))", browser.find_element("id", name), value)
+    set_field("light_samples", "1000000000")
+    message = browser.find_element("id", "message")
+    wait(browser, lambda: "light samples 1,000,000,000" in message.text)
+    assert message.text.startswith("error: ")
+    assert browser.find_element("id", "light_samples").get_attribute("value") == "1"
+    spp = stats(browser)["spp"]
+    wait(browser, lambda: stats(browser)["spp"] > spp)              # still rendering
+    session = next(iter(server.server.sockets)).session
+    set_field("light_samples", "1024")
+    set_field("max_depth", "8")
+    wait(browser, lambda: session.settings.max_depth == 8)
+    wait(browser, lambda: session.job.current is not None)          # a pass under way
+    browser.get("about:blank")
+    start = time.monotonic()
+    while session.running() and time.monotonic() - start < 30:
+        time.sleep(0.02)
+    assert time.monotonic() - start < 1.0 and not session.running()
