@@ -83,6 +83,25 @@ def moved(camera, home, op, dx=0.0, dy=0.0, factor=1.0):
     camera: any number not finite, or the target more than PAN_RANGE home distances from
     home's (so no sequence of moves can break a session's camera)."""
     reference = float(np.linalg.norm(home.position - home.target))
+    try:
+        camera = _moved(camera, op, dx, dy, factor, reference)
+    except PtraceError as error:   # a camera ptrace.camera refuses to make (not finite, ...)
+        if "unknown camera operation" in str(error):
+            raise
+        camera = None
+    with np.errstate(all="ignore"):
+        usable = camera is not None and all(np.isfinite(part).all() for part in
+                                            (camera.position, camera.target,
+                                             camera.camera_to_world)) \
+            and np.linalg.norm(camera.position - camera.target) > 0 \
+            and np.linalg.norm(camera.target - home.target) <= PAN_RANGE * reference
+    if not usable:
+        raise PtraceError(f"camera {op} refused: the view would not be usable (numbers not "
+                          f"finite, or the target more than {PAN_RANGE:g} view distances away)")
+    return camera
+
+
+def _moved(camera, op, dx, dy, factor, reference):
     with np.errstate(all="ignore"):
         if op == "orbit":
             camera = orbit(camera, -dx * np.pi / camera.width, -dy * np.pi / camera.width)
@@ -95,13 +114,6 @@ def moved(camera, home, op, dx=0.0, dy=0.0, factor=1.0):
             camera = zoom(camera, wanted / distance)
         elif op != "still":
             raise PtraceError(f"unknown camera operation {op!r}")
-        usable = all(np.isfinite(part).all() for part in
-                     (camera.position, camera.target, camera.camera_to_world)) \
-            and np.linalg.norm(camera.position - camera.target) > 0 \
-            and np.linalg.norm(camera.target - home.target) <= PAN_RANGE * reference
-    if not usable:
-        raise PtraceError(f"camera {op} refused: the view would not be usable (numbers not "
-                          f"finite, or the target more than {PAN_RANGE:g} view distances away)")
     return camera
 
 

@@ -60,10 +60,12 @@ HOSTILE = [   # (text, what the error reply says)
     ("[" * 2000 + "]" * 2000, "nested more than 1 deep"),
     ('{"type": "probe", "x": {"y": [1]}, "y": 0}', "nested"),
     (json.dumps({"type": "settings", "spp": 2 ** 64}), "beyond 2^63 - 1"),
-    (json.dumps({"type": "settings", "spp": 2 ** 40}), "samples must be from 1 to"),
+    (json.dumps({"type": "settings", "spp": 2 ** 40}), "from 1 to 4294967296"),
     (json.dumps({"type": "settings", "light_samples": 10 ** 9}),
-     "light samples 1,000,000,000 and depth 2: one path may trace"),
-    (json.dumps({"type": "settings", "max_depth": -1}), "max depth must not be negative"),
+     "light samples (-l) must be an integer from 1 to 65536"),
+    (json.dumps({"type": "settings", "light_samples": 65536, "max_depth": 100}),
+     "one path may trace"),
+    (json.dumps({"type": "settings", "max_depth": -1}), "max depth (-m) must be an integer from 0"),
     (json.dumps({"type": "settings", "spp": 1.5}), "spp must be an integer"),
     ('{"type": "camera", "op": "zoom", "factor": NaN, "moving": false}', "NaN is not a number"),
     ('{"type": "camera", "op": "orbit", "dx": Infinity, "dy": 0}', "Infinity is not a number"),
@@ -290,12 +292,12 @@ def test_resolution_samples_and_path_rays_are_bounded_at_start(tmp_path, capsys,
     buffers pass half the memory, samples beyond the sampler's, a seed beyond 64 bits and
     paths of more rays than one kernel call may trace; a resolution of which fewer than
     MAX_SESSIONS sessions fit in memory lowers the cap."""
-    for argv, text in ((["-r", "100000", "100000"], "-r 100000 100000: a viewer's per-pixel "
-                                                     "buffers would need"),
-                       (["-r", "9223372036854775807", "1"], "of memory"),
-                       (["-s", str(2 ** 64)], "-s must be from 1 to 4,294,967,296"),
-                       (["--seed", str(10 ** 20)], "--seed must be from 0 to"),
-                       (["-l", "1000000000"], "-l 1,000,000,000 and -m 1: one path may trace")):
+    for argv, text in ((["-r", "100000", "100000"], "buffers would need 1490.1 GiB"),
+                       (["-r", "9223372036854775807", "1"], "from 1 to 1048576"),
+                       (["-s", str(2 ** 64)], "from 1 to 4294967296"),
+                       (["--seed", str(10 ** 20)], "seed (--seed) must be an integer from 0 to"),
+                       (["-l", "1000000000"], "from 1 to 65536, got 1000000000"),
+                       (["-l", "65536", "-m", "100"], "-l 65,536 and -m 100: one path may trace")):
         assert cli.main(["view", str(SHIPPED), "--no-browser"] + argv) == cli.EXIT_USAGE
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("ptrace: error: ") and text in err, err
