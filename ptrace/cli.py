@@ -322,12 +322,19 @@ def run(argv):
         finally:
             if client is not None:
                 distributed.shutdown(client, cluster)
-    seconds = stats["render_seconds"]
+    seconds, build_seconds = stats["render_seconds"], stats["build_seconds"]
+    phases = stats.get("phases", {})
+    if "compile" in phases:   # in-process: the summary's seconds leave numba's compiler out
+        seconds = phases["records"] + phases["render"]
+        build_seconds = phases["build"]
+        if stats["counts"].get("compiled", 0) and not args.quiet:
+            print(f"ptrace: compiled kernels in {phases['compile']:.1f} s (cached for the next "
+                  f"runs)", file=sys.stderr)
     mean_spp = stats["samples"].mean()
     where = f"workers {stats['workers']} " if "workers" in stats else ""
     split = f" split {args.bvh_split}" if args.bvh_split != "mean" else ""
     print(f"{image.shape[1]}x{image.shape[0]} spp {args.spp} (mean {mean_spp:.1f}) "
-          f"{where}accel {args.accel}{split} build {stats['build_seconds']:.3f} s render {seconds:.3f} s "
+          f"{where}accel {args.accel}{split} build {build_seconds:.3f} s render {seconds:.3f} s "
           f"rays {stats['rays']} ({stats['rays'] / max(seconds, 1e-9):,.0f} rays/s) "
           f"non-finite samples dropped {stats['nonfinite']} -> {os.path.abspath(output)}")
     if args.denoise:
