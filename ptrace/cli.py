@@ -8,6 +8,7 @@ import argparse
 import contextlib
 import json
 import os
+import re
 import sys
 import traceback
 
@@ -201,17 +202,27 @@ def scene_info(scene):
 
 def grouped_notes(notes):
     """The loader's notes, one line per kind: a note '<element ...>: what' names where, and notes
-    that say the same `what` in several places become one line with the count and the first."""
+    that say the same `what` in several places, or the same up to its numbers (fan-triangulated
+    1 polygon here, 6 there), become one line with the count of places and the first; where
+    one of their numbers differs from place to place, the line gives its sum."""
     kinds = {}
     for note in notes:
         where, _, what = note.partition(": ") if note.startswith("<") else ("", "", note)
-        kinds.setdefault(what, []).append(where)
+        kinds.setdefault(re.sub(r"\d+", "#", what), []).append((where, what))
     lines = []
-    for what, places in kinds.items():
+    for kind, places in kinds.items():
+        where, what = places[0]
         if len(places) == 1:
-            lines.append(f"{places[0]}: {what}" if places[0] else what)
-        else:
-            lines.append(f"{what} ({len(places)} places, the first {places[0]})")
+            lines.append(f"{where}: {what}" if where else what)
+            continue
+        columns = list(zip(*[re.findall(r"\d+", text) for _, text in places]))
+        varying = [k for k, column in enumerate(columns) if len(set(column)) > 1]
+        if len(varying) == 1:   # one count that differs from place to place: their sum
+            values = iter([str(sum(map(int, column))) if k in varying else column[0]
+                           for k, column in enumerate(columns)])
+            what = re.sub(r"#", lambda _: next(values), kind)
+        first = f", the first {where}" if where else ""
+        lines.append(f"{what} ({len(places)} places{first})")
     return lines
 
 

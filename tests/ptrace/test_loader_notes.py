@@ -10,6 +10,8 @@ import pytest
 import ptrace
 from ptrace.cli import grouped_notes
 
+from console import SHIPPED
+
 PLY = """ply
 format ascii 1.0
 element vertex 6
@@ -54,6 +56,25 @@ def test_notes_of_one_kind_become_one_line_with_a_count():
         'fan-triangulated 2 polygon(s) (2 places, the first <polylist> in <geometry id="a">)',
         "no lights in the scene"]
     assert grouped_notes(notes[:1]) == [notes[0]]
+
+
+def test_notes_of_one_kind_with_other_numbers_are_one_line_too():
+    """Only the numbers differ (1 polygon in five places, 6 in another): still one kind, and
+    the line sums them; notes of another kind stay apart."""
+    notes = [f'<polylist> in <geometry id="{name}">: fan-triangulated 1 polygon(s) with more '
+             f'than 3 corners' for name in "abcde"]
+    notes += ['<polylist> in <geometry id="block">: fan-triangulated 6 polygon(s) with more '
+              'than 3 corners', '<p> in <geometry id="f">: skipped 2 polygon(s) with fewer than '
+              '3 corners']
+    assert grouped_notes(notes) == [
+        'fan-triangulated 11 polygon(s) with more than 3 corners (6 places, the first '
+        '<polylist> in <geometry id="a">)',
+        '<p> in <geometry id="f">: skipped 2 polygon(s) with fewer than 3 corners']
+
+
+def test_the_shipped_cornell_box_loads_without_a_note():
+    """A user's first render prints nothing but its summary."""
+    assert ptrace.load(SHIPPED).notes == []
 
 
 def run(*args):
