@@ -1,9 +1,9 @@
 """BSDFs in a local shading frame (normal = +z), as numba functions of one material index.
 
 Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine
-term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction) return from sample()
-the weight f / pdf already folded into f with pdf = 1 and `delta = True`; eval() of a delta BSDF
-is 0. Semantics follow docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi),
+term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`)
+return from bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf
+the discrete probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi),
 where the course's starter has pi).
 """
 import math

@@ -55,7 +55,7 @@ OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primiti
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
 # default first vertex after whose BSDF sample roulette may end a path: 5, Mitsuba's, chosen by
-# benchmarks/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
+# benchmarks/results/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
 # ptrace's earlier 2 and pbrt-v4's rule): starting at 2, q = min(0.95, throughput) ends dim
 # paths early and turns a dim mirror's chains into rare heavy ones (CBcoil: 4x the spread of a
 # pixel's mean, tests/ptrace/test_per_pixel.py)
