@@ -101,4 +101,23 @@ def camera_from_flags(scene, args, width, height):
         camera = default_camera(scene, width, height)
     if args.lens_radius is not None or args.focal_distance is not None:
         camera = camera.with_lens(args.lens_radius, args.focal_distance)
+    note = up_note(scene, args.up)
+    if note is not None:
+        scene.notes.append(note)
     return camera
+
+
+def up_note(scene, up):
+    """The note that --up turns the camera and not the lights that are about world +Y (the
+    ambient light's hemisphere, -e's sky), when up is not +Y and the scene has such a light."""
+    from .pointing import Y_UP, unit
+    from .scene import AMBIENT, ENVIRONMENT
+    if up is None or unit(up, "--up") @ np.array(Y_UP) > 1 - 1e-12:
+        return None
+    kinds = set(np.asarray(scene.lights.kind).tolist())
+    which = [what for kind, what in ((AMBIENT, "the ambient light's hemisphere"),
+                                     (ENVIRONMENT, "-e's environment")) if kind in kinds]
+    if not which:
+        return None
+    return (f"--up turns the camera, not the lighting: {' and '.join(which)} "
+            f"{'stays' if len(which) == 1 else 'stay'} about world +Y")

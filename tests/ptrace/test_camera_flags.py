@@ -179,6 +179,15 @@ def test_up_z_puts_plus_z_up_in_the_image(tmp_path):
     assert not (edge_on.sum(axis=-1) > 0).any()
 
 
+def test_up_says_the_ambient_light_stays_about_plus_y(tmp_path, capsys):
+    path = box_obj(tmp_path)
+    note = "--up turns the camera, not the lighting: the ambient light's hemisphere stays " \
+        "about world +Y"
+    for up, noted in (("0,0,1", True), ("0,3,0", False)):
+        assert main(["--info", "--up", up, str(path)]) == 0
+        assert (note in json.loads(capsys.readouterr().out)["notes"]) == noted
+
+
 def test_default_fov_at_800x600_is_the_course_cameras_focal_length():
     """--eye on a course scene without --fov: at 800x600 the course camera's focal length; from
     the course camera's own position and target, the course camera's axes."""
