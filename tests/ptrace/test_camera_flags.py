@@ -140,6 +140,17 @@ def test_the_render_fills_the_frame_not_a_centre_crop(box, size, touching):
     assert not margin[0] and not margin[-1] and margin.any()
 
 
+@pytest.mark.parametrize("scale", [1e-5, 1e7])
+def test_framing_reaches_a_model_in_any_units(tmp_path, scale):
+    """The loader's znear 0.001 and zfar 1e6 would clip a model 3e-5 wide or 3e7 wide away
+    entirely; the framing camera's clip planes reach its box."""
+    scene = ptrace.load(box_obj(tmp_path, LOWER * scale, UPPER * scale))
+    camera = ptrace.default_camera(scene, 16, 12)
+    assert_frames(camera, LOWER * scale, UPPER * scale)
+    covered = ptrace.render(scene, integrator="normals", resolution=(16, 12)).sum(axis=-1) > 0
+    assert covered.any(axis=0).all() and not covered[0].any()
+
+
 def test_fov_and_up_without_eye_reframe_a_mesh_file(box):
     camera = ptrace.framing_camera(box, 160, 120, fov=20)
     assert camera.vfov == pytest.approx(20)
