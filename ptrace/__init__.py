@@ -6,9 +6,11 @@ from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError
 from .image import show
 from .io import load
+from .pointing import default_camera, framing_camera, look_at
 from .renderer import render
 from .scene import Scene
 from .settings import Settings
 
 __all__ = ["Camera", "Environment", "PtraceError", "SceneError", "Scene", "Settings",
-           "course_camera", "load", "load_environment", "render", "show"]
+           "course_camera", "default_camera", "framing_camera", "load", "load_environment",
+           "look_at", "render", "show"]

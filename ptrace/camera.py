@@ -79,6 +79,19 @@ class Camera:
         """Same focal length in pixels, another window (docs/course.md#focal-length)."""
         return replace(self, width=int(width), height=int(height))
 
+    def project(self, points):
+        """Image points (px, py) of world points (N, 3), y counted from the bottom, in pixels
+        (the frame spans 0..width and 0..height), and their depths along the view axis (a
+        point at depth <= 0 is not in front of the camera and its image point means nothing):
+        the inverse of directions for the pinhole."""
+        local = (np.asarray(points, dtype=np.float64).reshape(-1, 3)
+                 - np.asarray(self.position, dtype=np.float64)) @ self.camera_to_world
+        depth = -local[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            px = 0.5 * self.width + self.screen_dist * local[:, 0] / depth
+            py = 0.5 * self.height + self.screen_dist * local[:, 1] / depth
+        return px, py, depth
+
     def directions(self, px, py):
         """World directions (unit) through image points (px, py); y counted from the bottom
         (the pinhole's: from the position, whatever the lens)."""

@@ -81,6 +81,7 @@ def _positive_float(name):
 def build_parser():
     import accel
 
+    from .cli_camera import add_camera_flags
     from .renderer import MAX_SIDE, PIXEL_BYTES
     from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
@@ -110,8 +111,9 @@ def build_parser():
     add("-r", "--resolution", nargs=2, type=_int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=(800, 600),
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
-             f"{PIXEL_BYTES} bytes a pixel) within half the machine's memory; keeps the focal "
-             f"length, so it crops (default 800 600)")
+             f"{PIXEL_BYTES} bytes a pixel) within half the machine's memory; a course scene's "
+             f"camera (and -c's) keeps the focal length, so it crops; a mesh file's default "
+             f"camera and --eye's frame the view at any size (default 800 600)")
     add("-f", "--output", default=None, metavar="FILE",
         help="output image, .png (the course's 8-bit curve) or .exr (linear float); "
              "default SCENE_NAME.png in the current directory")
@@ -119,6 +121,7 @@ def build_parser():
         default=None, help="render only this cell (y counted from the bottom) and save just it")
     add("-c", "--camera", default=None, metavar="FILE",
         help="the course's camera settings file (its focalDistance and lensRadius included)")
+    add_camera_flags(parser)
     add("-e", "--environment", default=None, metavar="FILE|R,G,B",
         help="an environment light (the course's -e): an image OpenImageIO reads (.exr, .hdr, "
              "...), lat-long with +Y up, or a constant colour such as 0.5,0.5,0.5")
@@ -127,7 +130,8 @@ def build_parser():
              "file's lensRadius)")
     add("-d", "--focal-distance", type=float, default=None, metavar="D",
         help="thin-lens focal distance along the view axis (the course's -d; default 4.7, or "
-             "the -c file's focalDistance)")
+             "the -c file's focalDistance, or for --eye and a mesh file's default camera the "
+             "distance to the point looked at)")
     add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
         help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
@@ -157,8 +161,10 @@ def build_parser():
     return parser
 
 
-def scene_info(scene):
-    from .camera import course_camera
+def scene_info(scene, camera=None):
+    """--info's summary of the scene; its camera is `camera`, default the scene's default
+    camera at 800x600."""
+    from .pointing import default_camera
     from .scene import KIND_NAMES, PHYSICAL
     lights = scene.lights
     entries = []
@@ -182,7 +188,7 @@ def scene_info(scene):
             entry.update(edge_x=lights.edge_x[i].tolist(), edge_y=lights.edge_y[i].tolist(),
                          area=float(lights.area[i]))
         entries.append(entry)
-    camera = course_camera(scene)
+    camera = default_camera(scene) if camera is None else camera
     bounds = scene.bounds()
     return {
         "file": os.path.abspath(scene.path),
@@ -244,13 +250,13 @@ def _notice(text):
 
 def run(argv):
     from . import load, render
-    from .camera import course_camera, load_camera_settings
+    from .cli_camera import attach_negative_vectors, camera_from_flags, check_pointing
     from .errors import PtraceError
     from .features import denoise, denoised_path, require_denoiser
     from .image import FORMATS, check_output_path, rate_colours, rate_path, write_images
     from .renderer import check_frame
     from .settings import Settings
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(attach_negative_vectors(argv))
     _one_line_warnings()
     if args.adaptive is not None:
         batch = _int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
@@ -282,18 +288,16 @@ def run(argv):
         Settings(spp=args.spp, light_samples=args.light_samples, max_depth=args.max_depth,
                  seed=args.seed, adaptive=args.adaptive)
         check_frame(*args.resolution, args.crop, features=aovs is not None)
+    check_pointing(args)
     scene = load(args.scene)
     if args.environment is not None:
         from .environment import load_environment
         scene = scene.with_environment(load_environment(args.environment))
-    if args.info:
-        print(json.dumps(scene_info(scene), indent=2))
-        return 0
     width, height = args.resolution
-    camera = load_camera_settings(args.camera, width, height) if args.camera else None
-    if args.lens_radius is not None or args.focal_distance is not None:
-        camera = (course_camera(scene, width, height) if camera is None else camera).with_lens(
-            args.lens_radius, args.focal_distance)
+    camera = camera_from_flags(scene, args, width, height)
+    if args.info:
+        print(json.dumps(scene_info(scene, camera), indent=2))
+        return 0
     if args.dashboard and args.workers is None:
         raise PtraceError("--dashboard needs --workers (a local cluster)")
     stats = {}

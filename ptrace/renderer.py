@@ -13,11 +13,12 @@ import warnings
 import numba
 import numpy as np
 
-from .camera import BASE_HEIGHT, BASE_WIDTH, course_camera
+from .camera import BASE_HEIGHT, BASE_WIDTH
 from .errors import PtraceError
 from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
 from .features import FEATURES, aov_images
 from .jit import cache_notes
+from .pointing import default_camera
 from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
@@ -90,9 +91,13 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
            notice=None, aovs=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
-    resolution is (W, H), default the course's 800x600 (a crop of the same focal length, not a
-    rescale); crop (x, y, dx, dy) renders only that cell (y counted from the bottom, like the
-    course) and returns it alone; camera overrides the course's camera; options are the light
+    resolution is (W, H), default the camera's own size, or without a camera the course's
+    800x600; camera (a ptrace.Camera: ptrace.course_camera, ptrace.look_at, ...) replaces
+    the scene's default camera (ptrace.pointing.default_camera: the course's for a course scene,
+    a size other than 800x600 being a crop of the same focal length, not a rescale; for a mesh
+    file, one that frames the scene's bounds at that size), and a given resolution other than
+    its own keeps its focal length in pixels; crop (x, y, dx, dy) renders only that cell (y
+    counted from the bottom, like the course) and returns it alone; options are the light
     transport flags of ptrace.settings.Settings: light_samples (-l, default 1), max_depth (-m,
     default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
     (default True; False runs every path to max_depth, for comparisons: the course has no such
@@ -113,7 +118,12 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     try:
         settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
                                          **options)
-        width, height = (BASE_WIDTH, BASE_HEIGHT) if resolution is None else resolution
+        if resolution is not None:
+            width, height = resolution
+        elif camera is not None:
+            width, height = camera.width, camera.height
+        else:
+            width, height = BASE_WIDTH, BASE_HEIGHT
         check_frame(width, height, crop, features=aovs is not None)
         width, height = int(width), int(height)
         previous_threads = numba.get_num_threads()
@@ -143,7 +153,8 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
 
 def _render(scene, settings, width, height, crop, camera, progress, stats, client,
             worker_threads, notice, phases, aovs):
-    camera = course_camera(scene, width, height) if camera is None else camera.resized(width, height)
+    camera = default_camera(scene, width, height) if camera is None \
+        else camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
     for message in scene_warnings(scene, settings):
         warnings.warn(message, RuntimeWarning, stacklevel=4)

@@ -66,9 +66,9 @@ def load_mesh(path):
         notes.append(f"mesh file: no light and no emissive material: one ambient light, "
                      f"radiance {AMBIENT_RADIANCE}")
     notes += [
-        "mesh file: camera on +Z looking toward -Z (view_point (0, 0, 1)), "
-        f"hfov {DEFAULT_HFOV}, vfov {DEFAULT_VFOV:.3f}, znear {DEFAULT_ZNEAR}, zfar {DEFAULT_ZFAR}",
-        "mesh file: coordinates used as they are (taken to be Y-up); file normals ignored",
+        "mesh file: default camera on the +Z side looking toward -Z, +Y up, framing the bounds "
+        f"at any -r, its longer image side spanning {DEFAULT_HFOV} degrees (--up, --eye: others)",
+        "mesh file: coordinates taken as they are (Y-up unless --up); file normals ignored",
     ]
     materials = Materials.from_records(records)
     lights = Lights.from_records(light_records)

@@ -312,7 +312,7 @@ def test_mesh_file_renders_and_its_notes_name_what_was_ignored(tmp_path):
     assert any("KHR_lights_punctual" in n for n in notes), notes
     assert not any("ambient light" in n for n in notes), notes
     image = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)
-    assert image.mean() > 0.05
+    assert image.mean() > 0.03   # lit by its lights: its emitters alone (-m 0) give 0.016
 
 
 def test_obj_diffuse_with_specular_is_a_glossy_coat(tmp_path):

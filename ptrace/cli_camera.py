@@ -1,0 +1,123 @@
+"""The camera flags of `ptrace` (and, through ptrace.cli.build_parser, of `ptrace view`):
+-c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing), -b/-d's
+thin lens, and the checks that refuse flags which do not go together in one line."""
+import argparse
+
+import numpy as np
+
+
+def _vector(name):
+    """A parser of X,Y,Z: three finite numbers, for the flag `name`."""
+    def parse(text):
+        parts = text.split(",")
+        try:
+            values = [float(part) for part in parts]
+        except ValueError:
+            values = None
+        if values is None or len(values) != 3 or not np.isfinite(values).all():
+            raise argparse.ArgumentTypeError(f"{name} must be three finite numbers X,Y,Z, got "
+                                             f"{text!r}")
+        return tuple(values)
+    return parse
+
+
+def _fov(text):
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or not 0 < value < 180:
+        raise argparse.ArgumentTypeError(f"--fov must be a number of degrees greater than 0 and "
+                                         f"less than 180, got {text!r}")
+    return value
+
+
+VECTOR_FLAGS = ("--eye", "--look-at", "--up")
+POINTING_NAMES = {"eye": "--eye", "target": "--look-at", "up": "--up", "fov": "--fov"}
+
+
+def attach_negative_vectors(argv):
+    """argv with `--eye -1,2,3` written `--eye=-1,2,3`: argparse takes a value that starts
+    with '-' and is not a plain number for a flag, not for the vector it is."""
+    out = list(argv)
+    for i, token in enumerate(out[:-1]):
+        if token in VECTOR_FLAGS and out[i + 1][:2] in ("-0", "-1", "-2", "-3", "-4", "-5",
+                                                        "-6", "-7", "-8", "-9", "-."):
+            out[i] = f"{token}={out[i + 1]}"
+            out[i + 1] = None
+    return [token for token in out if token is not None]
+
+
+def add_camera_flags(parser):
+    """--eye, --look-at, --up and --fov on `parser`."""
+    add = parser.add_argument
+    add("--eye", type=_vector("--eye"), default=None, metavar="X,Y,Z",
+        help="point a camera: stand it here (a pinhole on every scene kind; for -b and -d too)")
+    add("--look-at", type=_vector("--look-at"), default=None, metavar="X,Y,Z",
+        help="with --eye: the point at the image's centre (default: the centre of the scene's "
+             "bounds)")
+    add("--up", type=_vector("--up"), default=None, metavar="X,Y,Z",
+        help="the world's up, above the image's centre (default 0,1,0); without --eye, a mesh "
+             "file's default camera takes it as the file's up (a Z-up file: 0,0,1, seen from -Y)")
+    add("--fov", type=_fov, default=None, metavar="DEGREES",
+        help="the vertical field of view of --eye's camera (without --eye, of a mesh file's "
+             "default camera), from the image's bottom edge to its top edge, 0 < DEGREES < 180 "
+             "(default: the longer image side spans the scene camera's horizontal view at "
+             "800x600, 49.13434 degrees for a mesh file)")
+
+
+def check_pointing(args):
+    """Refuse, before the scene is read, camera flags that do not go together: -c with
+    --eye/--look-at/--up/--fov, --look-at without --eye, --up or --fov without --eye on a course
+    scene (which keeps the course's camera), and an --eye, --look-at and --up that give no view."""
+    from .errors import PtraceError
+    from .pointing import is_course_path, view_axes
+    given = [flag for flag, value in (("--eye", args.eye), ("--look-at", args.look_at),
+                                      ("--up", args.up), ("--fov", args.fov)) if value is not None]
+    if args.camera is not None and given:
+        raise PtraceError(f"-c (a camera file) and {given[0]} both give the camera: use one")
+    if args.look_at is not None and args.eye is None:
+        raise PtraceError("--look-at needs --eye (where the camera stands)")
+    if args.eye is None and given and is_course_path(args.scene):
+        raise PtraceError(f"{given[0]} without --eye: a course scene (.dae) keeps the course's "
+                          f"camera; give --eye to point one")
+    if args.eye is not None and args.look_at is not None:
+        view_axes(args.eye, args.look_at, args.up, POINTING_NAMES)
+
+
+def camera_from_flags(scene, args, width, height):
+    """The camera the flags give (-c, --eye/--look-at/--up/--fov, -b/-d) at width x height, or
+    the scene's default camera (ptrace.pointing.default_camera)."""
+    from .camera import load_camera_settings
+    from .pointing import default_camera, framing_camera, look_at
+    if args.camera is not None:
+        camera = load_camera_settings(args.camera, width, height)
+    elif args.eye is not None:
+        camera = look_at(scene, args.eye, args.look_at, args.up, args.fov, width, height,
+                                names=POINTING_NAMES)
+    elif args.up is not None or args.fov is not None:   # a mesh file (check_pointing)
+        camera = framing_camera(scene, width, height, args.up, args.fov, names=POINTING_NAMES)
+    else:
+        camera = default_camera(scene, width, height)
+    if args.lens_radius is not None or args.focal_distance is not None:
+        camera = camera.with_lens(args.lens_radius, args.focal_distance)
+    note = up_note(scene, args.up)
+    if note is not None:
+        scene.notes.append(note)
+    return camera
+
+
+def up_note(scene, up):
+    """The note that --up turns the camera and not the lights that are about world +Y (the
+    ambient light's hemisphere, -e's sky), when up is not +Y and the scene has such a light."""
+    from .pointing import Y_UP, unit
+    from .scene import AMBIENT, ENVIRONMENT
+    if up is None or unit(up, "--up") @ np.array(Y_UP) > 1 - 1e-12:
+        return None
+    kinds = set(np.asarray(scene.lights.kind).tolist())
+    which = [what for kind, what in ((AMBIENT, "the ambient light's hemisphere"),
+                                     (ENVIRONMENT, "-e's environment")) if kind in kinds]
+    if not which:
+        return None
+    return (f"--up turns the camera, not the lighting: {' and '.join(which)} "
+            f"{'stays' if len(which) == 1 else 'stay'} about world +Y")
