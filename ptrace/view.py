@@ -247,7 +247,9 @@ def parse(argv):
     parser.add_argument("--no-browser", action="store_true",
                         help="only print the URL, do not open a browser")
     parser.set_defaults(spp=VIEW_SPP)
-    args = parser.parse_args(argv)
+    from .cli_camera import attach_negative_vectors, check_pointing
+    args = parser.parse_args(attach_negative_vectors(argv))
+    check_pointing(args)
     for flag, given in (("--info", args.info), ("--aov", args.aov is not None),
                         ("--workers", args.workers is not None),
                         ("--scheduler", args.scheduler is not None),
@@ -263,7 +265,7 @@ def parse(argv):
 def prepare(args):
     """(scene, settings, camera, outputs) of the view's flags, checked as ptrace checks them."""
     from . import load
-    from .camera import course_camera, load_camera_settings
+    from .cli_camera import camera_from_flags
     from .renderer import _check_frame
     from .settings import Settings
     output = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".png"
@@ -291,10 +293,7 @@ def prepare(args):
     if args.environment is not None:
         from .environment import load_environment
         scene = scene.with_environment(load_environment(args.environment))
-    camera = load_camera_settings(args.camera, width, height) if args.camera \
-        else course_camera(scene, width, height)
-    if args.lens_radius is not None or args.focal_distance is not None:
-        camera = camera.with_lens(args.lens_radius, args.focal_distance)
+    camera = camera_from_flags(scene, args, width, height)   # -c, --eye ..., -b, -d
     return scene, settings, camera, (root + ".png", root + ".exr")
 
 

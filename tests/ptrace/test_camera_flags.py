@@ -322,3 +322,15 @@ def test_info_reports_the_flags_camera(tmp_path, capsys):
     framing = ptrace.default_camera(ptrace.load(path), 120, 160)
     np.testing.assert_allclose(camera["position"], framing.position)
     assert camera["vfov"] == pytest.approx(49.13434)
+
+
+def test_the_viewer_takes_the_camera_flags(tmp_path):
+    """ptrace view points the camera as ptrace does (it read the flags and ignored them)."""
+    from ptrace import view
+    output = str(tmp_path / "v.png")
+    scene, _, camera, _ = view.prepare(view.parse(
+        [str(SHIPPED), "-r", "64", "48", "-f", output, "--eye", "0,1,-3", "--look-at", "0,1,0"]))
+    np.testing.assert_allclose(camera.position, [0.0, 1.0, -3.0])
+    np.testing.assert_allclose(camera.target, [0.0, 1.0, 0.0])
+    with pytest.raises(ptrace.PtraceError, match="--look-at needs --eye"):
+        view.parse([str(SHIPPED), "--look-at", "0,1,0"])
