@@ -17,6 +17,7 @@ import numpy as np
 EXIT_INTERNAL = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141   # 128 + SIGPIPE, as a shell reports a writer whose reader left
 
 
 class _Parser(argparse.ArgumentParser):
@@ -380,6 +381,12 @@ def main(argv=None):
     except KeyboardInterrupt:
         print("ptrace: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:   # `ptrace --info X | head`: the reader has gone, as with any tool
+        try:
+            sys.stdout = open(os.devnull, "w")   # so Python's exit flush does not fail again
+        except OSError:
+            pass
+        return EXIT_BROKEN_PIPE
     except Exception as error:   # noqa: BLE001 - not the user's fault: a bug, told as one
         _internal_error(error)
         return EXIT_INTERNAL

@@ -207,3 +207,18 @@ def test_a_cold_cache_says_it_is_compiling_and_a_warm_one_does_not(tmp_path):
     assert float(render.group(1)) + float(build.group(1)) < float(compiled.group(1))
     warm = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
     assert warm.returncode == 0 and "compil" not in warm.stderr, warm.stderr
+
+
+def test_a_reader_that_leaves_early_is_no_internal_error(tmp_path):
+    """`ptrace --info SCENE | head -1`: the pipe closes under ptrace, which stops quietly
+    (exit 141, as a shell reports such a writer), with no traceback and no 'internal error'.
+    The reader's end is closed before ptrace starts, so its first write meets the closed pipe."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        result = subprocess.run([sys.executable, "-m", "ptrace", "--info", str(SHIPPED)],
+                                stdout=write, stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    assert result.returncode == 141, result.stderr
+    assert "internal error" not in result.stderr and "Traceback" not in result.stderr
