@@ -83,8 +83,9 @@ def build_parser():
     import accel
 
     from .cli_camera import add_camera_flags
+    from .integrator import AUTO_EVERY_LIGHT
     from .renderer import MAX_SIDE, PIXEL_BYTES
-    from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, SAMPLERS
+    from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, LIGHT_SAMPLERS, SAMPLERS
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
     add = parser.add_argument
@@ -109,6 +110,12 @@ def build_parser():
     add("--sampler", choices=SAMPLERS, default="sobol",
         help="random numbers: sobol (Owen-scrambled Sobol', stratified; default) or "
              "independent (uniform, like the course)")
+    add("--light-sampler", choices=LIGHT_SAMPLERS, default="auto",
+        help="which lights a vertex samples: all (-l samples of every light, one of each point "
+             "or directional light: the course's), power (-l samples in all, each of one light "
+             "chosen by its estimated power) or auto (all for a scene of at most "
+             f"{AUTO_EVERY_LIGHT} lights, the emissive primitives counting as one; else power; "
+             "the default)")
     add("-r", "--resolution", nargs=2, type=_int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=(800, 600),
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
@@ -325,6 +332,7 @@ def run(argv):
                            client=client, light_samples=args.light_samples,
                            max_depth=args.max_depth, adaptive=args.adaptive,
                            hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
+                           light_sampler=args.light_sampler,
                            bvh_split=args.bvh_split, notice=None if args.quiet else _notice,
                            aovs=aovs)
             images = [dict(path=output, radiance=image,

@@ -42,8 +42,10 @@ from .environment import (
 from .lights import (
     EMITTER,
     area_light_hit,
+    choose,
     emitter_arrays,
     light_is_delta,
+    light_selection,
     sample_emitter,
     sample_light,
 )
@@ -66,6 +68,13 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
+# Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
+# samples at a vertex each of one light chosen by power (ptrace.lights.light_selection), or
+# AUTO: every light while a scene has at most AUTO_EVERY_LIGHT of them, else by power
+LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO = 0, 1, 2
+AUTO_EVERY_LIGHT = 4
+DIM_CHOOSE = 4          # (power) key offsets from DIM_LIGHT: the choice of light, and the
+DIM_CHOOSE_PRIM = 5     # choice of an emissive primitive
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
                                          "vertex_normals", "material_index", "scale", "uv",
@@ -80,13 +89,14 @@ LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direct
                                          "edge_y", "area", "model", "cos_inner",
                                          "cos_outer", "faced", "emitter_prims",
                                          "emitter_cdf", "prim_pdf", "findable", "env_image",
-                                         "env_marginal", "env_conditional", "env_table"])
+                                         "env_marginal", "env_conditional", "env_table",
+                                         "select_cdf", "select_pmf"])
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width",
                                            "lens_radius", "focal_distance"])
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
                                  "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
-                                 "sampler"])
+                                 "sampler", "light_sampler"], defaults=[LIGHTS_AUTO])
 
 
 def _f64(array, shape_tail=None):
@@ -133,7 +143,7 @@ def scene_records(scene):
         np.concatenate([faced, np.zeros(extra, np.int64)]),
         prims, cdf, prim_pdf,
         bool(extra or np.isin(lights.kind, [AREA, AMBIENT, ENVIRONMENT]).any()),
-        *environment_arrays(scene.environment))
+        *environment_arrays(scene.environment), *light_selection(scene))
     return shapes, materials, light_arrays
 
 
@@ -302,18 +312,39 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             g += tg * (fg * scale) * eg
             b += tb * (fb * scale) * eb
         return r, g, b, rays
+    n = options.light_samples
+    power = options.light_sampler == LIGHTS_POWER or (
+        options.light_sampler == LIGHTS_AUTO and lights.kind.shape[0] > AUTO_EVERY_LIGHT)
     j = 0
-    for light in range(lights.kind.shape[0]):
+    for outer in range(n if power else lights.kind.shape[0]):
+        index = 0
+        light = outer
+        if power:   # light sample `outer` of -l: one light, chosen by power
+            index = sample * n + outer
+            light = choose(lights.select_cdf, sample_1d(
+                options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
+                base + DIM_LIGHT + 4 * outer + 2))
         light_kind = lights.kind[light]
         delta = light_is_delta(light_kind, lights.model[light])
-        count = 1 if delta else options.light_samples
+        count = 1 if delta or power else n
         for s in range(count):
-            index = sample * count + s
-            u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
-                               base + DIM_LIGHT + 2 * j)
+            if power:   # weight: the light's expected samples at this vertex
+                weight = n * lights.select_pmf[light]
+                u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
+                                   base + DIM_LIGHT + 4 * outer)
+            else:
+                weight = count
+                index = sample * count + s
+                u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
+                                   base + DIM_LIGHT + 2 * j)
             if light_kind == EMITTER:
-                u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
-                               base + DIM_SELECT + j)
+                if power:
+                    u0 = sample_1d(options, pixel, sample, index,
+                                   base + DIM_LIGHT + DIM_CHOOSE_PRIM,
+                                   base + DIM_LIGHT + 4 * outer + 3)
+                else:
+                    u0 = sample_1d(options, pixel, sample, index,
+                                   base + DIM_LIGHT + 2 * light + 1, base + DIM_SELECT + j)
                 lr, lg, lb, wx, wy, wz, dist, pdf = sample_emitter(
                     shapes, materials, lights.emitter_prims, lights.emitter_cdf,
                     lights.prim_pdf, px, py, pz, u0, u1, u2)
@@ -335,10 +366,10 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             wiy = wx * yx + wy * yy + wz * yz
             fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k,
                                    materials.specular, m, wox, woy, woz, wix, wiy, wiz)
-            scale = wiz / (count * pdf)
+            scale = wiz / (weight * pdf)
             if options.mis and not delta:
-                scale *= power_heuristic(count * pdf, bsdf_pdf(kind, alpha, wox, woy, woz, wix,
-                                                               wiy, wiz))
+                scale *= power_heuristic(weight * pdf, bsdf_pdf(kind, alpha, wox, woy, woz, wix,
+                                                                wiy, wiz))
             ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
             sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional or ambient light
             if dist != math.inf:
@@ -373,12 +404,16 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     sampling: the area lights (faced or not; the face itself then does not count again), the
     ambient light, the environment and the emissive primitives that are lights, each with its power heuristic
     weight against the light sampling that direct_light did at q (bsdf_pdf_ is this ray's
-    density). Area lights are transparent, as in the course: a ray passes on through them."""
+    density). Area lights are transparent, as in the course: a ray passes on through them.
+    When direct_light chose lights by power, a light's samples per vertex are -l times its
+    probability of being chosen, and its weight says so."""
     r = g = b = 0.0
     kinds = lights.kind
-    n = options.light_samples
+    power = options.light_sampler == LIGHTS_POWER or (
+        options.light_sampler == LIGHTS_AUTO and kinds.shape[0] > AUTO_EVERY_LIGHT)
     for light in range(kinds.shape[0]):
         kind = kinds[light]
+        n = options.light_samples * lights.select_pmf[light] if power else options.light_samples
         if kind == AREA:
             if delta and lights.faced[light]:
                 continue
@@ -412,6 +447,9 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
             b += weight * lights.radiance[light, 2]
     if m >= 0 and materials.kind[m] == EMISSION:
         weight = 1.0
+        n = options.light_samples   # the emissive primitives are the last light
+        if power and kinds.shape[0] > 0:
+            n = options.light_samples * lights.select_pmf[kinds.shape[0] - 1]
         if not delta:
             area_pdf = lights.prim_pdf[prim]
             if area_pdf == 0.0:

@@ -157,6 +157,13 @@ def emitter_arrays(scene):
     probability (by power, area times mean emission), prim_pdf (F + S,) float64: selection
     probability over area for those primitives, 0 elsewhere: the area density of sampling a
     point there)."""
+    faced, prims, cdf, prim_pdf, _ = _emitters(scene)
+    return faced, prims, cdf, prim_pdf
+
+
+def _emitters(scene):
+    """emitter_arrays' four arrays and the emissive primitives' total power (area times mean
+    emission, summed)."""
     g, lights = scene.geometry, scene.lights
     faced = np.zeros(len(lights), dtype=np.int64)
     sampled = []
@@ -168,7 +175,7 @@ def emitter_arrays(scene):
             sampled.append(prims)
     prim_pdf = np.zeros(g.triangle_count + g.sphere_count)
     if not sampled:
-        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, 0.0
     prims = np.sort(np.concatenate(sampled)).astype(np.int64)
     areas = np.empty(prims.shape[0])
     triangles = prims < g.triangle_count
@@ -191,13 +198,75 @@ def emitter_arrays(scene):
     power = areas * np.maximum(emission, 0.0)
     total = power.sum()
     if not total > 0.0:
-        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, 0.0
     probability = power / total
     cdf = np.cumsum(probability)
     cdf[-1] = 1.0
     nonzero = areas > 0.0
     prim_pdf[prims[nonzero]] = probability[nonzero] / areas[nonzero]
-    return faced, prims, cdf, prim_pdf
+    return faced, prims, cdf, prim_pdf, float(total)
+
+
+# -- choosing one light per light sample (--light-sampler power) ----------------------------------
+
+def light_selection(scene):
+    """(cdf, pmf) over the integrator's lights (the file's lights, then the emissive primitives
+    as one more light if there are any), each light's probability of being chosen for a light
+    sample in proportion to an estimate of the irradiance it gives a point of the scene: its
+    power over the square of the scene's radius r for lights that fall off (area lights, glTF's
+    point and spot lights, the emissive primitives), its radiance for the course's point lights
+    (which do not fall off) and directional lights, pi times it for the ambient light and the
+    environment (a hemisphere of that radiance). A light that can give light gets a probability
+    above zero (so choosing is unbiased); the course's spot lights, which give none, get zero."""
+    from .environment import LUMINANCE
+    from .scene import ENVIRONMENT
+    lights = scene.lights
+    _, prims, _, _, emitted = _emitters(scene)
+    bounds = scene.bounds()
+    radius = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0])) if bounds is not None else 1.0
+    r2 = max(radius * radius, 1e-300)
+    luminance = np.asarray(lights.radiance, dtype=np.float64).reshape(-1, 3) @ LUMINANCE
+    weight = np.zeros(len(lights) + (1 if prims.shape[0] else 0))
+    for i, kind in enumerate(np.asarray(lights.kind).tolist()):
+        physical = lights.model[i] == PHYSICAL
+        if kind == AREA:
+            weight[i] = luminance[i] * lights.area[i] / r2
+        elif kind == POINT:
+            weight[i] = luminance[i] / r2 if physical else luminance[i]
+        elif kind == SPOT:
+            weight[i] = luminance[i] / r2 if physical else 0.0
+        elif kind == DIRECTIONAL:
+            weight[i] = luminance[i]
+        elif kind == AMBIENT:
+            weight[i] = np.pi * luminance[i]
+        elif kind == ENVIRONMENT:
+            image = scene.environment.image if scene.environment is not None else np.ones(3)
+            weight[i] = np.pi * luminance[i] * float((image @ LUMINANCE).mean())
+    if prims.shape[0]:
+        weight[-1] = emitted / r2
+    weight = np.where(np.isfinite(weight) & (weight > 0.0), weight, 0.0)
+    total = weight.sum()
+    if not total > 0.0:   # nothing gives light: choose uniformly (every estimate is zero)
+        weight = np.ones_like(weight)
+        total = weight.sum()
+    pmf = weight / total
+    cdf = np.cumsum(pmf)
+    if cdf.size:
+        cdf[-1] = 1.0
+    return cdf, pmf
+
+
+@njit(cache=True, inline="always")
+def choose(cdf, u):
+    """The first index k with u < cdf[k] (cdf ascending, its last value 1)."""
+    lo, hi = 0, cdf.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if u < cdf[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

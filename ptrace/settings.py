@@ -7,13 +7,27 @@ import numpy as np
 import accel
 
 from .errors import PtraceError
-from .integrator import INDEPENDENT, NORMALS, PATH, RR_CAP, RR_DEPTH, SOBOL, Options
+from .integrator import (
+    AUTO_EVERY_LIGHT,
+    INDEPENDENT,
+    LIGHTS_ALL,
+    LIGHTS_AUTO,
+    LIGHTS_POWER,
+    NORMALS,
+    PATH,
+    RR_CAP,
+    RR_DEPTH,
+    SOBOL,
+    Options,
+)
 from .lights import emitter_arrays
 from .scene import DIRECTIONAL, POINT
 
 INTEGRATORS = ("path", "normals")
 DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
 SAMPLERS = ("sobol", "independent")   # --sampler
+LIGHT_SAMPLERS = ("auto", "all", "power")   # --light-sampler
+LIGHT_SAMPLER_CODES = {"auto": LIGHTS_AUTO, "all": LIGHTS_ALL, "power": LIGHTS_POWER}
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
@@ -58,7 +72,11 @@ class Settings:
     importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
     (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers);
     bvh_split: the BVH's split, "mean" (the seed's mean-centroid split) or "sah" (binned surface
-    area heuristic); only with accel="bvh".
+    area heuristic); only with accel="bvh". light_sampler: "all" (at each vertex -l samples of
+    every light, one of each point or directional light: the course's estimator), "power" (-l
+    samples at each vertex, each of one light chosen by its estimated power) or "auto" (all
+    while a scene has at most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive
+    primitives counting as one, else power).
     """
     spp: int = 1
     accel: str = "bvh"
@@ -74,6 +92,7 @@ class Settings:
     direct: str = "mis"
     sampler: str = "sobol"
     bvh_split: str = "mean"
+    light_sampler: str = "auto"
 
     def __post_init__(self):
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
@@ -94,6 +113,9 @@ class Settings:
         if self.sampler not in SAMPLERS:
             raise PtraceError(f"unknown sampler {self.sampler!r}; choose one of "
                               f"{', '.join(SAMPLERS)}")
+        if self.light_sampler not in LIGHT_SAMPLERS:
+            raise PtraceError(f"unknown light sampler {self.light_sampler!r}; choose one of "
+                              f"{', '.join(LIGHT_SAMPLERS)}")
         if self.bvh_split not in BVH_SPLITS:
             raise PtraceError(f"unknown BVH split {self.bvh_split!r}; choose one of "
                               f"{', '.join(BVH_SPLITS)}")
@@ -130,7 +152,7 @@ class Settings:
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
         known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
-                 "rr_depth", "direct", "sampler", "bvh_split"}
+                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
@@ -145,7 +167,8 @@ class Settings:
         mode = NORMALS if self.integrator == "normals" else PATH
         return Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
                        self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
-                       self.direct == "mis", SOBOL if self.sampler == "sobol" else INDEPENDENT)
+                       self.direct == "mis", SOBOL if self.sampler == "sobol" else INDEPENDENT,
+                       LIGHT_SAMPLER_CODES[self.light_sampler])
 
     def rays_per_path(self, scene):
         """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the
@@ -158,5 +181,8 @@ class Settings:
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
         emitters = int(emitter_arrays(scene)[1].shape[0] > 0)
         bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
+        if self.light_sampler == "power" or (self.light_sampler == "auto"
+                                             and len(lights) + emitters > AUTO_EVERY_LIGHT):
+            return 1 + self.light_samples + bsdf_ray
         return 1 + delta + self.light_samples * (len(lights) - delta + emitters) + bsdf_ray
 

@@ -285,6 +285,7 @@ def prepare(args):
         spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
         light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
         hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
+        light_sampler=args.light_sampler,
         bvh_split=args.bvh_split)
     width, height = args.resolution
     _check_frame(width, height, args.crop)
