@@ -23,6 +23,22 @@ def cpu_model():
     return platform.processor() or "unknown"
 
 
+def vector_extensions():
+    """The widest x86 vector extension the CPU reports (AVX-512 changes what SIMD code gains
+    over AVX2), or '' where /proc/cpuinfo has no flags."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                flags = set(line.split(":", 1)[1].split())
+                for name, flag in (("AVX-512", "avx512f"), ("AVX2", "avx2"), ("AVX", "avx"),
+                                   ("SSE4.2", "sse4_2")):
+                    if flag in flags:
+                        return name
+    except OSError:
+        pass
+    return ""
+
+
 def header(title):
     versions = []
     for name in PACKAGES:
@@ -30,12 +46,14 @@ def header(title):
             versions.append(f"{name} {metadata.version(name)}")
         except metadata.PackageNotFoundError:
             pass
+    vectors = vector_extensions() or "vector extensions unknown"
     command = "python -m " + " ".join(
         [__import__("__main__").__spec__.name if getattr(__import__("__main__"), "__spec__", None)
          else sys.argv[0]] + [shlex.quote(a) for a in sys.argv[1:]])
     return "\n".join([
         f"# {title}", "",
-        f"- machine: {os.cpu_count()} cores, {cpu_model()}, {platform.system()} {platform.machine()}",
+        f"- machine: {os.cpu_count()} cores, {cpu_model()} ({vectors}), {platform.system()} "
+        f"{platform.machine()}",
         f"- date: {datetime.datetime.now().strftime('%Y-%m-%d %H:%M')}",
         f"- python {platform.python_version()}; " + ", ".join(versions),
         f"- command: `{command}`", "", ""])

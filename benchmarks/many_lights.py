@@ -1,0 +1,113 @@
+"""Choosing lights in a room of many: every light at every vertex against -l lights chosen by
+power (--light-sampler), by relative MSE at equal samples and relative MSE x seconds.
+
+    python -m benchmarks.many_lights [--quick] [--spp 4 16] [--reference-spp 1024]
+        [--resolution 160 120] [--threads 2] [--output many_lights.md]
+
+The scene is scenes/make_many_lights.py's room (64 area lights of radiance 1 to 64 and 1,024
+emissive ceiling tiles), written to a temporary folder, seen from inside it (--eye 0,1.6,7.5
+--look-at 0,1.2,0 --fov 60), `-m 5 -l 1`. The reference is a --reference-spp render by power
+(seed 99; both estimators are unbiased, and the table shows each against it). Each estimator
+renders every spp in turns, seeds 0..repeats-1; its error is the median relative MSE (benchmarks'
+error_vs_time.relative_mse: pixels whose reference is at most 1) and its seconds the median wall
+seconds of the render call. Beside them, the paths per second of the same room lit by its
+brightest area light alone, the yardstick for the cost of having many lights.
+"""
+import argparse
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import ptrace
+
+from . import report
+from .error_vs_time import relative_mse
+
+ROOT = Path(__file__).resolve().parents[1]
+VIEW = dict(eye=(0.0, 1.6, 7.5), target=(0.0, 1.2, 0.0), fov=60.0)
+
+
+def room(folder, *flags):
+    path = Path(folder) / ("brightest.dae" if flags else "many_lights.dae")
+    subprocess.run([sys.executable, str(ROOT / "scenes" / "make_many_lights.py"), "-o",
+                    str(path), *flags], check=True, capture_output=True)
+    return ptrace.load(path)
+
+
+def render(scene, width, height, spp, seed, sampler, threads):
+    camera = ptrace.look_at(scene, VIEW["eye"], VIEW["target"], fov=VIEW["fov"], width=width,
+                            height=height)
+    stats = {}
+    start = time.perf_counter()
+    image = ptrace.render(scene, camera=camera, resolution=(width, height), spp=spp, seed=seed,
+                          light_samples=1, max_depth=5, light_sampler=sampler, threads=threads,
+                          stats=stats)
+    return image, time.perf_counter() - start, stats["rays"]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--spp", type=int, nargs="+", default=None)
+    parser.add_argument("--reference-spp", type=int, default=None)
+    parser.add_argument("--resolution", type=int, nargs=2, default=None)
+    parser.add_argument("--repeats", type=int, default=None)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--output", default="many_lights.md")
+    args = report.quick_defaults(parser.parse_args(argv), spp=([2], [4, 16]),
+                                 reference_spp=(64, 1024), resolution=((64, 48), (160, 120)),
+                                 repeats=(1, 3))
+    width, height = args.resolution
+    with tempfile.TemporaryDirectory() as folder:
+        scene, brightest = room(folder), room(folder, "--brightest-only")
+    for sampler in ("all", "power"):          # compile and warm both
+        render(scene, 8, 6, 1, 0, sampler, args.threads)
+    render(brightest, 8, 6, 1, 0, "all", args.threads)
+    reference, reference_seconds, _ = render(scene, width, height, args.reference_spp, 99,
+                                             "power", args.threads)
+    rows = {}
+    for spp in args.spp:
+        for repeat in range(args.repeats):
+            for sampler in ("all", "power"):
+                image, seconds, rays = render(scene, width, height, spp, repeat, sampler,
+                                              args.threads)
+                rows.setdefault((sampler, spp), []).append(
+                    (relative_mse(image, reference), seconds, rays, float(image.mean())))
+    yard = [render(brightest, width, height, args.spp[-1], r, "all", args.threads)[1]
+            for r in range(args.repeats)]
+    lines = [report.header("Many lights: every light at every vertex, or -l chosen by power"),
+             f"{width}x{height}, `-m 5 -l 1`, {args.threads} threads, the room of "
+             f"scenes/make_many_lights.py (64 area lights, 1,024 emissive tiles) from inside; "
+             f"reference {args.reference_spp} spp by power ({reference_seconds:.1f} s, mean "
+             f"{reference.mean():.4f}). Medians of {args.repeats} seeds.", "",
+             "| light sampler | spp | rel. MSE | seconds | rel. MSE x s | rays/path | paths/s | "
+             "mean |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    paths = width * height
+    summary = {}
+    for (sampler, spp), runs in sorted(rows.items(), key=lambda kv: (kv[0][1], kv[0][0])):
+        mse = statistics.median(r[0] for r in runs)
+        seconds = statistics.median(r[1] for r in runs)
+        rays = statistics.median(r[2] for r in runs)
+        summary[(sampler, spp)] = (mse, seconds)
+        lines.append(f"| {sampler} | {spp} | {mse:.4g} | {seconds:.2f} | {mse * seconds:.4g} | "
+                     f"{rays / (paths * spp):.2f} | {paths * spp / seconds:,.0f} | "
+                     f"{statistics.median(r[3] for r in runs):.4f} |")
+    lines += ["", "| spp | rel. MSE x s: all / power | paths/s: power, 1,000+ lights / the "
+                  "brightest light alone |", "|---:|---:|---:|"]
+    yard_rate = paths * args.spp[-1] / statistics.median(yard)
+    for spp in args.spp:
+        (mse_all, s_all), (mse_power, s_power) = summary[("all", spp)], summary[("power", spp)]
+        rate = paths * spp / s_power
+        lines.append(f"| {spp} | {mse_all * s_all / (mse_power * s_power):.1f}x | "
+                     f"{rate / yard_rate:.2f}x (brightest alone {yard_rate:,.0f} paths/s at "
+                     f"{args.spp[-1]} spp) |")
+    path = report.write(args.output, "\n".join(lines) + "\n")
+    print("\n".join(lines[-(len(args.spp) + 3):]))
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
