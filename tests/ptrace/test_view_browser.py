@@ -236,8 +236,8 @@ def test_the_denoised_toggle_changes_the_image_and_labels_it(browser, serve):
 
 def test_a_refused_setting_is_said_and_leaving_the_page_stops_its_render(browser, serve):
     """A value the viewer refuses is said on the page, its field shows the value kept and the
-    render goes on; leaving a page that renders expensive paths stops its render within a
-    second (the session's thread ends)."""
+    render goes on; leaving a page that renders expensive paths stops its render within one
+    kernel call (the session's thread ends), not after the block of paths it was tracing."""
     server = serve(spp=4096, max_depth=2)
     open_page(browser, server)
 
@@ -253,12 +253,14 @@ def test_a_refused_setting_is_said_and_leaving_the_page_stops_its_render(browser
     spp = stats(browser)["spp"]
     wait(browser, lambda: stats(browser)["spp"] > spp)              # still rendering
     session = next(iter(server.server.sockets)).session
-    set_field("light_samples", "1024")
-    set_field("max_depth", "8")
-    wait(browser, lambda: session.settings.max_depth == 8)
+    set_field("light_samples", "4096")
+    set_field("max_depth", "32")
+    wait(browser, lambda: session.settings.max_depth == 32)
     wait(browser, lambda: session.job.current is not None)          # a pass under way
     browser.get("about:blank")
     start = time.monotonic()
-    while session.running() and time.monotonic() - start < 30:
+    while session.running() and time.monotonic() - start < 60:
         time.sleep(0.02)
-    assert time.monotonic() - start < 1.0 and not session.running()
+    # a block of these paths took 43-55 s to stop before a closed page stopped within one call;
+    # a call is sized to about 0.1 s, and the bound leaves room for a loaded machine
+    assert time.monotonic() - start < 10.0 and not session.running()
