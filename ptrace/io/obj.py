@@ -1,0 +1,293 @@
+"""read_obj: a Wavefront OBJ file's triangles, texture coordinates, vertex colours and
+materials (through ptrace.io.mtl), read here rather than by trimesh.
+
+Why a reader of our own (chosen by trying each on hand-written and exported files):
+- trimesh 5's OBJ reader resolves negative (relative) indices against the end of the file,
+  not against the vertices read so far as the OBJ specification says, so every file written
+  with them (hand-written and exported Cornell boxes) collapses; it skips vertex lines written
+  `v<TAB>x y z`; it reads `map_Kd` silently or not at all (a backslash path, a missing file)
+  and gives a mesh with texture coordinates but no material a 2 x 2 placeholder texture as
+  its colour. A text pre-pass could fix the first two, but not the material handling.
+- The assimp bindings on PyPI read such geometry right, but impasse needs a system libassimp
+  and assimp-py bundles a 12 MB native library; both flatten the MTL to assimp's keys (no
+  `illum`, no map options), and assimp-py returns an empty scene for random bytes.
+OBJ is a line format; reading it whole here is short, and every statement it does not read
+is a note. Statements are read in order, so relative indices count the vertices read so far;
+the parsing of the (usually millions of) numbers is vectorised with numpy.
+"""
+import os
+import re
+
+import numpy as np
+
+from ..errors import SceneError
+from . import files, mtl
+
+IGNORED = {"o", "g", "s", "mg", "vn", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
+           "usemap", "bevel", "c_interp", "d_interp", "call", "csh"}
+FREE_FORM = {"cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole",
+             "scrv", "sp", "end", "con"}
+# the four forms of a face's corner: v, v/vt, v//vn, v/vt/vn (an index may be negative)
+CORNER_FORMS = {0: r"-?\d+", 1: r"-?\d+/-?\d+", 2: r"-?\d+//-?\d+", 3: r"-?\d+/-?\d+/-?\d+"}
+
+
+def read_obj(path):
+    """The parts of a scene (as ptrace.io.meshes assembles them) that an OBJ file gives."""
+    data = files.read_bytes(path)
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):     # UTF-16 text, with its byte order mark
+        try:
+            data = data.decode("utf-16").encode("utf-8")
+        except UnicodeError:
+            raise SceneError(path, "is not an OBJ file: it starts as UTF-16 text but is not "
+                                   "UTF-16") from None
+    if b"\x00" in data:
+        raise SceneError(path, "is not an OBJ file: it holds binary data (NUL bytes), and OBJ "
+                               "is text")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")     # names in a legacy encoding; the numbers are ASCII
+    state = _read_statements(path, text)
+    notes = state["notes"]
+    if not state["faces"]:
+        if state["v"]:
+            lines = " and lines" if state["skipped"].get("l") else ""
+            raise SceneError(path, f"contains no faces, only points (vertices{lines}): "
+                                   f"ptrace renders surfaces")
+        if state["unknown"]:
+            word, number = state["first_unknown"]
+            what = repr(word) if word.isascii() and word.isprintable() else "bytes that are " \
+                "not text"
+            raise SceneError(path, f"is not an OBJ file: line {number} starts with {what}, "
+                                   f"which is no OBJ statement, and there are no vertices")
+        raise SceneError(path, "the file contains no triangles (no face statements)")
+    vertices, colours = _vertex_rows(path, state["v"])
+    uv_rows = _uv_rows(path, state["vt"])
+    corner_v, corner_vt, counts = _corners(path, state, len(vertices), len(uv_rows))
+    triangles, face_of_triangle = _fan(counts, notes)
+    if len(triangles) == 0:
+        raise SceneError(path, "the file contains no triangles (every face has fewer than "
+                               "three corners)")
+    tri_v = corner_v[triangles]                   # (T, 3) vertex index of each corner
+    tri_vt = corner_vt[triangles]                 # (T, 3), -1 where a corner has none
+    has_uv = (tri_vt >= 0).all(axis=1)
+    uv = np.zeros((len(triangles), 3, 2))
+    if len(uv_rows):
+        uv[has_uv] = uv_rows[tri_vt[has_uv]]
+    used, faces = np.unique(tri_v, return_inverse=True)   # drop unreferenced vertices
+    faces = faces.reshape(-1, 3)
+    material_of_face = np.asarray(state["face_material"], dtype=np.int64)[face_of_triangle]
+    for word, count in sorted(state["skipped"].items()):
+        notes.append(f"OBJ: {count} {SKIPPED_NAMES.get(word, word)} statement(s) ignored "
+                     f"(ptrace renders surfaces)")
+    if state["unknown"]:
+        word, number = state["first_unknown"]
+        notes.append(f"OBJ: {state['unknown']} line(s) with unknown statements ignored (the "
+                     f"first, line {number}: {word!r})")
+    directory = os.path.dirname(os.path.abspath(path))
+    library = mtl.read_libraries(path, directory, state["mtllib"], notes)
+    return mtl.assemble(path, directory, library, state["material_names"], material_of_face,
+                        has_uv, uv, vertices[used], faces,
+                        colours[used] if colours is not None else None, notes)
+
+
+SKIPPED_NAMES = {"p": "point", "l": "line", "free-form": "free-form (curve or surface)"}
+
+
+def _read_statements(path, text):
+    """One pass over the lines, in order: the payload of every v, vt and f statement, and for
+    each face the counts of v and vt read before it (for relative indices), its line number
+    and its material (the last usemtl)."""
+    text = text.replace("\\\r\n", " ").replace("\\\n", " ")     # line continuations
+    state = {"v": [], "vt": [], "faces": [], "face_v": [], "face_vt": [], "face_line": [],
+             "face_material": [], "mtllib": [], "material_names": {}, "skipped": {},
+             "unknown": 0, "first_unknown": None, "notes": []}
+    v_rows, vt_rows, faces = state["v"], state["vt"], state["faces"]
+    face_v, face_vt, face_line, face_material = (state["face_v"], state["face_vt"],
+                                                 state["face_line"], state["face_material"])
+    names, skipped = state["material_names"], state["skipped"]
+    material = -1
+    for number, line in enumerate(text.splitlines(), 1):
+        words = line.split(None, 1)
+        if not words:
+            continue
+        key = words[0]
+        rest = words[1] if len(words) > 1 else ""
+        if key == "v" or key == "f" or key == "vt":
+            if "#" in rest:
+                rest = rest[:rest.index("#")]
+            if key == "v":
+                v_rows.append(rest)
+            elif key == "vt":
+                vt_rows.append(rest)
+            else:
+                faces.append(rest)
+                face_v.append(len(v_rows))
+                face_vt.append(len(vt_rows))
+                face_line.append(number)
+                face_material.append(material)
+        elif key[0] == "#":
+            continue
+        elif key == "usemtl":
+            material = names.setdefault(rest.strip(), len(names))
+        elif key == "mtllib":
+            state["mtllib"].append(rest.strip())
+        elif key in IGNORED:
+            continue
+        elif key in ("p", "l"):
+            skipped[key] = skipped.get(key, 0) + 1
+        elif key in FREE_FORM:
+            skipped["free-form"] = skipped.get("free-form", 0) + 1
+        else:
+            state["unknown"] += 1
+            if state["first_unknown"] is None:
+                state["first_unknown"] = (key[:40], number)
+    return state
+
+
+def _numbers(path, rows, what):
+    """The numbers of some statements' payloads, one flat float array."""
+    tokens = " ".join(rows).split()
+    try:
+        return np.array(tokens, dtype=np.float64)
+    except ValueError:
+        bad = next(t for t in tokens if not _is_number(t))
+        raise SceneError(path, f"a {what} has {bad[:40]!r} where a number belongs") from None
+
+
+def _is_number(token):
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
+
+
+def _vertex_rows(path, rows):
+    """(V, 3) positions, and (V, 3) colours or None: `v x y z`, `v x y z w` (w ignored) and
+    `v x y z r g b` (vertex colours, as MeshLab writes them)."""
+    flat = _numbers(path, rows, "vertex (v)")
+    if len(flat) == 3 * len(rows):
+        positions, colours = flat.reshape(-1, 3), None
+    else:
+        counts = np.array([len(row.split()) for row in rows])
+        if counts.min() < 3:
+            line = int(np.argmin(counts))
+            raise SceneError(path, f"vertex {line + 1} has {counts[line]} coordinate(s); a "
+                                   f"vertex needs three")
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        positions = flat[starts[:, None] + np.arange(3)]
+        coloured = counts >= 6
+        colours = None
+        if coloured.any():
+            colours = np.ones((len(rows), 3))
+            colours[coloured] = flat[starts[coloured, None] + np.arange(3, 6)]
+    return positions, colours
+
+
+def _uv_rows(path, rows):
+    """(N, 2) texture coordinates (u, v) of `vt u [v [w]]` statements (a missing v is 0)."""
+    if not rows:
+        return np.zeros((0, 2))
+    flat = _numbers(path, rows, "texture coordinate (vt)")
+    if len(flat) == 2 * len(rows):
+        return flat.reshape(-1, 2)
+    counts = np.array([len(row.split()) for row in rows])
+    if counts.min() < 1:
+        raise SceneError(path, "a texture coordinate (vt) statement has no numbers")
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    uv = np.zeros((len(rows), 2))
+    uv[:, 0] = flat[starts]
+    two = counts >= 2
+    uv[two, 1] = flat[starts[two] + 1]
+    return uv
+
+
+def _corners(path, state, vertex_count, uv_count):
+    """Per corner of every face: its vertex index and its texture coordinate index (-1 for
+    none), 0-based, relative indices resolved against the statements read before the face;
+    and the number of corners of each face."""
+    rows = state["faces"]
+    counts = np.fromiter((len(row.split()) for row in rows), dtype=np.int64, count=len(rows))
+    corners = " ".join(" ".join(rows).split())
+    first = corners.split(" ", 1)[0]
+    form = first.count("/") + (first.count("//") > 0)
+    pattern = CORNER_FORMS.get(form)
+    if pattern is not None and re.fullmatch(rf"{pattern}(?: {pattern})*", corners):
+        width = (1, 2, 2, 3)[form]
+        numbers = np.fromstring(corners.replace("//", " ").replace("/", " "), dtype=np.int64,
+                                sep=" ").reshape(-1, width)
+        raw_v = numbers[:, 0]
+        raw_vt = numbers[:, 1] if form in (1, 3) else np.zeros(len(numbers), np.int64)
+    else:     # corners of mixed forms: one at a time
+        raw_v, raw_vt = _mixed_corners(path, corners.split(" "))
+    per_corner = lambda values: np.repeat(np.asarray(values, dtype=np.int64), counts)
+    v = _resolve(path, raw_v, per_corner(state["face_v"]), vertex_count, "vertex",
+                 per_corner(state["face_line"]))
+    vt = _resolve(path, raw_vt, per_corner(state["face_vt"]), uv_count,
+                  "texture coordinate", per_corner(state["face_line"]), optional=True)
+    return v, vt, counts
+
+
+def _mixed_corners(path, corners):
+    raw_v = np.zeros(len(corners), np.int64)
+    raw_vt = np.zeros(len(corners), np.int64)
+    for i, corner in enumerate(corners):
+        parts = corner.split("/")
+        try:
+            raw_v[i] = int(parts[0])
+            if len(parts) > 1 and parts[1]:
+                raw_vt[i] = int(parts[1])
+            if len(parts) > 2 and parts[2]:
+                int(parts[2])
+        except (ValueError, OverflowError):
+            raise SceneError(path, f"a face corner {corner[:40]!r} is not of the form v, "
+                                   f"v/vt, v//vn or v/vt/vn (whole numbers)") from None
+        if len(parts) > 3:
+            raise SceneError(path, f"a face corner {corner[:40]!r} has more than three "
+                                   f"indices")
+    return raw_v, raw_vt
+
+
+def _resolve(path, raw, read_so_far, total, what, lines, optional=False):
+    """0-based indices of OBJ indices: positive ones count from 1 at the file's first
+    statement of their kind; negative ones count back from the last one read before the face
+    (-1 is the latest). 0 means none for an optional index (a missing vt) and is an error
+    otherwise. An index past what the file holds is an error naming the face's line."""
+    index = np.where(raw > 0, raw - 1, read_so_far + raw)
+    missing = raw == 0
+    if optional:
+        index[missing] = -1
+    elif missing.any():
+        line = int(lines[np.argmax(missing)])
+        raise SceneError(path, f"the face on line {line} has {what} index 0 (OBJ counts from 1)")
+    bad = ~missing & ((index < 0) | (index >= total))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise SceneError(path, f"the face on line {int(lines[i])} refers to {what} {int(raw[i])}, "
+                               f"but {_count(total, what)} "
+                               + ("are read before it" if raw[i] < 0 else "are in the file"))
+    return index
+
+
+def _count(n, what):
+    return f"only {n} {what}{'s' if n != 1 else ''}" if n else f"no {what}s"
+
+
+def _fan(counts, notes):
+    """Triangles (T, 3) as indices of corners, each face fanned from its first corner, and the
+    face each triangle came from. Faces with fewer than three corners are dropped (noted)."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    per_face = np.maximum(counts - 2, 0)
+    short = int((counts < 3).sum())
+    if short:
+        notes.append(f"OBJ: {short} face(s) with fewer than three corners dropped")
+    large = int((counts > 4).sum())
+    if large:
+        notes.append(f"OBJ: {large} polygon(s) with more than four corners fan-triangulated "
+                     f"from their first corner (right for convex polygons)")
+    face = np.repeat(np.arange(len(counts)), per_face)
+    step = np.arange(len(face)) - np.repeat(np.cumsum(per_face) - per_face, per_face) + 1
+    first = starts[face]
+    triangles = np.stack([first, first + step, first + step + 1], axis=1)
+    return triangles, face
