@@ -81,8 +81,15 @@ def resolve_reference(directory, reference, uri=False, base=None):
     try:
         mode = os.stat(path).st_mode
     except OSError:
-        where = "the model's folder" if remark else "the model's folder (as named)"
-        return None, f"was not found in {where}", None
+        if remark or "/" not in name.strip("/"):
+            where = "the model's folder" if remark else "the model's folder (as named)"
+            return None, f"was not found in {where}", None
+        # a path relative to where the exporter ran (`scenes/box.mtl` beside scenes/box.obj)
+        found, _, _ = resolve_reference(directory, name.rsplit("/", 1)[-1], base=base)
+        if found is None:
+            return None, "was not found in the model's folder (as named, nor by its base " \
+                         "name)", None
+        return found, None, "not found as named: read by its base name from the model's folder"
     if not stat.S_ISREG(mode):
         return None, f"is {_kind(mode)}, not a regular file", None
     return path, None, remark

@@ -212,9 +212,12 @@ def _transform_matrix(path, where, field, extension):
         values.append(checked)
     (ox, oy), (angle,), (sx, sy) = values
     c, s = math.cos(angle), math.sin(angle)
-    # the extension's GLSL, mat3(c, s, 0, -s, c, 0, 0, 0, 1), is column-major
+    # The rotation's sense is the one Khronos's conformance model TextureTransformTest checks
+    # (its arrow meets the green marker) and three.js's loader uses: u' = c u + s v,
+    # v' = -s u + c v. The extension's GLSL listing, mat3(c, s, 0, -s, c, 0, 0, 0, 1), read as
+    # GLSL's column-major, gives the opposite sense, which that model marks red.
     matrix = (np.array([[1, 0, ox], [0, 1, oy], [0, 0, 1]]) @
-              np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]) @ np.diag([sx, sy, 1.0]))
+              np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) @ np.diag([sx, sy, 1.0]))
     return None if np.allclose(matrix, np.eye(3)) else matrix
 
 

@@ -72,6 +72,9 @@ def load_mesh(path):
         light_records = [{"kind": AMBIENT, "radiance": (AMBIENT_RADIANCE,) * 3}]
         notes.append(f"mesh file: no light and no emissive material: one ambient light, "
                      f"radiance {AMBIENT_RADIANCE}")
+    elif not light_records:
+        notes.append("mesh file: no lights: its emissive materials are its only light (no "
+                     "default light; -e adds one)")
     notes += [
         "mesh file: camera on +Z looking toward -Z (view_point (0, 0, 1)), "
         f"hfov {DEFAULT_HFOV}, vfov {DEFAULT_VFOV:.3f}, znear {DEFAULT_ZNEAR}, zfar {DEFAULT_ZFAR}",
@@ -84,6 +87,12 @@ def load_mesh(path):
         geometry = accel.Geometry(vertices=vertices, faces=faces)
     except ValueError as error:
         raise SceneError(path, f"invalid mesh: {error}") from error
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    if not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
+        notes.append("mesh file: every face is edge-on to the default camera, which looks "
+                     "along the Z axis: the image shows nothing of the model (it is flat, in a "
+                     "plane that holds the Z axis)")
     pool = parts["textures"]
     return Scene(path=path, geometry=geometry,
                  vertex_normals=area_weighted_normals(geometry.vertices, geometry.faces),
@@ -132,6 +141,7 @@ def _read_with_trimesh(path, extension):
         resolver = files.trimesh_resolver(directory)
         if extension == ".ply":
             elements = ply.read_header(path, data)
+            notes += elements.pop("notes", [])
         if extension == ".stl":
             _check_stl(path, data)
     quiet = logging.getLogger("trimesh")
@@ -158,7 +168,9 @@ def _read_with_trimesh(path, extension):
                         geometry.visual = trimesh.visual.ColorVisuals(geometry,
                                                                       vertex_colors=colours)
                 geometry.process()
-            parts = _assemble(path, scene, document, missing, notes, extension)
+            # texture coordinates without a texture file: trimesh gives them a placeholder
+            untextured = elements is not None and not elements["texture"]
+            parts = _assemble(path, scene, document, missing, notes, untextured)
     except SceneError:
         raise
     except Exception as error:     # trimesh raises many kinds for a bad file
@@ -172,7 +184,7 @@ def _read_with_trimesh(path, extension):
     return parts
 
 
-def _assemble(path, scene, document, missing, notes, extension):
+def _assemble(path, scene, document, missing, notes, untextured):
     pool = TexturePool()
     records, by_key, built = [], {}, {}
     vertices, faces, material_index, uvs, colours, vertex_sets = [], [], [], [], [], []
@@ -190,6 +202,8 @@ def _assemble(path, scene, document, missing, notes, extension):
         v = v @ transform[:3, :3].T + transform[:3, 3]
         visual = getattr(geometry, "visual", None)
         material = getattr(visual, "material", None) if visual is not None else None
+        if untextured:      # a PLY with texture coordinates but no texture file
+            material = None
         kind = getattr(visual, "kind", None) if visual is not None else None
         uv = getattr(visual, "uv", None) if material is not None else None
         has_uv = uv is not None and len(uv) == len(v)

@@ -12,7 +12,8 @@ import numpy as np
 from ..errors import SceneError
 
 COLOUR_NAMES = (("red", "green", "blue"), ("r", "g", "b"),
-                ("diffuse_red", "diffuse_green", "diffuse_blue"))
+                ("diffuse_red", "diffuse_green", "diffuse_blue"),
+                ("color_0", "color_1", "color_2"))
 INTEGER_RANGE = {"uchar": 255, "uint8": 255, "char": 127, "int8": 127, "ushort": 65535,
                  "uint16": 65535, "short": 32767, "int16": 32767}
 MAX_HEADER = 1 << 20
@@ -21,15 +22,18 @@ MAX_HEADER = 1 << 20
 def read_header(path, data):
     """{element name: (count, {property name: type})} of a PLY file's header, checked: a file
     that is not PLY, or has no faces (only points, or triangle strips), is refused with the
-    reason."""
+    reason. Also "texture": whether a comment names a texture file, and "notes"."""
     if not data.startswith(b"ply") or data[3:4] not in (b"\n", b"\r"):
         raise SceneError(path, "is not a PLY file: it does not start with the line 'ply'")
     end = data.find(b"end_header", 0, MAX_HEADER)
     if end < 0:
         raise SceneError(path, "is not a valid PLY file: its header has no 'end_header' line")
     elements, current = {}, None
+    texture = False
     for line in data[:end].decode("latin-1").splitlines()[1:]:
         words = line.split()
+        if words[:1] == ["comment"] and "texturefile" in line.lower():
+            texture = True
         if not words or words[0] in ("comment", "obj_info", "format"):
             continue
         if words[0] == "element" and len(words) >= 3:
@@ -41,7 +45,7 @@ def read_header(path, data):
             current = elements.setdefault(words[1], (count, {}))
         elif words[0] == "property" and current is not None and len(words) >= 3:
             current[1][words[-1]] = words[1] if words[1] != "list" else "list"
-    faces = elements.get("face", (0, {}))[0]
+    faces, face_properties = elements.get("face", (0, {}))
     if faces <= 0:
         if elements.get("tristrips", (0, {}))[0] > 0:
             raise SceneError(path, "holds its faces as triangle strips (a 'tristrips' "
@@ -51,6 +55,10 @@ def read_header(path, data):
             raise SceneError(path, f"contains only points ({vertices} vertices, no faces): "
                                    f"ptrace renders surfaces")
         raise SceneError(path, "the file contains no triangles (no vertices and no faces)")
+    names = next((n for n in COLOUR_NAMES if all(p in face_properties for p in n)), None)
+    if names is not None:
+        elements["notes"] = [f"PLY: per-face colours ({' '.join(names)}) ignored"]
+    elements["texture"] = texture     # a 'comment TextureFile name' line names an image
     return elements
 
 

@@ -111,8 +111,9 @@ def test_a_missing_image_is_a_note_and_the_material_keeps_its_factor(tmp_path):
 
 
 def test_texture_transform_is_applied_to_the_texture_coordinates(tmp_path):
-    """KHR_texture_transform: uv' = T R S uv in glTF's uv space (v down); offset (0.5, 0.25),
-    rotation 0.3, scale (0.5, 2)."""
+    """KHR_texture_transform: uv' = T R S uv in glTF's uv space (v down), R's sense as
+    Khronos's TextureTransformTest model checks it; offset (0.5, 0.25), rotation 0.3, scale
+    (0.5, 2)."""
     material = json.loads(json.dumps(TEXTURED))
     transform = {"offset": [0.5, 0.25], "rotation": 0.3, "scale": [0.5, 2.0]}
     material["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = {
@@ -130,7 +131,7 @@ def test_texture_transform_is_applied_to_the_texture_coordinates(tmp_path):
             x, y, _ = scene.geometry.vertices[faces[f, k]]
             u, v = corner_uv[(round(x), round(y))]
             su, sv = 0.5 * u, 2.0 * v
-            tu, tv = c * su - s * sv + 0.5, s * su + c * sv + 0.25
+            tu, tv = c * su + s * sv + 0.5, -s * su + c * sv + 0.25
             np.testing.assert_allclose(scene.uv[f, k], [tu, 1 - tv], atol=1e-6)
 
 

@@ -182,3 +182,12 @@ def test_bad_obj_files_are_one_line_in_words(tmp_path, content, words):
     message = str(caught.value)
     assert "bad.obj" in message and words in message and "\n" not in message, message
     assert "Error" not in message, message
+
+
+def test_a_file_lit_only_by_its_emitters_says_so(tmp_path):
+    (tmp_path / "lamp.mtl").write_text("newmtl lamp\nKe 5 5 5\n")
+    path = write(tmp_path, "lamp.obj", "mtllib lamp.mtl\nusemtl lamp\nv 0 0 0\nv 1 0 0\n"
+                                       "v 0 1 0\nf 1 2 3\n")
+    scene = ptrace.load(path)
+    assert len(scene.lights) == 0
+    assert any("emissive materials are its only light" in n for n in scene.notes), scene.notes

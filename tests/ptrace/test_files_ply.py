@@ -51,3 +51,37 @@ def test_a_file_that_is_not_ply_says_so(tmp_path):
     path.write_bytes(b"\x00\x01binary junk")
     with pytest.raises(ptrace.SceneError, match="is not a PLY file"):
         ptrace.load(path)
+
+
+UV_PLY = "ply\nformat ascii 1.0\n{comment}element vertex 3\nproperty float x\n" \
+         "property float y\nproperty float z\nproperty float s\nproperty float t\n" \
+         "element face 1\nproperty list uchar int vertex_indices\nend_header\n" \
+         "0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n"
+
+
+def test_texture_coordinates_without_a_texture_file_get_the_default_albedo(tmp_path):
+    """trimesh gives them its 2 x 2 placeholder texture; ptrace the documented default."""
+    path = tmp_path / "uv.ply"
+    path.write_text(UV_PLY.format(comment=""))
+    scene = ptrace.load(path)
+    assert len(scene.textures) == 0
+    np.testing.assert_allclose(scene.materials.albedo[0], 0.5)
+    assert any("without a material" in n for n in scene.notes), scene.notes
+
+
+def test_a_texture_file_comment_is_the_albedo_texture(tmp_path):
+    from files_by_hand import png_bytes
+    (tmp_path / "skin.png").write_bytes(png_bytes("RGB", (0, 0, 255)))
+    path = tmp_path / "uv.ply"
+    path.write_text(UV_PLY.format(comment="comment TextureFile skin.png\n"))
+    scene = ptrace.load(path)
+    assert scene.materials.albedo_texture[0] == 0
+    np.testing.assert_allclose(scene.textures.texels[0], [0, 0, 1], atol=1e-4)
+
+
+def test_a_flat_model_edge_on_to_the_default_camera_is_noted(tmp_path):
+    """One triangle in the plane x = 0, the default camera looking along -Z: an empty image,
+    said in a note rather than silently."""
+    path = write(tmp_path, rows=("0 0 0", "0 1 0", "0 0 1"))
+    assert any("edge-on" in n for n in ptrace.load(path).notes)
+    assert not any("edge-on" in n for n in ptrace.load(write(tmp_path)).notes)
