@@ -200,6 +200,18 @@ def prepare(path):
     for i, material in enumerate(_list(copy.get("materials"))):
         if isinstance(material, dict):
             material["name"] = f"{TAG}{i}"
+    accessors = _list(copy.get("accessors"))
+    for mesh in _list(copy.get("meshes")):
+        for primitive in _list(_dict(mesh).get("primitives")):
+            attributes = _dict(_dict(primitive).get("attributes"))
+            uv = attributes.get("TEXCOORD_0")
+            if isinstance(uv, int) and 0 <= uv < len(accessors) and \
+                    _dict(accessors[uv]).get("componentType", 5126) != 5126:
+                # trimesh reads normalized integers unscaled: drop them, not a wrong texture
+                del attributes["TEXCOORD_0"]
+                notes.append(f"<mesh {_dict(mesh).get('name', '')!r}>: texture coordinates "
+                             f"stored as normalized integers are not read: its textures are "
+                             f"not applied")
     text = json.dumps(copy).encode("utf-8")
     resolver = files.trimesh_resolver(directory, uri=True)
     if binary is None and not path.lower().endswith(".glb"):

@@ -55,7 +55,7 @@ def read_obj(path):
             raise SceneError(path, f"contains no faces, only points (vertices{lines}): "
                                    f"ptrace renders surfaces")
         if state["unknown"]:
-            word, number = state["first_unknown"]
+            word, number = state["first_unknown"], _line_number(state, None, 0)
             what = repr(word) if word.isascii() and word.isprintable() else "bytes that are " \
                 "not text"
             raise SceneError(path, f"is not an OBJ file: line {number} starts with {what}, "
@@ -76,12 +76,12 @@ def read_obj(path):
         uv[has_uv] = uv_rows[tri_vt[has_uv]]
     used, faces = np.unique(tri_v, return_inverse=True)   # drop unreferenced vertices
     faces = faces.reshape(-1, 3)
-    material_of_face = np.asarray(state["face_material"], dtype=np.int64)[face_of_triangle]
+    material_of_face = _per_face(state["materials"], len(counts), -1)[face_of_triangle]
     for word, count in sorted(state["skipped"].items()):
         notes.append(f"OBJ: {count} {SKIPPED_NAMES.get(word, word)} statement(s) ignored "
                      f"(ptrace renders surfaces)")
     if state["unknown"]:
-        word, number = state["first_unknown"]
+        word, number = state["first_unknown"], _line_number(state, None, 0)
         notes.append(f"OBJ: {state['unknown']} line(s) with unknown statements ignored (the "
                      f"first, line {number}: {word!r})")
     directory = os.path.dirname(os.path.abspath(path))
@@ -95,41 +95,50 @@ SKIPPED_NAMES = {"p": "point", "l": "line", "free-form": "free-form (curve or su
 
 
 def _read_statements(path, text):
-    """One pass over the lines, in order: the payload of every v, vt and f statement, and for
-    each face the counts of v and vt read before it (for relative indices), its line number
-    and its material (the last usemtl)."""
-    text = text.replace("\\\r\n", " ").replace("\\\n", " ")     # line continuations
-    state = {"v": [], "vt": [], "faces": [], "face_v": [], "face_vt": [], "face_line": [],
-             "face_material": [], "mtllib": [], "material_names": {}, "skipped": {},
-             "unknown": 0, "first_unknown": None, "notes": []}
-    v_rows, vt_rows, faces = state["v"], state["vt"], state["faces"]
-    face_v, face_vt, face_line, face_material = (state["face_v"], state["face_vt"],
-                                                 state["face_line"], state["face_material"])
+    """One pass over the lines, in order: the payload of every v, vt and f statement, where
+    each run of faces starts (with the counts of v and vt read before it, for relative
+    indices), and each usemtl's face. The common lines (`v `, `vt `, `f ` at the line's start)
+    take a short path; the rest (tabs, indentation, other statements) are split into words."""
+    lines = text.replace("\\\r\n", " ").replace("\\\n", " ").splitlines()
+    state = {"v": [], "vt": [], "faces": [], "runs": [], "materials": [], "mtllib": [],
+             "material_names": {}, "skipped": {}, "unknown": 0, "first_unknown": None,
+             "notes": [], "lines": lines}
+    v_rows, vt_rows, faces, runs = state["v"], state["vt"], state["faces"], state["runs"]
     names, skipped = state["material_names"], state["skipped"]
-    material = -1
-    for number, line in enumerate(text.splitlines(), 1):
+    in_faces = False
+    for line in lines:
+        head = line[:2]
+        if head == "v ":
+            v_rows.append(line[2:])
+            in_faces = False
+            continue
+        if head == "f ":
+            if not in_faces:
+                runs.append((len(faces), len(v_rows), len(vt_rows)))
+                in_faces = True
+            faces.append(line[2:])
+            continue
+        if head == "vt" and line[2:3] == " ":
+            vt_rows.append(line[3:])
+            in_faces = False
+            continue
         words = line.split(None, 1)
-        if not words:
+        if not words or words[0][0] == "#" or words[0] == "vn":
             continue
-        key = words[0]
-        rest = words[1] if len(words) > 1 else ""
-        if key == "v" or key == "f" or key == "vt":
-            if "#" in rest:
-                rest = rest[:rest.index("#")]
-            if key == "v":
-                v_rows.append(rest)
-            elif key == "vt":
-                vt_rows.append(rest)
-            else:
-                faces.append(rest)
-                face_v.append(len(v_rows))
-                face_vt.append(len(vt_rows))
-                face_line.append(number)
-                face_material.append(material)
-        elif key[0] == "#":
-            continue
+        key, rest = words[0], (words[1] if len(words) > 1 else "")
+        if key == "v":
+            v_rows.append(rest)
+            in_faces = False
+        elif key == "vt":
+            vt_rows.append(rest)
+            in_faces = False
+        elif key == "f":
+            if not in_faces:
+                runs.append((len(faces), len(v_rows), len(vt_rows)))
+                in_faces = True
+            faces.append(rest)
         elif key == "usemtl":
-            material = names.setdefault(rest.strip(), len(names))
+            state["materials"].append((len(faces), names.setdefault(rest.strip(), len(names))))
         elif key == "mtllib":
             state["mtllib"].append(rest.strip())
         elif key in IGNORED:
@@ -141,8 +150,37 @@ def _read_statements(path, text):
         else:
             state["unknown"] += 1
             if state["first_unknown"] is None:
-                state["first_unknown"] = (key[:40], number)
+                state["first_unknown"] = key[:40]
+    for key in ("v", "vt", "faces"):        # comments after the numbers
+        rows = state[key]
+        if "#" in "".join(rows):
+            state[key] = [row.split("#", 1)[0] for row in rows]
     return state
+
+
+def _line_number(state, key, index):
+    """The line number of the index-th statement of kind key ("f", or the first unknown)."""
+    seen = 0
+    for number, line in enumerate(state["lines"], 1):
+        words = line.split(None, 1)
+        if words and (words[0] == key or key is None and words[0] == state["first_unknown"]):
+            if seen == index:
+                return number
+            seen += 1
+    return 0
+
+
+def _per_face(changes, count, default):
+    """Per face, the value of the last (face index, value) change at or before it."""
+    values = np.full(count, default, dtype=np.int64)
+    if not changes:
+        return values
+    starts = np.array([c[0] for c in changes], dtype=np.int64)
+    given = np.array([c[1] for c in changes], dtype=np.int64)
+    last = np.append(starts[1:] != starts[:-1], True)       # of changes at one face, the last
+    starts, given = starts[last], given[last]
+    values[starts[0]:] = np.repeat(given, np.diff(np.append(starts, count)))
+    return values
 
 
 def _numbers(path, rows, what):
@@ -208,8 +246,14 @@ def _corners(path, state, vertex_count, uv_count):
     none), 0-based, relative indices resolved against the statements read before the face;
     and the number of corners of each face."""
     rows = state["faces"]
-    counts = np.fromiter((len(row.split()) for row in rows), dtype=np.int64, count=len(rows))
-    corners = " ".join(" ".join(rows).split())
+    text = "\n".join(rows)
+    if any(c in text for c in ("\t", "\r", "\f", "\v", "  ", " \n", "\n ")) or \
+            text[:1] == " " or text[-1:] == " ":      # whitespace other than single spaces
+        text = re.sub(r"[ \t\r\f\v]+", " ", text)
+        text = re.sub(r" ?\n ?", "\n", text).strip(" ")
+    counts = np.fromiter((row.count(" ") + 1 if row else 0 for row in text.split("\n")),
+                         dtype=np.int64, count=len(rows))
+    corners = text.replace("\n", " ") if counts.all() else " ".join(text.split())
     first = corners.split(" ", 1)[0]
     form = first.count("/") + (first.count("//") > 0)
     pattern = CORNER_FORMS.get(form)
@@ -221,11 +265,13 @@ def _corners(path, state, vertex_count, uv_count):
         raw_vt = numbers[:, 1] if form in (1, 3) else np.zeros(len(numbers), np.int64)
     else:     # corners of mixed forms: one at a time
         raw_v, raw_vt = _mixed_corners(path, corners.split(" "))
-    per_corner = lambda values: np.repeat(np.asarray(values, dtype=np.int64), counts)
-    v = _resolve(path, raw_v, per_corner(state["face_v"]), vertex_count, "vertex",
-                 per_corner(state["face_line"]))
-    vt = _resolve(path, raw_vt, per_corner(state["face_vt"]), uv_count,
-                  "texture coordinate", per_corner(state["face_line"]), optional=True)
+    runs = state["runs"]
+    read_v = np.repeat(_per_face([(r[0], r[1]) for r in runs], len(rows), 0), counts)
+    read_vt = np.repeat(_per_face([(r[0], r[2]) for r in runs], len(rows), 0), counts)
+    face = np.repeat(np.arange(len(rows)), counts)
+    v = _resolve(path, state, raw_v, read_v, vertex_count, "vertex", face)
+    vt = _resolve(path, state, raw_vt, read_vt, uv_count, "texture coordinate", face,
+                  optional=True)
     return v, vt, counts
 
 
@@ -249,7 +295,7 @@ def _mixed_corners(path, corners):
     return raw_v, raw_vt
 
 
-def _resolve(path, raw, read_so_far, total, what, lines, optional=False):
+def _resolve(path, state, raw, read_so_far, total, what, faces, optional=False):
     """0-based indices of OBJ indices: positive ones count from 1 at the file's first
     statement of their kind; negative ones count back from the last one read before the face
     (-1 is the latest). 0 means none for an optional index (a missing vt) and is an error
@@ -259,12 +305,13 @@ def _resolve(path, raw, read_so_far, total, what, lines, optional=False):
     if optional:
         index[missing] = -1
     elif missing.any():
-        line = int(lines[np.argmax(missing)])
+        line = _line_number(state, "f", int(faces[np.argmax(missing)]))
         raise SceneError(path, f"the face on line {line} has {what} index 0 (OBJ counts from 1)")
     bad = ~missing & ((index < 0) | (index >= total))
     if bad.any():
         i = int(np.argmax(bad))
-        raise SceneError(path, f"the face on line {int(lines[i])} refers to {what} {int(raw[i])}, "
+        line = _line_number(state, "f", int(faces[i]))
+        raise SceneError(path, f"the face on line {line} refers to {what} {int(raw[i])}, "
                                f"but {_count(total, what)} "
                                + ("are read before it" if raw[i] < 0 else "are in the file"))
     return index

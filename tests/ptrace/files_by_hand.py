@@ -46,7 +46,8 @@ def gltf(path, primitives, materials=(), images=(), samplers=(), textures=None, 
     """Write a glTF 2.0 file (.gltf with an embedded buffer, or a .glb by path's extension).
 
     primitives: dicts with "positions" (N, 3), "indices" (M,) and optional "uv" (N, 2, glTF's
-    v down), "colours" (N, 3 or 4 floats), "material" (index), "mode", "extensions". Each
+    v down; "uv_normalized": stored as normalized uint16), "colours" (N, 3 or 4 floats),
+    "material" (index), "mode", "extensions". Each
     becomes one mesh on one node (unless nodes is given). images: bytes (embedded in the
     buffer) or a str URI. textures: default one per image. document: entries merged last.
     buffer_uri: write the buffer to this file name beside the .gltf instead of embedding."""
@@ -68,7 +69,11 @@ def gltf(path, primitives, materials=(), images=(), samplers=(), textures=None, 
     for primitive in primitives:
         attributes = {"POSITION": accessor(np.asarray(primitive["positions"], np.float32),
                                            5126, "VEC3")}
-        if primitive.get("uv") is not None:
+        if primitive.get("uv") is not None and primitive.get("uv_normalized"):
+            attributes["TEXCOORD_0"] = accessor(
+                np.round(np.asarray(primitive["uv"]) * 65535).astype(np.uint16), 5123, "VEC2")
+            accessors[-1]["normalized"] = True
+        elif primitive.get("uv") is not None:
             attributes["TEXCOORD_0"] = accessor(np.asarray(primitive["uv"], np.float32), 5126,
                                                 "VEC2")
         if primitive.get("colours") is not None:

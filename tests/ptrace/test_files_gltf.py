@@ -250,3 +250,14 @@ def test_a_file_of_points_says_why_it_has_no_triangles(tmp_path):
     gltf(path, [quad(mode=0)])
     message = load_error(path)
     assert "no triangles" in message and "points" in message, message
+
+
+def test_normalized_integer_texture_coordinates_drop_the_texture_with_a_note(tmp_path):
+    """glTF allows them; trimesh reads them unscaled (every uv in the thousands): the texture
+    is not applied rather than sampled at wrong places."""
+    path = tmp_path / "q.glb"
+    gltf(path, [quad(material=0, uv_normalized=True)], materials=[TEXTURED],
+         images=[png_bytes("RGB")])
+    scene = ptrace.load(path)
+    assert scene.materials.albedo_texture[0] == -1
+    assert any("normalized integers" in n for n in scene.notes), scene.notes
