@@ -90,10 +90,13 @@ def check_extensions(path, document, notes):
     """Refuse a file that requires an extension ptrace does not read (the glTF specification:
     a loader that does not support a required extension must not load the file), and one
     whose meshes are compressed (Draco: trimesh would leave zeros in their place)."""
-    required = [e for e in _list(document.get("extensionsRequired")) if e not in READ_EXTENSIONS]
-    for name in required:
-        why = WHY_NOT.get(name, "which ptrace does not read")
-        raise SceneError(path, f"requires the glTF extension {name} ({why})")
+    required = [str(e)[:60] for e in _list(document.get("extensionsRequired"))
+                if e not in READ_EXTENSIONS]
+    if required:
+        whys = "; ".join(f"{name} ({WHY_NOT.get(name, 'which ptrace does not read')})"
+                         for name in required)
+        raise SceneError(path, f"requires the glTF extension{'s' if len(required) > 1 else ''} "
+                               f"{whys}")
     for mesh in _list(document.get("meshes")):
         for primitive in _list(_dict(mesh).get("primitives")):
             primitive = _dict(primitive)
