@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import SceneError
 from . import files, mtl
 
-IGNORED = {"o", "g", "s", "mg", "vn", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
+IGNORED = {"o", "g", "s", "mg", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
            "usemap", "bevel", "c_interp", "d_interp", "call", "csh"}
 FREE_FORM = {"cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole",
              "scrv", "sp", "end", "con"}
@@ -63,7 +63,8 @@ def read_obj(path):
         raise SceneError(path, "the file contains no triangles (no face statements)")
     vertices, colours = _vertex_rows(path, state["v"])
     uv_rows = _uv_rows(path, state["vt"])
-    corner_v, corner_vt, counts = _corners(path, state, len(vertices), len(uv_rows))
+    corner_v, corner_vt, corner_vn, counts = _corners(path, state, len(vertices),
+                                                      len(uv_rows))
     triangles, face_of_triangle = _fan(counts, notes)
     if len(triangles) == 0:
         raise SceneError(path, "the file contains no triangles (every face has fewer than "
@@ -74,7 +75,13 @@ def read_obj(path):
     uv = np.zeros((len(triangles), 3, 2))
     if len(uv_rows):
         uv[has_uv] = uv_rows[tri_vt[has_uv]]
-    used, faces = np.unique(tri_v, return_inverse=True)   # drop unreferenced vertices
+    # A vertex is a (v, vn) pair: where the file gives one position two normals (a hard edge,
+    # a cube's corner) the faces there do not share a vertex, so the area-weighted normals
+    # ptrace computes are smooth only where the file's are. The normals' values are not read.
+    # Unreferenced vertices are dropped.
+    span = state["vn"] + 1
+    keys, faces = np.unique(tri_v * span + corner_vn[triangles] + 1, return_inverse=True)
+    used = keys // span
     faces = faces.reshape(-1, 3)
     material_of_face = _per_face(state["materials"], len(counts), -1)[face_of_triangle]
     for word, count in sorted(state["skipped"].items()):
@@ -100,12 +107,12 @@ def _read_statements(path, text):
     indices), and each usemtl's face. The common lines (`v `, `vt `, `f ` at the line's start)
     take a short path; the rest (tabs, indentation, other statements) are split into words."""
     lines = text.replace("\\\r\n", " ").replace("\\\n", " ").splitlines()
-    state = {"v": [], "vt": [], "faces": [], "runs": [], "materials": [], "mtllib": [],
+    state = {"v": [], "vt": [], "faces": [], "runs": [], "materials": [], "mtllib": [], "vn": 0,
              "material_names": {}, "skipped": {}, "unknown": 0, "first_unknown": None,
              "notes": [], "lines": lines}
     v_rows, vt_rows, faces, runs = state["v"], state["vt"], state["faces"], state["runs"]
     names, skipped = state["material_names"], state["skipped"]
-    in_faces = False
+    in_faces, normals = False, 0
     for line in lines:
         head = line[:2]
         if head == "v ":
@@ -114,7 +121,7 @@ def _read_statements(path, text):
             continue
         if head == "f ":
             if not in_faces:
-                runs.append((len(faces), len(v_rows), len(vt_rows)))
+                runs.append((len(faces), len(v_rows), len(vt_rows), normals))
                 in_faces = True
             faces.append(line[2:])
             continue
@@ -122,8 +129,12 @@ def _read_statements(path, text):
             vt_rows.append(line[3:])
             in_faces = False
             continue
+        if head == "vn" and line[2:3] == " ":
+            normals += 1
+            in_faces = False
+            continue
         words = line.split(None, 1)
-        if not words or words[0][0] == "#" or words[0] == "vn":
+        if not words or words[0][0] == "#":
             continue
         key, rest = words[0], (words[1] if len(words) > 1 else "")
         if key == "v":
@@ -132,9 +143,12 @@ def _read_statements(path, text):
         elif key == "vt":
             vt_rows.append(rest)
             in_faces = False
+        elif key == "vn":
+            normals += 1
+            in_faces = False
         elif key == "f":
             if not in_faces:
-                runs.append((len(faces), len(v_rows), len(vt_rows)))
+                runs.append((len(faces), len(v_rows), len(vt_rows), normals))
                 in_faces = True
             faces.append(rest)
         elif key == "usemtl":
@@ -151,6 +165,7 @@ def _read_statements(path, text):
             state["unknown"] += 1
             if state["first_unknown"] is None:
                 state["first_unknown"] = key[:40]
+    state["vn"] = normals
     for key in ("v", "vt", "faces"):        # comments after the numbers
         rows = state[key]
         if "#" in "".join(rows):
@@ -263,8 +278,9 @@ def _corners(path, state, vertex_count, uv_count):
                                 sep=" ").reshape(-1, width)
         raw_v = numbers[:, 0]
         raw_vt = numbers[:, 1] if form in (1, 3) else np.zeros(len(numbers), np.int64)
+        raw_vn = numbers[:, width - 1] if form in (2, 3) else np.zeros(len(numbers), np.int64)
     else:     # corners of mixed forms: one at a time
-        raw_v, raw_vt = _mixed_corners(path, corners.split(" "))
+        raw_v, raw_vt, raw_vn = _mixed_corners(path, corners.split(" "))
     runs = state["runs"]
     read_v = np.repeat(_per_face([(r[0], r[1]) for r in runs], len(rows), 0), counts)
     read_vt = np.repeat(_per_face([(r[0], r[2]) for r in runs], len(rows), 0), counts)
@@ -272,12 +288,15 @@ def _corners(path, state, vertex_count, uv_count):
     v = _resolve(path, state, raw_v, read_v, vertex_count, "vertex", face)
     vt = _resolve(path, state, raw_vt, read_vt, uv_count, "texture coordinate", face,
                   optional=True)
-    return v, vt, counts
+    read_vn = np.repeat(_per_face([(r[0], r[3]) for r in runs], len(rows), 0), counts)
+    vn = _resolve(path, state, raw_vn, read_vn, state["vn"], "normal", face, optional=True)
+    return v, vt, vn, counts
 
 
 def _mixed_corners(path, corners):
     raw_v = np.zeros(len(corners), np.int64)
     raw_vt = np.zeros(len(corners), np.int64)
+    raw_vn = np.zeros(len(corners), np.int64)
     for i, corner in enumerate(corners):
         parts = corner.split("/")
         try:
@@ -285,14 +304,14 @@ def _mixed_corners(path, corners):
             if len(parts) > 1 and parts[1]:
                 raw_vt[i] = int(parts[1])
             if len(parts) > 2 and parts[2]:
-                int(parts[2])
+                raw_vn[i] = int(parts[2])
         except (ValueError, OverflowError):
             raise SceneError(path, f"a face corner {corner[:40]!r} is not of the form v, "
                                    f"v/vt, v//vn or v/vt/vn (whole numbers)") from None
         if len(parts) > 3:
             raise SceneError(path, f"a face corner {corner[:40]!r} has more than three "
                                    f"indices")
-    return raw_v, raw_vt
+    return raw_v, raw_vt, raw_vn
 
 
 def _resolve(path, state, raw, read_so_far, total, what, faces, optional=False):
@@ -318,7 +337,8 @@ def _resolve(path, state, raw, read_so_far, total, what, faces, optional=False):
 
 
 def _count(n, what):
-    return f"only {n} {what}{'s' if n != 1 else ''}" if n else f"no {what}s"
+    plural = {"vertex": "vertices"}.get(what, what + "s")
+    return f"only {n} {what if n == 1 else plural}" if n else f"no {plural}"
 
 
 def _fan(counts, notes):

@@ -1,6 +1,8 @@
 """OBJ files as real exporters and hand-written files have them (ptrace.io.obj, ptrace.io.mtl):
 relative indices, tabs, backslash paths, vertex colours, missing or unreadable pieces (each a
 note), texture coordinates without a material, NaN in a material. Each test writes its files."""
+import re
+
 import numpy as np
 import pytest
 from files_by_hand import png_bytes, rgb16_png
@@ -191,3 +193,34 @@ def test_a_file_lit_only_by_its_emitters_says_so(tmp_path):
     scene = ptrace.load(path)
     assert len(scene.lights) == 0
     assert any("emissive materials are its only light" in n for n in scene.notes), scene.notes
+
+
+CUBE = "".join(f"v {x} {y} {z}\n" for x in (0, 1) for y in (0, 1) for z in (0, 1)) + """
+vn -1 0 0
+vn 1 0 0
+vn 0 -1 0
+vn 0 1 0
+vn 0 0 -1
+vn 0 0 1
+f 1//1 2//1 4//1 3//1
+f 5//2 7//2 8//2 6//2
+f 1//3 5//3 6//3 2//3
+f 3//4 4//4 8//4 7//4
+f 1//5 3//5 7//5 5//5
+f 2//6 6//6 8//6 4//6
+"""
+
+
+def test_hard_edges_where_the_file_gives_a_corner_several_normals(tmp_path):
+    """The file's normals are not read, but where it gives one position several normals (a
+    cube's corners) the faces do not share the vertex: flat faces, not a smoothed blob."""
+    scene = ptrace.load(write(tmp_path, "cube.obj", CUBE))
+    assert scene.triangle_count == 12 and len(scene.geometry.vertices) == 24
+    corners = scene.geometry.vertices[scene.geometry.faces]
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    face_normals /= np.linalg.norm(face_normals, axis=1, keepdims=True)
+    at_corners = scene.vertex_normals[scene.geometry.faces]
+    np.testing.assert_allclose(at_corners, np.repeat(face_normals[:, None], 3, axis=1),
+                               atol=1e-9)
+    smooth = ptrace.load(write(tmp_path, "smooth.obj", re.sub(r"//\d+", "", CUBE)))
+    assert len(smooth.geometry.vertices) == 8
