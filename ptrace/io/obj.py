@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import SceneError
 from . import files, mtl
 
-IGNORED = {"o", "g", "s", "mg", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
+IGNORED = {"o", "g", "mg", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
            "usemap", "bevel", "c_interp", "d_interp", "call", "csh"}
 FREE_FORM = {"cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm", "trim", "hole",
              "scrv", "sp", "end", "con"}
@@ -75,12 +75,20 @@ def read_obj(path):
     uv = np.zeros((len(triangles), 3, 2))
     if len(uv_rows):
         uv[has_uv] = uv_rows[tri_vt[has_uv]]
-    # A vertex is a (v, vn) pair: where the file gives one position two normals (a hard edge,
-    # a cube's corner) the faces there do not share a vertex, so the area-weighted normals
-    # ptrace computes are smooth only where the file's are. The normals' values are not read.
+    # Which faces share a vertex, so that the area-weighted normals ptrace computes are smooth
+    # only where the file's are (the normals' values are not read): a corner with a normal (vn)
+    # is the pair (v, vn), so a position given several normals (a cube's corner) splits; one
+    # without is (v, smoothing group), and under `s off` it is the face's own (flat), as the
+    # OBJ specification says. A file with neither vn nor `s` is smooth, the course's rule.
     # Unreferenced vertices are dropped.
-    span = state["vn"] + 1
-    keys, faces = np.unique(tri_v * span + corner_vn[triangles] + 1, return_inverse=True)
+    count, groups = len(counts), len(state["groups"])
+    group = _per_face(state["smoothing"], count, -1)[face_of_triangle][:, None]
+    normal = corner_vn[triangles]
+    base = state["vn"] + 1
+    share = np.where(normal >= 0, normal, np.where(
+        group == 0, base + face_of_triangle[:, None], base + count + 1 + group))
+    span = base + count + groups + 2
+    keys, faces = np.unique(tri_v * span + share, return_inverse=True)
     used = keys // span
     faces = faces.reshape(-1, 3)
     material_of_face = _per_face(state["materials"], len(counts), -1)[face_of_triangle]
@@ -108,6 +116,7 @@ def _read_statements(path, text):
     take a short path; the rest (tabs, indentation, other statements) are split into words."""
     lines = text.replace("\\\r\n", " ").replace("\\\n", " ").splitlines()
     state = {"v": [], "vt": [], "faces": [], "runs": [], "materials": [], "mtllib": [], "vn": 0,
+             "smoothing": [], "groups": {},
              "material_names": {}, "skipped": {}, "unknown": 0, "first_unknown": None,
              "notes": [], "lines": lines}
     v_rows, vt_rows, faces, runs = state["v"], state["vt"], state["faces"], state["runs"]
@@ -151,6 +160,11 @@ def _read_statements(path, text):
                 runs.append((len(faces), len(v_rows), len(vt_rows), normals))
                 in_faces = True
             faces.append(rest)
+        elif key == "s":      # smoothing group: off (or 0), or a name
+            group = rest.strip().lower()
+            group = 0 if group in ("off", "0", "") else \
+                state["groups"].setdefault(group, len(state["groups"]) + 1)
+            state["smoothing"].append((len(faces), group))
         elif key == "usemtl":
             state["materials"].append((len(faces), names.setdefault(rest.strip(), len(names))))
         elif key == "mtllib":

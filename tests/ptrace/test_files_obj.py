@@ -224,3 +224,13 @@ def test_hard_edges_where_the_file_gives_a_corner_several_normals(tmp_path):
                                atol=1e-9)
     smooth = ptrace.load(write(tmp_path, "smooth.obj", re.sub(r"//\d+", "", CUBE)))
     assert len(smooth.geometry.vertices) == 8
+
+
+@pytest.mark.parametrize("smoothing, vertices", [("s off\n", 24), ("s 1\n", 8), ("", 8)])
+def test_smoothing_groups_decide_shared_vertices_without_normals(tmp_path, smoothing,
+                                                                  vertices):
+    """Without vn: `s off` makes every face flat (the OBJ specification); a smoothing group,
+    or no `s` at all (the course's rule), shares the corners."""
+    text = smoothing + re.sub(r"//\d+", "", CUBE)
+    scene = ptrace.load(write(tmp_path, "cube.obj", text))
+    assert len(scene.geometry.vertices) == vertices
