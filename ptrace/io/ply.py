@@ -23,7 +23,7 @@ def read_header(path, data):
     """{element name: (count, {property name: type})} of a PLY file's header, checked: a file
     that is not PLY, or has no faces (only points, or triangle strips), is refused with the
     reason. Also "texture": whether a comment names a texture file, and "notes"."""
-    if not data.startswith(b"ply") or data[3:4] not in (b"\n", b"\r"):
+    if not data.startswith(b"ply") or data[3:4] not in (b"\n", b"\r", b" ", b"\t"):
         raise SceneError(path, "is not a PLY file: it does not start with the line 'ply'")
     end = data.find(b"end_header", 0, MAX_HEADER)
     if end < 0:
