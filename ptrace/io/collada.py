@@ -5,6 +5,7 @@ import accel
 
 from ..errors import SceneError
 from ..scene import Lights, Materials, Scene, area_weighted_normals
+from .collada_dialect import check_dialect
 from .collada_document import ColladaDocument
 from .collada_geometry import read_mesh, sphere_radius
 from .collada_shading import MaterialTable, apply, read_camera, read_light
@@ -37,6 +38,7 @@ def load_collada(path):
 
 def _load(path):
     document = ColladaDocument(path)
+    check_dialect(document)
     up_axis = read_up_axis(document)
     visual_scene = select_visual_scene(document)
     builder = SceneBuilder(document)

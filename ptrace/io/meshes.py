@@ -1,6 +1,14 @@
-"""load_mesh: triangle meshes (.obj .ply .glb .gltf .stl) via trimesh, with the materials,
-textures and lights the file carries (ptrace.io.materials) and defaults for what it lacks, so
-that they render like a course scene."""
+"""load_mesh: triangle meshes (.obj .ply .glb .gltf .stl) with the materials, textures and
+lights the file carries, and defaults for what it lacks, so that they render like a course
+scene.
+
+OBJ is read by ptrace.io.obj; the other formats by trimesh, after a check of what trimesh
+would read wrongly or silently (ptrace.io.gltf for glTF's JSON and references, ptrace.io.ply
+for a PLY's header). Every failure inside a reader becomes one line naming the file and what
+is wrong in words (ptrace.io.files.describe_failure).
+"""
+import io
+import logging
 import math
 import os
 
@@ -20,10 +28,12 @@ from ..scene import (
     Textures,
     area_weighted_normals,
 )
-from . import materials
+from . import files, gltf, gltf_materials, obj, ply
+from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl")
-DEFAULT_ALBEDO = 0.5
+FORMAT_NAMES = {".ply": "PLY", ".glb": "binary glTF", ".gltf": "glTF", ".stl": "STL"}
+TEXTURES = ("albedo_texture", "emission_texture", "roughness_texture")
 AMBIENT_RADIANCE = 1.0
 # The course's CB camera: 49.13434 degrees across a 4:3 frame.
 DEFAULT_HFOV = 49.13434
@@ -34,44 +44,42 @@ DEFAULT_ZNEAR, DEFAULT_ZFAR = 0.001, 1e6
 def load_mesh(path):
     """Read a mesh file into a Scene. Any problem raises SceneError.
 
-    Each geometry keeps the material its file gives it (ptrace.io.materials: an OBJ's .mtl, a
-    glTF's materials, a PLY's vertex colours; their textures and texture coordinates); a
-    geometry without one gets the default diffuse material. glTF files' KHR_lights_punctual
-    lights are read; a file with neither a light nor an emissive material gets the default
-    ambient light."""
+    Each geometry keeps the material its file gives it (an OBJ's .mtl, a glTF's materials, a
+    PLY's vertex colours; their textures and texture coordinates); a geometry without one gets
+    the default diffuse material. glTF files' KHR_lights_punctual lights are read; a file with
+    neither a light nor an emissive material gets the default ambient light."""
     path = str(path)
-    if not os.path.exists(path):
-        raise SceneError(path, "no such file")
-    if os.path.isdir(path):
-        raise SceneError(path, "is a directory, not a scene file")
-    parts = _read_parts(path)
-    vertices, faces, non_finite = parts["vertices"], parts["faces"], parts["non_finite"]
-    if non_finite and len(faces) == 0:
-        raise SceneError(path, f"every face ({non_finite}) has NaN or infinite vertex "
-                               f"coordinates")
+    files.require_regular_file(path)
+    if os.path.getsize(path) == 0:
+        raise SceneError(path, "is empty (0 bytes)")
+    extension = os.path.splitext(path)[1].lower()
+    parts = obj.read_obj(path) if extension == ".obj" else _read_with_trimesh(path, extension)
+    parts = _drop_non_finite(path, parts)
+    vertices, faces = parts["vertices"], parts["faces"]
     if len(faces) == 0:
-        raise SceneError(path, "the file contains no triangles")
-    if not np.isfinite(vertices).all():
-        raise SceneError(path, "NaN or infinite vertex coordinates")
-    notes = [f"mesh file: dropped {non_finite} face(s) with NaN or infinite vertex coordinates"] \
-        if non_finite else []
-    notes += parts["notes"]
+        why = parts.get("why_empty")
+        raise SceneError(path, "the file contains no triangles" + (f": {why}" if why else ""))
+    notes = parts["notes"]
+    if parts["non_finite"]:
+        notes.insert(0, f"mesh file: dropped {parts['non_finite']} face(s) with NaN or "
+                        f"infinite vertex coordinates")
     records, light_records = parts["materials"], parts["lights"]
     if parts["defaulted"]:
-        notes.append(f"mesh file: {parts['defaulted']} geometry(s) without a material: one "
+        notes.append(f"mesh file: {parts['defaulted']} triangle(s) without a material: one "
                      f"diffuse material, albedo {DEFAULT_ALBEDO}")
     emitters = any(r["kind"] == EMISSION for r in records)
     if not light_records and not emitters:
         light_records = [{"kind": AMBIENT, "radiance": (AMBIENT_RADIANCE,) * 3}]
         notes.append(f"mesh file: no light and no emissive material: one ambient light, "
                      f"radiance {AMBIENT_RADIANCE}")
+    elif not light_records:
+        notes.append("mesh file: no lights: its emissive materials are its only light (no "
+                     "default light; -e adds one)")
     notes += [
         "mesh file: default camera on the +Z side looking toward -Z, +Y up, framing the bounds "
         f"at any -r, its longer image side spanning {DEFAULT_HFOV} degrees (--up, --eye: others)",
         "mesh file: coordinates taken as they are (Y-up unless --up); file normals ignored",
     ]
-    materials = Materials.from_records(records)
-    lights = Lights.from_records(light_records)
     camera = CameraSpec(view_point=np.array([0.0, 0.0, 1.0]), position=np.zeros(3),
                         hfov=DEFAULT_HFOV, vfov=DEFAULT_VFOV,
                         znear=DEFAULT_ZNEAR, zfar=DEFAULT_ZFAR)
@@ -79,134 +87,186 @@ def load_mesh(path):
         geometry = accel.Geometry(vertices=vertices, faces=faces)
     except ValueError as error:
         raise SceneError(path, f"invalid mesh: {error}") from error
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    if not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
+        notes.append("mesh file: every face is edge-on to the default camera, which looks "
+                     "along the Z axis: the image shows nothing of the model (it is flat, in a "
+                     "plane that holds the Z axis)")
     pool = parts["textures"]
     return Scene(path=path, geometry=geometry,
                  vertex_normals=area_weighted_normals(geometry.vertices, geometry.faces),
-                 material_index=parts["material_index"], materials=materials, lights=lights,
-                 camera=camera, notes=notes, uv=parts["uv"],
-                 vertex_colours=parts["vertex_colours"],
+                 material_index=parts["material_index"],
+                 materials=Materials.from_records(records),
+                 lights=Lights.from_records(light_records), camera=camera, notes=notes,
+                 uv=parts["uv"], vertex_colours=parts["vertex_colours"],
                  textures=Textures.from_images(pool.images, pool.wraps, pool.names))
 
 
-def _read_parts(path):
-    """Everything load_mesh takes from the file, through trimesh: each node's geometry with its
-    transform baked in, concatenated (vertices (V, 3), faces (F, 3)), the faces dropped for NaN
-    or infinite coordinates, and per face its material (records deduplicated by trimesh's
-    material object), per corner texture coordinates if any material has a texture, per vertex
-    colours if any geometry has them, the textures and the glTF lights. Each geometry is read
-    unprocessed first, to count the faces trimesh's processing would drop without a word, then
-    processed as trimesh's loader would (merged vertices, seams of texture coordinates kept,
-    non-finite faces removed)."""
-    import trimesh  # imported here: only mesh files need it
-
-    try:
-        scene = trimesh.load_scene(path, process=False)
-        document = None
-        if path.lower().endswith((".gltf", ".glb")):
-            document = materials.gltf_json(path)
-        non_finite = 0
-        for geometry in scene.geometry.values():   # each geometry as the file holds it
-            if not hasattr(geometry, "process"):
-                continue
-            raw_faces = np.asarray(geometry.faces, dtype=np.int64).reshape(-1, 3)
-            raw_vertices = np.asarray(geometry.vertices, dtype=np.float64).reshape(-1, 3)
-            if raw_faces.size and raw_faces.min() >= 0 and raw_faces.max() < len(raw_vertices):
-                non_finite += int((~np.isfinite(raw_vertices[raw_faces]).all(axis=(1, 2))).sum())
-            geometry.process()
-        parts = _assemble(scene, document, os.path.dirname(os.path.abspath(path)))
-    except SceneError:
-        raise
-    except Exception as error:     # trimesh raises many kinds for a bad file
-        raise SceneError(path, f"could not read the mesh ({type(error).__name__}: {error})") \
-            from error
-    faces = parts["faces"]
-    if faces.size and (faces.min() < 0 or faces.max() >= len(parts["vertices"])):
+def _drop_non_finite(path, parts):
+    """The parts without the faces that have a NaN or infinite vertex coordinate (counted in
+    parts["non_finite"]), and without the vertices no face uses."""
+    vertices, faces = parts["vertices"], parts["faces"]
+    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
         raise SceneError(path, "face indices out of range")
-    parts["non_finite"] = non_finite
+    finite = np.isfinite(vertices).all(axis=1)
+    keep = finite[faces].all(axis=1) if faces.size else np.zeros(0, bool)
+    dropped = int((~keep).sum()) + parts.get("non_finite", 0)
+    if dropped and not keep.any():
+        raise SceneError(path, f"every face ({dropped}) has NaN or infinite vertex coordinates")
+    parts["non_finite"] = dropped
+    if keep.all() and finite.all():
+        return parts
+    used, remap = np.unique(faces[keep], return_inverse=True)
+    parts.update(vertices=vertices[used], faces=remap.reshape(-1, 3),
+                 material_index=parts["material_index"][keep],
+                 uv=parts["uv"][keep] if parts["uv"] is not None else None,
+                 vertex_colours=(parts["vertex_colours"][used]
+                                 if parts["vertex_colours"] is not None else None))
     return parts
 
 
-def _assemble(scene, document, directory):
-    pool = materials.TexturePool()
-    notes, records, by_material = [], [], {}
+def _read_with_trimesh(path, extension):
+    """The parts of a PLY, STL or glTF file, read by trimesh: each node's geometry with its
+    transform baked in, concatenated, each processed as trimesh's loader would (merged
+    vertices, seams of texture coordinates kept, non-finite faces removed and counted)."""
+    import trimesh  # imported here: only these files need it
+
+    directory = os.path.dirname(os.path.abspath(path))
+    document, missing, notes, elements = None, {}, [], None
+    if extension in (".gltf", ".glb"):
+        (data, file_type, resolver), (document, notes, missing) = gltf.prepare(path)
+    else:
+        data, file_type = files.read_bytes(path), extension[1:]
+        resolver = files.trimesh_resolver(directory)
+        if extension == ".ply":
+            elements = ply.read_header(path, data)
+            notes += elements.pop("notes", [])
+        if extension == ".stl":
+            _check_stl(path, data)
+    quiet = logging.getLogger("trimesh")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)    # its warnings would print bare; ours are notes
+    try:
+        with np.errstate(all="ignore"):
+            scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type,
+                                       resolver=resolver, process=False)
+            non_finite = 0
+            for geometry in scene.geometry.values():   # each geometry as the file holds it
+                if not isinstance(geometry, trimesh.Trimesh):    # points, lines: noted later
+                    continue
+                raw_faces = np.asarray(geometry.faces, dtype=np.int64).reshape(-1, 3)
+                raw_vertices = np.asarray(geometry.vertices, dtype=np.float64).reshape(-1, 3)
+                if raw_faces.size and raw_faces.min() >= 0 and \
+                        raw_faces.max() < len(raw_vertices):
+                    non_finite += int((~np.isfinite(raw_vertices[raw_faces])
+                                       .all(axis=(1, 2))).sum())
+                if elements is not None:
+                    colours = ply.vertex_colours(path, elements,
+                                                 geometry.metadata.get("_ply_raw", {}), notes)
+                    if colours is not None and len(colours) == len(raw_vertices):
+                        geometry.visual = trimesh.visual.ColorVisuals(geometry,
+                                                                      vertex_colors=colours)
+                geometry.process()
+            # texture coordinates without a texture file: trimesh gives them a placeholder
+            untextured = elements is not None and not elements["texture"]
+            parts = _assemble(path, scene, document, missing, notes, untextured)
+    except SceneError:
+        raise
+    except Exception as error:     # trimesh raises many kinds for a bad file
+        raise SceneError(path, f"could not be read as {FORMAT_NAMES[extension]}: "
+                               f"{files.describe_failure(error)}") from None
+    finally:
+        quiet.setLevel(level)
+    parts["non_finite"] = non_finite
+    if document is not None and len(parts["faces"]) == 0:
+        parts["why_empty"] = gltf.why_empty(document)
+    return parts
+
+
+def _assemble(path, scene, document, missing, notes, untextured):
+    pool = TexturePool()
+    records, by_key, built = [], {}, {}
     vertices, faces, material_index, uvs, colours, vertex_sets = [], [], [], [], [], []
-    defaulted = 0
-    offset = 0
+    defaulted, offset, skipped = 0, 0, 0
     for node in scene.graph.nodes_geometry:
         transform, name = scene.graph[node]
         geometry = scene.geometry[name]
-        if not hasattr(geometry, "faces") or len(geometry.faces) == 0:
+        if not hasattr(geometry, "faces"):
+            skipped += 1
+            continue
+        if len(geometry.faces) == 0:
             continue
         v = np.asarray(geometry.vertices, dtype=np.float64).reshape(-1, 3)
         f = np.asarray(geometry.faces, dtype=np.int64).reshape(-1, 3)
         v = v @ transform[:3, :3].T + transform[:3, 3]
         visual = getattr(geometry, "visual", None)
         material = getattr(visual, "material", None) if visual is not None else None
-        uv = getattr(visual, "uv", None) if material is not None else None
-        where = f"geometry {name!r}"
+        if untextured:      # a PLY with texture coordinates but no texture file
+            material = None
         kind = getattr(visual, "kind", None) if visual is not None else None
+        uv = getattr(visual, "uv", None) if material is not None else None
+        has_uv = uv is not None and len(uv) == len(v)
+        where = f"geometry {name!r}"
+        record, key, transform_uv = None, None, None
         if material is None and kind == "vertex":   # the colours are the albedo
             key = "vertex colours"
-            if key not in by_material:
-                by_material[key] = len(records)
-                records.append({"kind": DIFFUSE, "albedo": (1.0, 1.0, 1.0),
-                                "name": "vertex colours"})
+            record = {"kind": DIFFUSE, "albedo": (1.0, 1.0, 1.0), "name": key}
         elif material is None:
             key = "default"
-            if key not in by_material:
-                by_material[key] = len(records)
-                records.append({"kind": DIFFUSE, "albedo": (DEFAULT_ALBEDO,) * 3,
-                                "name": "default"})
-            defaulted += 1
-        else:
-            key = id(material)
-            if key not in by_material:
-                by_material[key] = len(records)
-                if document is not None:
-                    records.append(materials.gltf_material(material, document, pool, notes,
-                                                           where))
-                else:
-                    records.append(materials.obj_material(material, directory, pool, notes,
-                                                          where))
-        m = by_material[key]
+            record = {"kind": DIFFUSE, "albedo": (DEFAULT_ALBEDO,) * 3, "name": key}
+            defaulted += len(f)
+        elif document is not None:
+            index = _material_index(getattr(material, "name", None))
+            if index not in built:
+                built[index] = gltf_materials.material_record(index, material, document,
+                                                              missing, pool, notes, path)
+            record, transform_uv = built[index]
+            key = ("gltf", index)
+        else:     # a PLY's texture (its TextureFile comment): the albedo of a diffuse material
+            key = ("image", id(material))
+            record = _image_material(material, pool, notes, where)
+        if any(t in record for t in TEXTURES) and not has_uv:
+            record = {k: value for k, value in record.items() if k not in TEXTURES}
+            key = (key, "without texture coordinates")
+            notes.append(f"<{where}>: no texture coordinates: its material's textures are "
+                         f"not applied to it")
+        if key not in by_key:
+            by_key[key] = len(records)
+            records.append(record)
         vertex_colours = None
         if material is None and kind == "vertex":
-            vertex_colours = materials.linear_rgb(
-                np.asarray(visual.vertex_colors)[None, :, :3], srgb=True)[0]
+            vertex_colours = linear_rgb(np.asarray(visual.vertex_colors)[None, :, :3],
+                                        srgb=document is None)[0]
+        elif material is not None and "color" in getattr(visual, "vertex_attributes", {}):
+            vertex_colours = _attribute_colours(visual.vertex_attributes["color"], len(v))
         elif material is None and kind == "face":
-            notes.append(f"{where}: per-face colours ignored")
-        corner_uv = None
-        if uv is not None and len(uv) == len(v):
+            notes.append(f"<{where}>: per-face colours ignored")
+        corner_uv = np.zeros((len(f), 3, 2))
+        if has_uv:
             corner_uv = np.asarray(uv, dtype=np.float64)[f]
+            if transform_uv is not None:
+                corner_uv = gltf_materials.apply_transform(corner_uv, transform_uv)
         vertices.append(v)
         faces.append(f + offset)
-        material_index.append(np.full(len(f), m, dtype=np.int32))
-        uvs.append(corner_uv if corner_uv is not None else np.zeros((len(f), 3, 2)))
+        material_index.append(np.full(len(f), by_key[key], dtype=np.int32))
+        uvs.append(corner_uv)
         colours.append(vertex_colours if vertex_colours is not None else np.ones((len(v), 3)))
         vertex_sets.append(vertex_colours)
         offset += len(v)
-    textured = any(r.get("albedo_texture", -1) >= 0 or r.get("emission_texture", -1) >= 0
-                   or r.get("roughness_texture", -1) >= 0 for r in records)
+    if skipped and document is None:
+        notes.append(f"mesh file: {skipped} geometry(s) of points or lines skipped (ptrace "
+                     f"renders surfaces)")
+    textured = any(any(r.get(t, -1) >= 0 for t in TEXTURES) for r in records)
     coloured = any(c is not None for c in vertex_sets)
     if coloured:
-        notes.append("mesh file: vertex colours (read as sRGB) are the albedo of a diffuse "
-                     "material")
-    lights = []
-    if document is not None:
-        names = {}
-        for i, node in enumerate(document.get("nodes", [])):
-            names[i] = node.get("name", str(i))
-
-        def node_transform(i):
-            try:
-                return np.asarray(scene.graph.get(names[i])[0], dtype=np.float64)
-            except (KeyError, TypeError, ValueError):
-                return None
-        lights = materials.gltf_lights(document, node_transform, notes)
+        notes.append("mesh file: vertex colours " + ("(COLOR_0, linear) multiply the base "
+                     "colour" if document is not None else "(read as sRGB) are the albedo of "
+                     "a diffuse material"))
+    lights = gltf.gltf_lights(path, document, notes) if document is not None else []
     if not vertices:
         return {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64),
-                "material_index": np.zeros(0, np.int32), "materials": records or
-                [{"kind": DIFFUSE, "albedo": (DEFAULT_ALBEDO,) * 3, "name": "default"}],
+                "material_index": np.zeros(0, np.int32), "materials": [],
                 "uv": None, "vertex_colours": None, "textures": pool, "notes": notes,
                 "lights": lights, "defaulted": 0}
     return {"vertices": np.concatenate(vertices), "faces": np.concatenate(faces),
@@ -214,3 +274,53 @@ def _assemble(scene, document, directory):
             "uv": np.concatenate(uvs) if textured else None,
             "vertex_colours": np.concatenate(colours) if coloured else None,
             "textures": pool, "notes": notes, "lights": lights, "defaulted": defaulted}
+
+
+def _check_stl(path, data):
+    """Refuse bytes that are neither binary STL (an 80-byte header, a triangle count n, then
+    exactly 50 bytes per triangle) nor ASCII STL (text starting with 'solid')."""
+    if len(data) >= 84 and len(data) == 84 + 50 * int.from_bytes(data[80:84], "little"):
+        return
+    head = data[:512].lstrip()
+    if head[:5].lower() == b"solid" and b"\x00" not in head:
+        return
+    raise SceneError(path, "is not an STL file: not binary STL (its size is not 84 bytes plus "
+                           "50 per triangle) and not ASCII STL (it does not start with 'solid')")
+
+
+def _material_index(name):
+    """The JSON index of a material trimesh read from ptrace.io.gltf's renamed copy."""
+    if isinstance(name, str) and name.startswith(gltf.TAG):
+        try:
+            return int(name[len(gltf.TAG):])
+        except ValueError:
+            pass
+    return -1
+
+
+def _image_material(material, pool, notes, where):
+    image = getattr(material, "image", None)
+    record = {"kind": DIFFUSE, "albedo": (1.0, 1.0, 1.0), "name": "texture"}
+    if image is None:
+        record["albedo"] = (DEFAULT_ALBEDO,) * 3
+        notes.append(f"<{where}>: its texture could not be read: the default diffuse "
+                     f"material (albedo {DEFAULT_ALBEDO})")
+        return record
+    try:
+        record["albedo_texture"] = pool.add(image, srgb=True, name="texture")
+        notes.append(f"<{where}>: its texture is the albedo of a diffuse material")
+    except Exception as error:     # Pillow decodes lazily: any decoder error lands here
+        record["albedo"] = (DEFAULT_ALBEDO,) * 3
+        notes.append(f"<{where}>: its texture could not be decoded ({str(error)[:80]}): the "
+                     f"default diffuse material (albedo {DEFAULT_ALBEDO})")
+    return record
+
+
+def _attribute_colours(values, count):
+    """(V, 3) linear colours of a glTF COLOR_0 attribute (float, or normalized integers)."""
+    array = np.asarray(values)
+    if array.ndim != 2 or len(array) != count or array.shape[1] < 3:
+        return None
+    if array.dtype.kind in "ui":
+        array = array / float(np.iinfo(array.dtype).max)
+    return np.clip(np.asarray(array[:, :3], dtype=np.float64), 0.0, None)

@@ -221,7 +221,9 @@ def test_deeply_nested_nodes(tmp_path):
     def nested(depth):
         path = tmp_path / f"deep{depth}.dae"
         path.write_text('<COLLADA><asset><up_axis>Y_UP</up_axis></asset>'
-                        '<library_visual_scenes><visual_scene id="s">' + "<node>" * depth
+                        '<library_cameras><camera id="c"/></library_cameras>'
+                        '<library_visual_scenes><visual_scene id="s">'
+                        '<node><instance_camera url="#c"/></node>' + "<node>" * depth
                         + "</node>" * depth + "</visual_scene></library_visual_scenes></COLLADA>")
         return path
     assert ptrace.load(nested(MAX_NODE_DEPTH)).triangle_count == 0   # walked without recursion

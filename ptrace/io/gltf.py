@@ -1,0 +1,370 @@
+"""glTF 2.0 files (.gltf, .glb): the document checked before trimesh reads the meshes, and the
+file's KHR_lights_punctual lights.
+
+trimesh reads the geometry, texture coordinates and images, but it reads a malformed file
+into a bare exception ("FileNotFoundError: model.gltf" for bad JSON), leaves placeholder zeros
+where a Draco-compressed mesh was, drops a missing image without a word, opens whatever file
+a URI names, and matches nothing back to the JSON (materials may share a name, or have none).
+So the JSON is read here first (`read_document`: a .gltf, or a .glb's JSON chunk, as the
+glTF 2.0 container specifies) and checked: its version, the extensions it requires, every
+buffer and image it names (from the model's folder only, regular files only). trimesh then
+reads a copy of the document whose materials are renamed by their index (so each of its
+materials is found in the JSON exactly) and whose unreadable images are removed (so trimesh
+opens nothing we refused). ptrace.io.gltf_materials reads the materials from the JSON.
+"""
+import json
+import math
+import os
+import struct
+
+import numpy as np
+
+from ..errors import SceneError
+from ..scene import DIRECTIONAL, PHYSICAL, POINT, SPOT
+from . import files
+from .gltf_materials import material_values
+from .materials import check_numbers
+
+TAG = "ptrace-material-"      # the names trimesh sees: TAG + the material's index
+JSON_CHUNK, BIN_CHUNK = 0x4E4F534A, 0x004E4942
+# extensions a file may require that ptrace reads (or approximates, with a note)
+READ_EXTENSIONS = {"KHR_materials_emissive_strength", "KHR_materials_transmission",
+                   "KHR_materials_ior", "KHR_lights_punctual", "KHR_texture_transform"}
+WHY_NOT = {"KHR_draco_mesh_compression": "Draco-compressed meshes, which ptrace cannot decode",
+           "EXT_meshopt_compression": "meshoptimizer-compressed buffers, which ptrace cannot "
+                                      "decode",
+           "KHR_mesh_quantization": "quantized vertex attributes, which ptrace does not read",
+           "KHR_texture_basisu": "KTX2 (Basis Universal) textures, which ptrace cannot decode",
+           "EXT_texture_webp": "WebP textures in place of PNG or JPEG",
+           "KHR_materials_pbrSpecularGlossiness": "the specular-glossiness material model, "
+                                                  "which ptrace does not read"}
+# primitive modes trimesh does not read as triangles (it reads 4, triangles, and 5, strips)
+PRIMITIVE_MODES = {0: "points", 1: "lines", 2: "line loops", 3: "line strips",
+                   6: "triangle fans"}
+
+
+def read_document(path, data):
+    """(document, BIN chunk bytes or None) of a .gltf's or .glb's bytes; SceneError in words
+    for a file that is not glTF 2.0."""
+    binary = None
+    if path.lower().endswith(".glb") or data[:4] == b"glTF":
+        if len(data) < 20 or data[:4] != b"glTF":
+            raise SceneError(path, "is not a binary glTF (.glb): it does not start with the "
+                                   "glTF magic and a 12-byte header")
+        version, length = struct.unpack_from("<II", data, 4)
+        if version != 2:
+            raise SceneError(path, f"is a binary glTF of version {version}; ptrace reads "
+                                   f"glTF 2.0")
+        chunk_length, kind = struct.unpack_from("<II", data, 12)
+        if kind != JSON_CHUNK or 20 + chunk_length > len(data):
+            raise SceneError(path, "is not a valid binary glTF: its first chunk is not a "
+                                   "whole JSON chunk (truncated or corrupt)")
+        text = data[20:20 + chunk_length]
+        rest = 20 + chunk_length + (-chunk_length % 4)
+        if rest + 8 <= len(data):
+            bin_length, bin_kind = struct.unpack_from("<II", data, rest)
+            if bin_kind == BIN_CHUNK:
+                binary = data[rest + 8:rest + 8 + bin_length]
+    else:
+        text = data
+    try:
+        document = json.loads(text.decode("utf-8-sig"))
+    except UnicodeDecodeError:
+        raise SceneError(path, "is not glTF: its JSON is not UTF-8 text") from None
+    except json.JSONDecodeError as error:
+        raise SceneError(path, f"is not valid glTF: its JSON is malformed at line "
+                               f"{error.lineno}, column {error.colno} ({error.msg})") from None
+    except RecursionError:
+        raise SceneError(path, "is not valid glTF: its JSON is nested too deeply") from None
+    if not isinstance(document, dict):
+        raise SceneError(path, "is not valid glTF: its JSON is not an object")
+    version = str((document.get("asset") or {}).get("version", "")) \
+        if isinstance(document.get("asset"), dict) else ""
+    if not version.startswith("2"):
+        raise SceneError(path, f"is glTF of version {version or '(none given)'}; ptrace reads "
+                               f"glTF 2.0")
+    return document, binary
+
+
+def check_extensions(path, document, notes):
+    """Refuse a file that requires an extension ptrace does not read (the glTF specification:
+    a loader that does not support a required extension must not load the file), and one
+    whose meshes are compressed (Draco: trimesh would leave zeros in their place)."""
+    required = [str(e)[:60] for e in _list(document.get("extensionsRequired"))
+                if e not in READ_EXTENSIONS]
+    if required:
+        whys = "; ".join(f"{name} ({WHY_NOT.get(name, 'which ptrace does not read')})"
+                         for name in required)
+        raise SceneError(path, f"requires the glTF extension{'s' if len(required) > 1 else ''} "
+                               f"{whys}")
+    for mesh in _list(document.get("meshes")):
+        for primitive in _list(_dict(mesh).get("primitives")):
+            primitive = _dict(primitive)
+            position = _dict(primitive.get("attributes")).get("POSITION")
+            accessors = _list(document.get("accessors"))
+            accessor = _dict(accessors[position]) if isinstance(position, int) and \
+                0 <= position < len(accessors) else {}
+            draco = "KHR_draco_mesh_compression"
+            if draco in _dict(primitive.get("extensions")) and "bufferView" not in accessor:
+                raise SceneError(path, f"uses the glTF extension {draco} ({WHY_NOT[draco]})")
+            mode = primitive.get("mode", 4)
+            if mode not in (4, 5):
+                kind = PRIMITIVE_MODES.get(mode, f"mode {mode}")
+                notes.append(f"<mesh {_dict(mesh).get('name', '')!r}>: a primitive of {kind} "
+                             f"skipped (ptrace renders triangles)")
+    used = set(_list(document.get("extensionsUsed"))) - READ_EXTENSIONS
+    for name in sorted(used & {"KHR_materials_pbrSpecularGlossiness", "EXT_texture_webp",
+                               "KHR_texture_basisu", "KHR_mesh_quantization"}):
+        notes.append(f"glTF: extension {name} used ({WHY_NOT[name]}): the parts that use it "
+                     f"may be missing or approximated")
+
+
+def why_empty(document):
+    """Why a file trimesh read no triangles from has none, in words, or None."""
+    scenes = _list(document.get("scenes"))
+    index = document.get("scene", 0)
+    if not scenes or not (isinstance(index, int) and 0 <= index < len(scenes)) or \
+            not _list(_dict(scenes[index]).get("nodes")):
+        return "it has no scene with nodes (nothing to render)"
+    modes = {_dict(p).get("mode", 4) for m in _list(document.get("meshes"))
+             for p in _list(_dict(m).get("primitives"))}
+    if modes and not modes & {4, 5}:
+        kinds = sorted(PRIMITIVE_MODES.get(m, f"mode {m}") for m in modes)
+        return f"its primitives are {', '.join(kinds)}, which ptrace does not render"
+    return None
+
+
+def check_nodes(path, document):
+    """Refuse a node hierarchy that is not a forest (a node with two parents, or a cycle):
+    the glTF specification forbids both, and trimesh reads such a file into nothing."""
+    nodes = _list(document.get("nodes"))
+    parent = {}
+    for i, node in enumerate(nodes):
+        for child in _list(_dict(node).get("children")):
+            if not isinstance(child, int) or not 0 <= child < len(nodes):
+                raise SceneError(path, f"node {i} has a child {str(child)[:20]} that is not a "
+                                       f"node of the file")
+            if child in parent:
+                raise SceneError(path, f"node {child} has two parents (nodes {parent[child]} "
+                                       f"and {i}); glTF nodes form trees")
+            parent[child] = i
+    for start in parent:
+        seen, i = set(), start
+        while i in parent:
+            if i in seen:
+                raise SceneError(path, f"its nodes form a cycle (node {i} is its own "
+                                       f"ancestor); glTF nodes form trees")
+            seen.add(i)
+            i = parent[i]
+
+
+def prepare(path):
+    """What trimesh needs to read a glTF file safely: (bytes of a copy of the file whose
+    materials are renamed TAG + index and whose unreadable images are removed, file type,
+    resolver of the model's folder), and (document, notes, {image index: why it is
+    missing})."""
+    data = files.read_bytes(path)
+    document, binary = read_document(path, data)
+    notes = []
+    check_extensions(path, document, notes)
+    check_nodes(path, document)
+    for i in range(len(_list(document.get("materials")))):
+        material_values(path, document, i)        # refuses values the schema forbids
+    directory = os.path.dirname(os.path.abspath(path))
+    for i, buffer in enumerate(_list(document.get("buffers"))):
+        uri = _dict(buffer).get("uri")
+        if uri is None:
+            if i != 0 or binary is None:
+                raise SceneError(path, f"buffer {i} has no uri and is not the .glb's binary "
+                                       f"chunk: its data is missing")
+            continue
+        if not isinstance(uri, str):
+            raise SceneError(path, f"buffer {i}'s uri is not a string")
+        if uri.startswith("data:"):
+            continue
+        where, reason, _ = files.resolve_reference(directory, uri, uri=True)
+        if where is None:
+            raise SceneError(path, f"buffer {i} {uri[:80]!r} {reason}: the meshes in it "
+                                   f"cannot be read")
+    missing = {}
+    copy = json.loads(json.dumps(document))
+    for i, image in enumerate(_list(copy.get("images"))):
+        image = _dict(image)
+        uri = image.get("uri")
+        if image.get("mimeType") == "image/ktx2" or str(uri).lower().endswith(".ktx2"):
+            missing[i] = "is a KTX2 texture, which ptrace cannot decode"
+        if isinstance(uri, str) and not uri.startswith("data:") and i not in missing:
+            where, reason, _ = files.resolve_reference(directory, uri, uri=True)
+            if where is None:
+                missing[i] = f"{uri[:80]!r} {reason}"
+        if i in missing:
+            image.pop("uri", None)
+            image.pop("bufferView", None)
+    for i, material in enumerate(_list(copy.get("materials"))):
+        if isinstance(material, dict):
+            material["name"] = f"{TAG}{i}"
+    accessors = _list(copy.get("accessors"))
+    for mesh in _list(copy.get("meshes")):
+        for primitive in _list(_dict(mesh).get("primitives")):
+            attributes = _dict(_dict(primitive).get("attributes"))
+            uv = attributes.get("TEXCOORD_0")
+            if isinstance(uv, int) and 0 <= uv < len(accessors) and \
+                    _dict(accessors[uv]).get("componentType", 5126) != 5126:
+                # trimesh reads normalized integers unscaled: drop them, not a wrong texture
+                del attributes["TEXCOORD_0"]
+                notes.append(f"<mesh {_dict(mesh).get('name', '')!r}>: texture coordinates "
+                             f"stored as normalized integers are not read: its textures are "
+                             f"not applied")
+    text = json.dumps(copy).encode("utf-8")
+    resolver = files.trimesh_resolver(directory, uri=True)
+    if binary is None and not path.lower().endswith(".glb"):
+        return (text, "gltf", resolver), (document, notes, missing)
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), JSON_CHUNK) + text
+    if binary is not None:
+        pad = binary + b"\x00" * (-len(binary) % 4)
+        body += struct.pack("<II", len(pad), BIN_CHUNK) + pad
+    glb = b"glTF" + struct.pack("<II", 2, 12 + len(body)) + body
+    return (glb, "glb", resolver), (document, notes, missing)
+
+
+def _list(value):
+    return value if isinstance(value, list) else []
+
+
+def _dict(value):
+    return value if isinstance(value, dict) else {}
+
+
+def node_matrices(path, document):
+    """{node index: world matrix} of the nodes of the file's scene (its `scene`, else the
+    first): a node's `matrix`, or its translation, rotation (a unit quaternion x, y, z, w)
+    and scale, times its parents'."""
+    nodes = _list(document.get("nodes"))
+    scenes = _list(document.get("scenes"))
+    index = document.get("scene", 0)
+    if scenes and isinstance(index, int) and 0 <= index < len(scenes):
+        roots = _list(_dict(scenes[index]).get("nodes"))
+    else:
+        children = {c for n in nodes for c in _list(_dict(n).get("children"))}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    world, stack = {}, [(r, np.eye(4)) for r in roots]
+    while stack:
+        i, parent = stack.pop()
+        if not isinstance(i, int) or not 0 <= i < len(nodes) or i in world:
+            continue
+        node = _dict(nodes[i])
+        world[i] = parent @ local_matrix(path, node, i)
+        stack.extend((c, world[i]) for c in _list(node.get("children")))
+    return world
+
+
+def local_matrix(path, node, i):
+    """A node's matrix relative to its parent (SceneError naming the node if not finite)."""
+    if "matrix" in node:
+        values = check_numbers(_list(node["matrix"]), f"node {i} matrix")
+        if isinstance(values, str) or len(values) != 16:
+            raise SceneError(path, values if isinstance(values, str) else
+                             f"node {i}'s matrix has {len(values)} numbers, not 16")
+        return np.array(values, dtype=np.float64).reshape(4, 4).T    # column-major
+    parts = []
+    for key, default in (("translation", [0, 0, 0]), ("rotation", [0, 0, 0, 1]),
+                         ("scale", [1, 1, 1])):
+        values = check_numbers(_list(node.get(key, default)), f"node {i} {key}")
+        if isinstance(values, str) or len(values) != len(default):
+            raise SceneError(path, values if isinstance(values, str) else
+                             f"node {i}'s {key} has {len(values)} numbers, not {len(default)}")
+        parts.append(values)
+    (tx, ty, tz), (x, y, z, w), scale = parts
+    norm = math.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    rotation = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    matrix = np.eye(4)
+    matrix[:3, :3] = rotation * np.asarray(scale)
+    matrix[:3, 3] = (tx, ty, tz)
+    return matrix
+
+
+def gltf_lights(path, document, notes):
+    """ptrace light records of glTF's KHR_lights_punctual (point, spot and directional lights,
+    all of the PHYSICAL model: intensity times colour as the radiance numerator, inverse-square
+    falloff, cones as the extension defines them), placed by their nodes.
+
+    A light whose numbers the extension forbids (a negative or non-finite intensity or colour,
+    cone angles outside 0 <= inner < outer <= pi/2, a range that is not positive) is refused
+    with the light named: the file is invalid and any light we made of it would be a guess.
+    A spot or directional light on a node of zero scale has no direction; such a node is how
+    glTF files hide things, so the light is dropped with a note."""
+    lights = _list(_dict(_dict(document.get("extensions")).get("KHR_lights_punctual"))
+                   .get("lights"))
+    matrices = node_matrices(path, document)
+    records = []
+    for i, node in enumerate(_list(document.get("nodes"))):
+        ref = _dict(_dict(node).get("extensions")).get("KHR_lights_punctual")
+        if ref is None:
+            continue
+        where = f"glTF node {_dict(node).get('name', i)!r}"
+        try:
+            light = _dict(lights[ref["light"]])
+        except (KeyError, IndexError, TypeError):
+            notes.append(f"<{where}>: its KHR_lights_punctual light does not exist: ignored")
+            continue
+        label = f"light {ref['light']} ({light.get('name', light.get('type'))!r})"
+        colour = check_numbers(_list(light.get("color", [1.0, 1.0, 1.0])), f"{label}: color",
+                               low=0.0)
+        intensity = check_numbers([light.get("intensity", 1.0)], f"{label}: intensity",
+                                  low=0.0)
+        for checked in (colour, intensity):
+            if isinstance(checked, str):
+                raise SceneError(path, checked)
+        if len(colour) != 3:
+            raise SceneError(path, f"{label}: color has {len(colour)} numbers, not 3")
+        if i not in matrices:
+            notes.append(f"<{where}>: a light outside the file's scene: ignored")
+            continue
+        matrix = matrices[i]
+        radiance = tuple(np.asarray(colour) * intensity[0])
+        position = tuple(matrix[:3, 3])
+        axis = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])   # lights point down their -Z
+        kind = light.get("type")
+        if light.get("range") is not None:
+            span = check_numbers([light["range"]], f"{label}: range", low=0.0)
+            if isinstance(span, str) or span[0] == 0.0:
+                raise SceneError(path, span if isinstance(span, str) else
+                                 f"{label}: range 0 (must be positive)")
+            notes.append(f"<{where}>: light range ignored (no cut-off)")
+        if kind in ("spot", "directional") and not np.linalg.norm(axis) > 1e-12:
+            notes.append(f"<{where}>: a {kind} light on a node of zero scale has no "
+                         f"direction: dropped")
+            continue
+        if kind in ("spot", "directional"):
+            axis = axis / np.linalg.norm(axis)
+        if kind == "point":
+            records.append({"kind": POINT, "radiance": radiance, "position": position,
+                            "model": PHYSICAL})
+        elif kind == "spot":
+            spot = _dict(light.get("spot"))
+            angles = check_numbers([spot.get("innerConeAngle", 0.0),
+                                    spot.get("outerConeAngle", math.pi / 4)],
+                                   f"{label}: innerConeAngle, outerConeAngle", low=0.0,
+                                   high=math.pi / 2)
+            if isinstance(angles, str) or not angles[0] < angles[1]:
+                raise SceneError(path, angles if isinstance(angles, str) else
+                                 f"{label}: innerConeAngle {angles[0]:g} is not less than "
+                                 f"outerConeAngle {angles[1]:g}")
+            inner, outer = angles
+            records.append({"kind": SPOT, "radiance": radiance, "position": position,
+                            "direction": tuple(axis), "model": PHYSICAL,
+                            "cos_inner": math.cos(inner), "cos_outer": math.cos(outer)})
+        elif kind == "directional":
+            # toward the light, as the course's directional lights
+            records.append({"kind": DIRECTIONAL, "radiance": radiance,
+                            "direction": tuple(-axis), "model": PHYSICAL})
+        else:
+            notes.append(f"<{where}>: light type {str(kind)[:40]!r} unknown: ignored")
+    if records:
+        notes.append(f"glTF: {len(records)} KHR_lights_punctual light(s), intensity taken as "
+                     f"radiometric (no lumen-to-watt factor), inverse-square falloff")
+    return records

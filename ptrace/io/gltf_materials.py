@@ -1,0 +1,246 @@
+"""A glTF material as a ptrace material record: its factors and extensions from the file's
+JSON, its images as trimesh decoded them (ptrace.io.gltf explains the split).
+
+What each field becomes is the README's table "What mesh files' materials become". Every
+value the glTF schema bounds is checked (factors in [0, 1], strengths at least 0, all finite):
+a value outside is refused with the material and field named, since no image made of it would
+be what the file means. A texture that is missing or cannot be decoded is a note and the
+material keeps its factors.
+"""
+import math
+
+import numpy as np
+
+from ..errors import SceneError
+from ..scene import CLAMP, EMISSION, GLASS, GLOSSY, MICROFACET, MIRROR_REPEAT, REPEAT
+from .materials import MIN_ALPHA, check_numbers, conductor_from_colour, linear_rgb
+
+METALLIC_THRESHOLD = 0.5  # glTF metallic at or above: a conductor; below: a dielectric
+GLTF_WRAP = {10497: REPEAT, 33071: CLAMP, 33648: MIRROR_REPEAT}
+HANDLED = {"KHR_materials_emissive_strength", "KHR_materials_transmission",
+           "KHR_materials_ior"}
+
+
+def _dict(value):
+    return value if isinstance(value, dict) else {}
+
+
+def material_record(index, material, document, missing, pool, notes, path):
+    """(record, texture-coordinate transform (3 x 3, glTF's uv space) or None) of material
+    `index` of the document; `material` is trimesh's PBRMaterial of it (its images), missing
+    {image index: why ptrace.io.gltf removed it}."""
+    spec, name, values = material_values(path, document, index)
+    where = f"material {name!r}"
+    pbr = _dict(spec.get("pbrMetallicRoughness"))
+    extensions = _dict(spec.get("extensions"))
+    base, metallic, roughness = values["base"], values["metallic"], values["roughness"]
+    emissive, strength = values["emissive"], values["strength"]
+    transmission, ior = values["transmission"], values["ior"]
+    for extension in sorted(set(extensions) - HANDLED):
+        notes.append(f"<{where}>: extension {extension} ignored")
+    for field in ("normalTexture", "occlusionTexture"):
+        if field in spec:
+            notes.append(f"<{where}>: {field} ignored")
+    if spec.get("alphaMode", "OPAQUE") != "OPAQUE":
+        notes.append(f"<{where}>: alphaMode {str(spec['alphaMode'])[:20]} ignored (rendered "
+                     f"opaque)")
+    transforms = {}
+
+    def texture(field, ref, image, srgb):
+        """The pool index of a referenced texture, or None (noted) if it cannot be used."""
+        if not isinstance(ref, dict):
+            return None
+        source = _source(document, ref)
+        if source in missing:
+            notes.append(f"<{where}>: {field}: its image {missing[source]}: ignored")
+            return None
+        coord = ref.get("texCoord", 0)
+        transform_ext = _dict(_dict(ref.get("extensions")).get("KHR_texture_transform"))
+        coord = transform_ext.get("texCoord", coord)
+        for extension in sorted(set(_dict(ref.get("extensions"))) - {"KHR_texture_transform"}):
+            notes.append(f"<{where}>: {field}'s {extension} ignored")
+        if coord != 0:
+            notes.append(f"<{where}>: {field} uses texture coordinate set {coord}; ptrace "
+                         f"reads the first set only: texture ignored")
+            return None
+        if image is None:
+            notes.append(f"<{where}>: {field}: its image is missing or could not be decoded: "
+                         f"ignored")
+            return None
+        try:
+            index = pool.add(image, srgb=srgb, wrap=_wrap(document, ref),
+                             name=f"{name} {field}", key=("gltf image", source))
+        except Exception as error:      # Pillow decodes lazily: any decoder error lands here
+            notes.append(f"<{where}>: {field}: its image could not be decoded "
+                         f"({str(error)[:80] or 'no message'}): ignored")
+            return None
+        transforms[field] = _transform_matrix(path, where, field, transform_ext)
+        return index
+
+    base_image = getattr(material, "baseColorTexture", None)
+    emissive_image = getattr(material, "emissiveTexture", None)
+    rough_image = getattr(material, "metallicRoughnessTexture", None)
+    rough_ref = pbr.get("metallicRoughnessTexture")
+    record = {"name": name}
+    if max(emissive) * strength > 0.0:
+        record.update(kind=EMISSION, emission=[e * strength for e in emissive])
+        t = texture("emissiveTexture", spec.get("emissiveTexture"), emissive_image, True)
+        if t is not None:
+            record["emission_texture"] = t
+        notes.append(f"<{where}>: emissive, so an emitter; its base colour, metallic and "
+                     f"roughness are ignored (ptrace's emitters do not reflect)")
+    elif transmission > 0.0:
+        record.update(kind=GLASS, albedo=(1.0, 1.0, 1.0), transmittance=tuple(base), ior=ior)
+        if transmission < 1.0 or roughness > 0.0:
+            notes.append(f"<{where} (transmission {transmission:g}, roughness "
+                         f"{roughness:g})>: glass rendered fully transmissive and smooth")
+    elif metallic >= METALLIC_THRESHOLD:
+        colour = list(base)
+        if isinstance(pbr.get("baseColorTexture"), dict):
+            mean = _mean_colour(base_image)
+            if mean is None:
+                notes.append(f"<{where}>: a metal's baseColorTexture is missing or could not "
+                             f"be decoded: its factor sets the conductor's colour")
+            else:
+                colour = [c * m for c, m in zip(colour, mean)]
+                notes.append(f"<{where}>: a metal's baseColorTexture: its mean colour times "
+                             f"the factor is the conductor's colour; the texture's pattern is "
+                             f"not applied (ptrace's conductor takes one colour per material)")
+        eta, k = conductor_from_colour(colour)
+        record.update(kind=MICROFACET, alpha=max(roughness * roughness, MIN_ALPHA),
+                      eta=tuple(eta), k=tuple(k))
+        t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
+        if t is not None:
+            record["roughness_texture"] = t
+        if metallic < 1.0:
+            notes.append(f"<{where} (metallic {metallic:g})>: metallic between 0.5 and 1 "
+                         f"rendered as a metal (ptrace has no blend)")
+    else:   # a dielectric: the base colour under a glossy coat of the ior's reflectance
+        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        record.update(kind=GLOSSY, albedo=tuple(base), specular=(r0, r0, r0),
+                      alpha=max(roughness * roughness, MIN_ALPHA))
+        t = texture("baseColorTexture", pbr.get("baseColorTexture"), base_image, True)
+        if t is not None:
+            record["albedo_texture"] = t
+        t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
+        if t is not None:
+            record["roughness_texture"] = t
+        if metallic > 0.0:
+            notes.append(f"<{where} (metallic {metallic:g})>: metallic between 0 and 0.5 "
+                         f"rendered as a dielectric (ptrace has no blend)")
+    return record, _one_transform(where, transforms, notes)
+
+
+def material_values(path, document, index):
+    """(JSON of material `index`, its name, its factors checked against the glTF schema:
+    {"base", "metallic", "roughness", "emissive", "strength", "transmission", "ior"}).
+    A value the schema forbids (not a number, NaN, infinite, outside its range) is refused
+    with the material and the field named."""
+    specs = document.get("materials") if isinstance(document.get("materials"), list) else []
+    spec = _dict(specs[index]) if 0 <= index < len(specs) else {}
+    name = str(spec.get("name") or f"#{index}")
+    where = f"material {name!r}"
+    pbr = _dict(spec.get("pbrMetallicRoughness"))
+    extensions = _dict(spec.get("extensions"))
+
+    def numbers(value, default, field, count=1, high=1.0):
+        values = default if value is None else value
+        values = values if isinstance(values, list) else [values]
+        checked = check_numbers(values, f"{where}: {field}", low=0.0, high=high)
+        if isinstance(checked, str):
+            raise SceneError(path, checked)
+        if len(checked) < count:
+            raise SceneError(path, f"{where}: {field} has {len(checked)} numbers, not {count}")
+        return checked[:count] if count > 1 else checked[0]
+
+    return spec, name, {
+        "base": numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)[:3],
+        "metallic": numbers(pbr.get("metallicFactor"), 1.0, "metallicFactor"),
+        "roughness": numbers(pbr.get("roughnessFactor"), 1.0, "roughnessFactor"),
+        "emissive": numbers(spec.get("emissiveFactor"), [0.0] * 3, "emissiveFactor", 3),
+        "strength": numbers(_dict(extensions.get("KHR_materials_emissive_strength"))
+                            .get("emissiveStrength"), 1.0, "emissiveStrength", high=None),
+        "transmission": numbers(_dict(extensions.get("KHR_materials_transmission"))
+                                .get("transmissionFactor"), 0.0, "transmissionFactor"),
+        "ior": numbers(_dict(extensions.get("KHR_materials_ior")).get("ior"), 1.5, "ior",
+                       high=None)}
+
+
+def _source(document, ref):
+    textures = document.get("textures") if isinstance(document.get("textures"), list) else []
+    i = ref.get("index")
+    if isinstance(i, int) and 0 <= i < len(textures):
+        return _dict(textures[i]).get("source")
+    return None
+
+
+def _wrap(document, ref):
+    textures = document.get("textures") if isinstance(document.get("textures"), list) else []
+    samplers = document.get("samplers") if isinstance(document.get("samplers"), list) else []
+    try:
+        sampler = _dict(samplers[textures[ref["index"]]["sampler"]])
+    except (KeyError, IndexError, TypeError):
+        return (REPEAT, REPEAT)
+    return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),
+            GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT))
+
+
+def _mean_colour(image):
+    if image is None:
+        return None
+    try:
+        return linear_rgb(image, srgb=True).reshape(-1, 3).mean(axis=0)
+    except Exception:     # Pillow decodes lazily: any decoder error lands here
+        return None
+
+
+def _transform_matrix(path, where, field, extension):
+    """KHR_texture_transform's matrix (translation x rotation x scale, in glTF's uv space:
+    origin at the image's top left, v down), or None for the identity."""
+    if not extension:
+        return None
+    values = []
+    for key, default, count in (("offset", [0.0, 0.0], 2), ("rotation", 0.0, 1),
+                                ("scale", [1.0, 1.0], 2)):
+        value = extension.get(key, default)
+        checked = check_numbers(value if isinstance(value, list) else [value],
+                                f"{where}: {field} KHR_texture_transform {key}")
+        if isinstance(checked, str) or len(checked) != count:
+            raise SceneError(path, checked if isinstance(checked, str) else
+                             f"{where}: {field} KHR_texture_transform {key} has "
+                             f"{len(checked)} numbers, not {count}")
+        values.append(checked)
+    (ox, oy), (angle,), (sx, sy) = values
+    c, s = math.cos(angle), math.sin(angle)
+    # The rotation's sense is the one Khronos's conformance model TextureTransformTest checks
+    # (its arrow meets the green marker) and three.js's loader uses: u' = c u + s v,
+    # v' = -s u + c v. The extension's GLSL listing, mat3(c, s, 0, -s, c, 0, 0, 0, 1), read as
+    # GLSL's column-major, gives the opposite sense, which that model marks red.
+    matrix = (np.array([[1, 0, ox], [0, 1, oy], [0, 0, 1]]) @
+              np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]]) @ np.diag([sx, sy, 1.0]))
+    return None if np.allclose(matrix, np.eye(3)) else matrix
+
+
+def _one_transform(where, transforms, notes):
+    """The one transform of a material's texture coordinates (ptrace keeps one set of them per
+    face): its textures' KHR_texture_transform when they agree, else the first's (noted)."""
+    found = [(field, m) for field, m in transforms.items()]
+    if not found:
+        return None
+    field, first = found[0]
+    for other, matrix in found[1:]:
+        if (matrix is None) != (first is None) or (matrix is not None and
+                                                   not np.allclose(matrix, first)):
+            notes.append(f"<{where}>: its textures have different KHR_texture_transforms: "
+                         f"{field}'s is applied to all")
+            break
+    return first
+
+
+def apply_transform(uv, matrix):
+    """Texture coordinates (..., 2) in ptrace's convention (v up) through a glTF texture
+    transform (defined with v down)."""
+    u, v = uv[..., 0], 1.0 - uv[..., 1]
+    tu = matrix[0, 0] * u + matrix[0, 1] * v + matrix[0, 2]
+    tv = matrix[1, 0] * u + matrix[1, 1] * v + matrix[1, 2]
+    return np.stack([tu, 1.0 - tv], axis=-1)

@@ -1,0 +1,87 @@
+"""PLY files (ptrace.io.ply): vertex colours under the names writers use, and files without
+faces refused with the reason."""
+import numpy as np
+import pytest
+
+import ptrace
+from ptrace.io.materials import linear_rgb
+
+HEADER = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n" \
+         "property float z\n{colour}{faces}end_header\n"
+FACE = "element face 1\nproperty list uchar int vertex_indices\n"
+
+
+def write(tmp_path, colour_properties="", rows=("0 0 0", "1 0 0", "0 1 0"), faces=FACE,
+          tail="3 0 1 2\n"):
+    colour = "".join(f"property {p}\n" for p in colour_properties)
+    path = tmp_path / "mesh.ply"
+    path.write_text(HEADER.format(colour=colour, faces=faces) + "\n".join(rows) + "\n" + tail)
+    return path
+
+
+@pytest.mark.parametrize("properties, values", [
+    (("uchar red", "uchar green", "uchar blue"), "255 128 0"),
+    (("float r", "float g", "float b"), "1.0 0.50196 0.0"),
+    (("float red", "float green", "float blue"), "1.0 0.50196 0.0"),
+    (("ushort red", "ushort green", "ushort blue"), "65535 32896 0"),
+    (("uchar diffuse_red", "uchar diffuse_green", "uchar diffuse_blue"), "255 128 0")])
+def test_vertex_colours_under_their_common_names(tmp_path, properties, values):
+    """float r g b were dropped without a note; every spelling is the same colour."""
+    rows = [f"{p} {values}" for p in ("0 0 0", "1 0 0", "0 1 0")]
+    scene = ptrace.load(write(tmp_path, properties, rows))
+    expected = linear_rgb(np.array([[[255, 128, 0]]], np.uint8), srgb=True)[0, 0]
+    np.testing.assert_allclose(scene.vertex_colours, [expected] * 3, atol=1e-4)
+    assert any("vertex colours" in n for n in scene.notes), scene.notes
+
+
+def test_a_ply_of_points_is_refused_saying_so(tmp_path):
+    with pytest.raises(ptrace.SceneError, match="contains only points") as caught:
+        ptrace.load(write(tmp_path, faces="", tail=""))
+    assert "mesh.ply" in str(caught.value)
+
+
+def test_a_ply_of_triangle_strips_is_refused_saying_so(tmp_path):
+    strips = "element tristrips 1\nproperty list int int vertex_indices\n"
+    with pytest.raises(ptrace.SceneError, match="triangle strips are not supported"):
+        ptrace.load(write(tmp_path, faces=strips, tail="3 0 1 2\n"))
+
+
+def test_a_file_that_is_not_ply_says_so(tmp_path):
+    path = tmp_path / "mesh.ply"
+    path.write_bytes(b"\x00\x01binary junk")
+    with pytest.raises(ptrace.SceneError, match="is not a PLY file"):
+        ptrace.load(path)
+
+
+UV_PLY = "ply\nformat ascii 1.0\n{comment}element vertex 3\nproperty float x\n" \
+         "property float y\nproperty float z\nproperty float s\nproperty float t\n" \
+         "element face 1\nproperty list uchar int vertex_indices\nend_header\n" \
+         "0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n"
+
+
+def test_texture_coordinates_without_a_texture_file_get_the_default_albedo(tmp_path):
+    """trimesh gives them its 2 x 2 placeholder texture; ptrace the documented default."""
+    path = tmp_path / "uv.ply"
+    path.write_text(UV_PLY.format(comment=""))
+    scene = ptrace.load(path)
+    assert len(scene.textures) == 0
+    np.testing.assert_allclose(scene.materials.albedo[0], 0.5)
+    assert any("without a material" in n for n in scene.notes), scene.notes
+
+
+def test_a_texture_file_comment_is_the_albedo_texture(tmp_path):
+    from files_by_hand import png_bytes
+    (tmp_path / "skin.png").write_bytes(png_bytes("RGB", (0, 0, 255)))
+    path = tmp_path / "uv.ply"
+    path.write_text(UV_PLY.format(comment="comment TextureFile skin.png\n"))
+    scene = ptrace.load(path)
+    assert scene.materials.albedo_texture[0] == 0
+    np.testing.assert_allclose(scene.textures.texels[0], [0, 0, 1], atol=1e-4)
+
+
+def test_a_flat_model_edge_on_to_the_default_camera_is_noted(tmp_path):
+    """One triangle in the plane x = 0, the default camera looking along -Z: an empty image,
+    said in a note rather than silently."""
+    path = write(tmp_path, rows=("0 0 0", "0 1 0", "0 0 1"))
+    assert any("edge-on" in n for n in ptrace.load(path).notes)
+    assert not any("edge-on" in n for n in ptrace.load(write(tmp_path)).notes)
