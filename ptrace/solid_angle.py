@@ -1,26 +1,28 @@
 """Solid-angle sampling of a light's shape as seen from a point, each sampler beside its pdf.
 
 From a shading point p, a sampler picks a point q of the shape so that the direction from p to q
-is uniform over the solid angle the shape subtends, and returns q and that direction's density per
-unit solid angle. The matching *_pdf function gives the density of a unit direction from p (0 if
-it misses the shape) from the same computation, with the same choice of technique, so that
+is uniform over the solid angle the shape subtends, and returns q and that direction's density
+per unit solid angle. The matching *_pdf function gives the density of a unit direction from p (0
+if it misses the shape) from the same computation and the same choice of technique, so that
 multiple importance sampling weighs a BSDF-sampled ray that finds the shape by the density the
 light sampler would have given it.
 
 - Rectangles: Urena, Fajardo and King 2013, "An Area-Preserving Parametrization for Spherical
   Rectangles".
-- Triangles: Arvo 1995, "Stratified Sampling of Spherical Triangles".
+- Triangles: Arvo 1995, "Stratified Sampling of Spherical Triangles", with his q rewritten so
+  that 1 - q, and the arcs from A and from B, come without cancelling.
 - Spheres: uniform over the cone of directions the sphere subtends (as pbrt-v4's Sphere::Sample);
   from inside the sphere, uniform over its area.
 
-Solid angles come from Van Oosterom and Strackee's formula (tan of half the solid angle of a
-triangle), which keeps full relative precision for tiny and distant shapes, where the sum of a
-spherical polygon's angles minus (n - 2) pi cancels. The samplers' maps still lose precision as
-the solid angle shrinks (they place the sample through differences of angles near their sum), so
-below a minimum solid angle (RECTANGLE_MIN_SOLID_ANGLE, TRIANGLE_MIN_SOLID_ANGLE, chosen by
-measuring the maps' error against an exact evaluation) a rectangle or triangle is sampled
-uniformly by area instead, its density converted to solid angle; there the two densities differ
-by little anyway. The pdf functions test the same number against the same threshold.
+Solid angles come from Van Oosterom and Strackee's formula (tan of half a triangle's solid angle
+from a triple product), which keeps its relative precision for tiny and distant shapes, where a
+spherical polygon's angle sum less (n - 2) pi cancels. The rectangle's map still loses precision
+for tiny solid angles and when seen nearly edge-on (it takes 1 - cos^2 of grazing angles); the
+thresholds below were set where
+its samples, measured against an exact evaluation of the same map, stay within a millionth of the
+rectangle's size (the triangle's rewritten map stayed at float64's limit for storing the point
+down to the smallest solid angles measured). Past them a shape is sampled uniformly by area, its
+density converted to solid angle; there the two densities differ little.
 
 Shapes are geometric and two-sided here: a direction's density does not depend on which face it
 meets (one-sided lights are the caller's to cull). Points and vectors are scalar float64
@@ -30,14 +32,13 @@ import math
 
 from numba import njit
 
-# Below these solid angles (steradians) the spherical maps give way to area sampling.
-RECTANGLE_MIN_SOLID_ANGLE = 1e-8
+# Below these solid angles (steradians) the spherical maps give way to area sampling ...
+RECTANGLE_MIN_SOLID_ANGLE = 1e-9
 TRIANGLE_MIN_SOLID_ANGLE = 1e-18
-# ... and so does a rectangle seen so nearly edge-on that its nearest point, in its plane, lies
-# farther from p's foot than sqrt(RECTANGLE_MAX_GRAZING) times p's distance to that plane.
+# ... and so does a rectangle seen so nearly edge-on that its nearest point lies farther from p's
+# foot on its plane than sqrt(RECTANGLE_MAX_GRAZING) times p's distance to that plane, or a
+# parallelogram whose edges' cosine exceeds RIGHT_ANGLE_TOLERANCE (the map needs a right angle).
 RECTANGLE_MAX_GRAZING = 1e8
-# A parallelogram whose edges' cosine exceeds this is sampled by area (the spherical rectangle
-# needs a right angle).
 RIGHT_ANGLE_TOLERANCE = 1e-7
 TWO_PI = 2.0 * math.pi
 
@@ -125,13 +126,17 @@ def _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2):
     x1, y1 = x0 + exl, y0 + eyl
     w = z0 * z0
     l01 = math.sqrt(x0 * x0 + y1 * y1 + w)
-    # the internal angles at (x0, y1) and (x0, y0), and the edges' normals' z
-    g2 = math.atan2(-z0 * l01, x0 * y1)
-    g3 = math.atan2(-z0 * l00, -x0 * y0)
+    # the internal angles at (x0, y1) and (x0, y0) as (cos, sin) times a length; the map starts
+    # from k = 2 pi - g2 - g3: au = k + u1 omega, its cos and sin by the addition formulas
+    c2, s2 = x0 * y1, -z0 * l01
+    c3, s3 = -x0 * y0, -z0 * l00
+    scale = 1.0 / math.sqrt((c2 * c2 + s2 * s2) * (c3 * c3 + s3 * s3))
+    ck, sk = (c2 * c3 - s2 * s3) * scale, -(s2 * c3 + c2 * s3) * scale
+    phi = u1 * omega
+    cp, sp = math.cos(phi), math.sin(phi)
+    s, c = sk * cp + ck * sp, ck * cp - sk * sp
     b0 = -y0 / math.sqrt(w + y0 * y0)
     b1 = y1 / math.sqrt(w + y1 * y1)
-    au = u1 * omega + (TWO_PI - g2 - g3)
-    s, c = math.sin(au), math.cos(au)
     num = c * b0 - b1
     den = math.sqrt(num * num + b0 * b0 * s * s)
     cu = _clamp(math.copysign(1.0, num) * s / den, -1.0, 1.0) if den > 0.0 else 0.0
@@ -156,9 +161,9 @@ def _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2):
 def rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, u1, u2):
     """A point q of the rectangle c + s e_x + t e_y (|s|, |t| <= 1/2: ptrace's area lights, c
     their position) seen from p: (qx, qy, qz, pdf), pdf per unit solid angle of the direction
-    from p to q. Uniform in solid angle (1 / solid angle) when the rectangle subtends at least
-    RECTANGLE_MIN_SOLID_ANGLE and has a right angle; else uniform by area, as
-    lights.sample_light's (pdf distance^2 / (area cos)). pdf 0: no sample."""
+    from p to q. Uniform in solid angle (pdf 1 / solid angle) unless the thresholds above say
+    otherwise; then uniform by area, as lights.sample_light's (pdf distance^2 / (area cos)).
+    pdf 0: no sample."""
     (xx, xy, xz, yx, yy, yz, zx, zy, zz, x0, y0, z0, exl, eyx_, eyl, area, omega, l00,
      spherical) = _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
     if spherical:
@@ -277,8 +282,8 @@ def _triangle_spherical(vax, vay, vaz, la, vbx, vby, vbz, lb, e1x, e1y, e1z, e2x
 def triangle_sample(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz, u1, u2):
     """A point q of the triangle ABC seen from p: (qx, qy, qz, wb, wc, pdf), where q = A + wb (B -
     A) + wc (C - A) (wb, wc: the barycentrics of B and C, as lights.sample_emitter's) and pdf is
-    per unit solid angle of the direction from p to q. Uniform in solid angle (1 / solid angle)
-    when the triangle subtends at least TRIANGLE_MIN_SOLID_ANGLE; else uniform by area, as
+    per unit solid angle of the direction from p to q. Uniform in solid angle (pdf 1 / solid
+    angle) when the triangle subtends at least TRIANGLE_MIN_SOLID_ANGLE; else uniform by area, as
     lights.sample_emitter's (pdf distance^2 / (area cos)). pdf 0: no sample."""
     (vax, vay, vaz, la, vbx, vby, vbz, lb, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz, triple,
      omega) = _triangle_frame(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz)
