@@ -415,9 +415,10 @@ def test_rectangle_fallbacks():
     check_consistent(far, by_area=True, omega=rectangle_solid_angle(*far.args))
     # grazing: p 1e-5 below the plane, 0.5 beside the rectangle ((0.5 / 1e-5)^2 > the limit)
     assert (0.5 / 1e-5) ** 2 > RECTANGLE_MAX_GRAZING
-    grazing = Rectangle(centre + np.array([0.9, -1e-5, 0.0]), centre, ex, ey)
-    assert rectangle_solid_angle(*grazing.args) > RECTANGLE_MIN_SOLID_ANGLE
-    check_consistent(grazing, by_area=True, omega=rectangle_solid_angle(*grazing.args))
+    for beside in (np.array([0.9, -1e-5, 0.0]), np.array([0.0, -1e-5, 0.8])):   # along x, y
+        grazing = Rectangle(centre + beside, centre, ex, ey)
+        assert rectangle_solid_angle(*grazing.args) > RECTANGLE_MIN_SOLID_ANGLE
+        check_consistent(grazing, by_area=True, omega=rectangle_solid_angle(*grazing.args))
     # a parallelogram without a right angle: by area, and its samples follow that density
     sheared = (p, centre, ex, np.array([0.2, 0.0, 0.6]))
     check_consistent(Rectangle(*sheared), by_area=True,
