@@ -48,17 +48,6 @@ def _clamp(x, lo, hi):
     return min(max(x, lo), hi)
 
 
-@njit(cache=True, inline="always")
-def _triangle_solid_angle(ax, ay, az, la, bx, by, bz, lb, cx, cy, cz, lc, triple):
-    """Solid angle of the triangle whose corners are a, b, c from the viewpoint (vectors of
-    lengths la, lb, lc), given |a . (b x c)| (Van Oosterom and Strackee 1983)."""
-    if triple == 0.0:
-        return 0.0
-    d = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc + (ax * cx + ay * cy + az * cz) * lb
-         + (bx * cx + by * cy + bz * cz) * la)
-    return 2.0 * math.atan2(triple, d)
-
-
 # -- rectangles ------------------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -207,7 +196,7 @@ def rectangle_pdf(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, wx, wy, 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _triangle_frame(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
     """Corners from p (a, b, c) and their lengths, edges e1 = B - A and e2 = C - A, the normal
-    e1 x e2 (length twice the area), a . (e1 x e2), and the solid angle."""
+    e1 x e2 (length twice the area), a . (e1 x e2) = a . (b x c), and the solid angle."""
     vax, vay, vaz = ax - px, ay - py, az - pz
     vbx, vby, vbz = bx - px, by - py, bz - pz
     vcx, vcy, vcz = cx - px, cy - py, cz - pz
@@ -218,8 +207,12 @@ def _triangle_frame(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):
     e2x, e2y, e2z = cx - ax, cy - ay, cz - az
     nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
     triple = vax * nx + vay * ny + vaz * nz
-    omega = _triangle_solid_angle(vax, vay, vaz, la, vbx, vby, vbz, lb, vcx, vcy, vcz, lc,
-                                  abs(triple))
+    omega = 0.0
+    if triple != 0.0:       # Van Oosterom and Strackee 1983
+        omega = 2.0 * math.atan2(abs(triple), la * lb * lc
+                                 + (vax * vbx + vay * vby + vaz * vbz) * lc
+                                 + (vax * vcx + vay * vcy + vaz * vcz) * lb
+                                 + (vbx * vcx + vby * vcy + vbz * vcz) * la)
     return (vax, vay, vaz, la, vbx, vby, vbz, lb, e1x, e1y, e1z, e2x, e2y, e2z, nx, ny, nz,
             triple, omega)
 
