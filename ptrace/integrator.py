@@ -42,8 +42,10 @@ from .environment import (
 from .lights import (
     EMITTER,
     area_light_hit,
+    area_light_pdf,
     choose,
     emitter_arrays,
+    emitter_pdf,
     light_is_delta,
     light_selection,
     sample_emitter,
@@ -422,12 +424,9 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
             if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
                 continue
             weight = 1.0
-            if not delta:
-                hx, hy, hz = ox + t_light * dx - qx, oy + t_light * dy - qy, oz + t_light * dz - qz
-                dist2 = hx * hx + hy * hy + hz * hz
-                cos_light = -(dx * lights.direction[light, 0] + dy * lights.direction[light, 1]
-                              + dz * lights.direction[light, 2])
-                weight = power_heuristic(bsdf_pdf_, n * dist2 / (lights.area[light] * cos_light))
+            if not delta:   # the light's density for this direction from q, as direct_light
+                weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
+                                                                       dx, dy, dz))
             r += weight * lights.radiance[light, 0]
             g += weight * lights.radiance[light, 1]
             b += weight * lights.radiance[light, 2]
@@ -451,15 +450,13 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
         if power and kinds.shape[0] > 0:
             n = options.light_samples * lights.select_pmf[kinds.shape[0] - 1]
         if not delta:
-            area_pdf = lights.prim_pdf[prim]
-            if area_pdf == 0.0:
+            if lights.prim_pdf[prim] == 0.0:
                 return r, g, b       # a light's face: its light was counted above
-            hx, hy, hz = ox + t * dx - qx, oy + t * dy - qy, oz + t * dz - qz
-            cos_light = abs(dx * gx + dy * gy + dz * gz)
-            if cos_light == 0.0:
+            if abs(dx * gx + dy * gy + dz * gz) == 0.0:
                 return r, g, b
-            weight = power_heuristic(
-                bsdf_pdf_, n * area_pdf * (hx * hx + hy * hy + hz * hz) / cos_light)
+            # the emitter sampler's density for this direction from q, as direct_light
+            weight = power_heuristic(bsdf_pdf_, n * emitter_pdf(shapes, lights.prim_pdf, prim,
+                                                                qx, qy, qz, dx, dy, dz))
         er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
         r += weight * er
         g += weight * eg

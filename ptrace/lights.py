@@ -16,6 +16,14 @@ import numpy as np
 from numba import njit
 
 from .scene import AMBIENT, AREA, DIRECTIONAL, PHYSICAL, POINT, SPOT
+from .solid_angle import (
+    rectangle_pdf,
+    rectangle_sample,
+    sphere_pdf,
+    sphere_sample,
+    triangle_pdf,
+    triangle_sample,
+)
 from .textures import surface_emission
 
 INF = math.inf
@@ -73,20 +81,22 @@ def sample_light(lights, i, px, py, pz, u1, u2):
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], direction[i, 0], \
             direction[i, 1], direction[i, 2], INF, 1.0
     if kind == AREA:
-        sx, sy = u1 - 0.5, u2 - 0.5
-        qx = position[i, 0] + sx * edge_x[i, 0] + sy * edge_y[i, 0]
-        qy = position[i, 1] + sx * edge_x[i, 1] + sy * edge_y[i, 1]
-        qz = position[i, 2] + sx * edge_x[i, 2] + sy * edge_y[i, 2]
+        # by solid angle (ptrace.solid_angle: spherical rectangles, area sampling where the
+        # solid angle is too small to be stable); the light is one-sided: nothing reaches a
+        # point behind its plane
+        if area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
+                              + (position[i, 1] - py) * direction[i, 1]
+                              + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
+            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+        qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
+                                           position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                           edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                           edge_y[i, 2], u1, u2)
         dx, dy, dz = qx - px, qy - py, qz - pz
-        dist2 = dx * dx + dy * dy + dz * dz
-        dist = math.sqrt(dist2)
-        if dist == 0.0 or area[i] <= 0.0:
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if dist == 0.0 or not pdf > 0.0:
             return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
         wx, wy, wz = dx / dist, dy / dist, dz / dist
-        cos_light = wx * direction[i, 0] + wy * direction[i, 1] + wz * direction[i, 2]
-        if cos_light >= 0.0:   # the point is behind the one-sided light
-            return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
-        pdf = dist2 / (area[i] * -cos_light)
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], wx, wy, wz, dist, pdf
     if kind == AMBIENT:
         # uniform over the hemisphere about world +Y, pdf 1 / (2 pi)
@@ -96,6 +106,17 @@ def sample_light(lights, i, px, py, pz, u1, u2):
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], r * math.cos(phi), y, \
             r * math.sin(phi), INF, 1.0 / (2.0 * math.pi)
     return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0   # spot: nothing, like the course
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def area_light_pdf(lights, i, px, py, pz, wx, wy, wz):
+    """The density per unit solid angle with which sample_light, at point p, gives the unit
+    direction w toward area light i (the pdf of a BSDF-sampled ray from p that finds it, for
+    multiple importance sampling): the same computation as the sampler's."""
+    position, edge_x, edge_y = lights.position, lights.edge_x, lights.edge_y
+    return rectangle_pdf(px, py, pz, position[i, 0], position[i, 1], position[i, 2],
+                         edge_x[i, 0], edge_x[i, 1], edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                         edge_y[i, 2], wx, wy, wz)
 
 
 # -- emissive geometry as a light ------------------------------------------------------------------
@@ -270,10 +291,28 @@ def choose(cdf, u):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def _primitive_area(shapes, prim):
+    """Area of a triangle or sphere primitive."""
+    vertices, faces = shapes.vertices, shapes.faces
+    if prim < faces.shape[0]:
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        e1x, e1y, e1z = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1],
+                         vertices[b, 2] - vertices[a, 2])
+        e2x, e2y, e2z = (vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1],
+                         vertices[c, 2] - vertices[a, 2])
+        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        return 0.5 * math.sqrt(nx * nx + ny * ny + nz * nz)
+    radius = shapes.radii[prim - faces.shape[0]]
+    return 4.0 * math.pi * radius * radius
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, u2):
-    """A point on the emissive primitives, chosen by power (u0) and uniformly by area (u1, u2),
-    as seen from p: (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per unit solid angle). Emission is
-    two-sided, like the course's."""
+    """A point on the emissive primitives as seen from p, the primitive chosen by power (u0)
+    and the point by solid angle (u1, u2: a spherical triangle, or a sphere's visible cone;
+    ptrace.solid_angle falls back to area sampling where that is not stable): (Lr, Lg, Lb, wix,
+    wiy, wiz, distance, pdf per unit solid angle, the choice's probability included). Emission
+    is two-sided, like the course's."""
     lo, hi = 0, prims.shape[0] - 1
     while lo < hi:        # the first k with u0 < cdf[k]
         mid = (lo + hi) // 2
@@ -287,40 +326,42 @@ def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, 
     wb = wc = 0.0
     if prim < n_tri:
         a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
-        root = math.sqrt(u1)
-        wa, wb, wc = 1.0 - root, root * (1.0 - u2), root * u2
-        qx = wa * vertices[a, 0] + wb * vertices[b, 0] + wc * vertices[c, 0]
-        qy = wa * vertices[a, 1] + wb * vertices[b, 1] + wc * vertices[c, 1]
-        qz = wa * vertices[a, 2] + wb * vertices[b, 2] + wc * vertices[c, 2]
-        e1x, e1y, e1z = (vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1],
-                         vertices[b, 2] - vertices[a, 2])
-        e2x, e2y, e2z = (vertices[c, 0] - vertices[a, 0], vertices[c, 1] - vertices[a, 1],
-                         vertices[c, 2] - vertices[a, 2])
-        nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
-        length = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if length == 0.0:
-            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        nx, ny, nz = nx / length, ny / length, nz / length
+        qx, qy, qz, wb, wc, pdf = triangle_sample(
+            px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2], vertices[b, 0],
+            vertices[b, 1], vertices[b, 2], vertices[c, 0], vertices[c, 1], vertices[c, 2],
+            u1, u2)
     else:
         s = prim - n_tri
-        nz = 1.0 - 2.0 * u1
-        ring = math.sqrt(max(0.0, 1.0 - nz * nz))
-        phi = 2.0 * math.pi * u2
-        nx, ny = ring * math.cos(phi), ring * math.sin(phi)
-        qx = centers[s, 0] + radii[s] * nx
-        qy = centers[s, 1] + radii[s] * ny
-        qz = centers[s, 2] + radii[s] * nz
+        qx, qy, qz, pdf = sphere_sample(px, py, pz, centers[s, 0], centers[s, 1],
+                                        centers[s, 2], radii[s], u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
-    dist2 = dx * dx + dy * dy + dz * dz
-    dist = math.sqrt(dist2)
-    if dist == 0.0:
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0 or not pdf > 0.0:
         return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
     wx, wy, wz = dx / dist, dy / dist, dz / dist
-    cos_light = abs(wx * nx + wy * ny + wz * nz)
-    if cos_light == 0.0:
-        return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
     er, eg, eb = surface_emission(shapes, materials, shapes.material_index[prim], prim, wb, wc)
-    return er, eg, eb, wx, wy, wz, dist, prim_pdf[prim] * dist2 / cos_light
+    return er, eg, eb, wx, wy, wz, dist, prim_pdf[prim] * _primitive_area(shapes, prim) * pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def emitter_pdf(shapes, prim_pdf, prim, px, py, pz, wx, wy, wz):
+    """The density per unit solid angle with which sample_emitter, at point p, gives the unit
+    direction w toward emissive primitive prim (the choice's probability included; 0 for a
+    primitive it never chooses): the same computation as the sampler's."""
+    chosen = prim_pdf[prim]
+    if chosen == 0.0:
+        return 0.0
+    vertices, faces = shapes.vertices, shapes.faces
+    if prim < faces.shape[0]:
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        pdf = triangle_pdf(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                           vertices[b, 0], vertices[b, 1], vertices[b, 2], vertices[c, 0],
+                           vertices[c, 1], vertices[c, 2], wx, wy, wz)
+    else:
+        s = prim - faces.shape[0]
+        pdf = sphere_pdf(px, py, pz, shapes.centers[s, 0], shapes.centers[s, 1],
+                         shapes.centers[s, 2], shapes.radii[s], wx, wy, wz)
+    return chosen * _primitive_area(shapes, prim) * pdf
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

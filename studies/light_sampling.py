@@ -1,0 +1,106 @@
+"""Study: area lights sampled by solid angle against by area, side by side with Mitsuba 3.
+
+    python studies/light_sampling.py --before CHECKOUT [--scenes CBspheres_lambertian CBbunny]
+        [--spp 16 64] [--seeds 3] [--output light_sampling.md]
+
+CHECKOUT is a checkout of ptrace before the change (a git worktree of the commit before it);
+this tree is the after. Each ptrace render runs in a fresh process of its tree (so both trees'
+kernels are their own), at 480x360, -m 5 -l 1, 2 threads, the default estimator (MIS, Sobol'),
+on the course scene without its emissive quad (benchmarks.error_vs_time.test_scene, as
+error_vs_time measures); Mitsuba 3 llvm_ad_rgb renders the same scene with its multijitter
+sampler. Error: benchmarks.error_vs_time.relative_mse against its cached 1024-spp Mitsuba
+reference. For every spp and seed the three renderers run in turns; a cell is the mean
+relative MSE over the seeds and the median seconds of the render call (kernels compiled
+before; a ptrace process times only its render call). Writes benchmarks/results/OUTPUT.
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks import error_vs_time as evt  # noqa: E402
+from benchmarks import report  # noqa: E402
+
+WORKER = """
+import json, sys, time, numpy as np
+sys.path.insert(0, {root!r})
+import ptrace
+from benchmarks.error_vs_time import test_scene, FULL, DEPTH, THREADS
+scene = test_scene({name!r})
+ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=DEPTH)           # compile
+start = time.perf_counter()
+image = ptrace.render(scene, spp={spp}, resolution=FULL, max_depth=DEPTH, threads=THREADS,
+                      seed={seed}, light_samples=1)
+seconds = time.perf_counter() - start
+np.save({out!r}, image)
+print(json.dumps(dict(seconds=seconds, file=ptrace.__file__)))
+"""
+
+
+def ptrace_render(tree, name, spp, seed, folder):
+    out = os.path.join(folder, f"{abs(hash((tree, name, spp, seed)))}.npy")
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    code = WORKER.format(root=str(tree), name=name, spp=spp, seed=seed, out=out)
+    result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                            text=True, check=True, cwd=folder)
+    answer = json.loads(result.stdout.strip().splitlines()[-1])
+    assert answer["file"].startswith(str(tree)), answer   # the tree asked for
+    return np.load(out), answer["seconds"]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--before", required=True)
+    parser.add_argument("--scenes", nargs="+", default=["CBspheres_lambertian", "CBbunny"])
+    parser.add_argument("--spp", type=int, nargs="+", default=[16, 64])
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--output", default="light_sampling.md")
+    args = parser.parse_args(argv)
+    trees = {"area (before)": Path(args.before).resolve(), "solid angle (after)": ROOT}
+    mitsuba = evt.Mitsuba()
+    rows = []
+    with tempfile.TemporaryDirectory() as folder:
+        for name in args.scenes:
+            ref, _ = evt.reference(name, mitsuba, evt.REFERENCE_SPP)
+            scene = evt.test_scene(name)
+            for spp in args.spp:
+                cells = {label: [] for label in [*trees, "Mitsuba multijitter"]}
+                for seed in range(args.seeds):
+                    for label, tree in trees.items():
+                        image, seconds = ptrace_render(tree, name, spp, seed, folder)
+                        cells[label].append((evt.relative_mse(image, ref), seconds))
+                    image, seconds, _ = mitsuba.render(scene, spp, sampler="multijitter",
+                                                       seed=seed)
+                    cells["Mitsuba multijitter"].append((evt.relative_mse(image, ref), seconds))
+                for label, runs in cells.items():
+                    mse = statistics.fmean(r[0] for r in runs)
+                    seconds = statistics.median(r[1] for r in runs)
+                    rows.append((name, spp, label, mse, seconds))
+                    print(name, spp, label, f"{mse:.5f}", f"{seconds:.2f}", flush=True)
+    lines = [report.header("Area lights by solid angle against by area, beside Mitsuba 3"),
+             f"480x360, `-m 5 -l 1`, 2 threads; before: `{args.before}`; mean relative MSE "
+             f"over {args.seeds} seeds against the cached {evt.REFERENCE_SPP}-spp Mitsuba "
+             "reference, median seconds of the render call.", "",
+             "| scene | spp | renderer | rel. MSE | seconds | rel. MSE x s | rel. MSE / "
+             "Mitsuba's | rel. MSE x s / Mitsuba's |", "|---|---:|---|---:|---:|---:|---:|---:|"]
+    for name, spp, label, mse, seconds in rows:
+        m_mse, m_s = next((r[3], r[4]) for r in rows
+                          if r[0] == name and r[1] == spp and r[2] == "Mitsuba multijitter")
+        lines.append(f"| {name} | {spp} | {label} | {mse:.5f} | {seconds:.2f} | "
+                     f"{mse * seconds:.5f} | {mse / m_mse:.2f}x | "
+                     f"{mse * seconds / (m_mse * m_s):.2f}x |")
+    path = report.write(args.output, "\n".join(lines) + "\n")
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
