@@ -52,7 +52,7 @@ from .lights import (
     sample_light,
 )
 from .sampling import sobol_1d, sobol_2d, uniform
-from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, MICROFACET, REFRACTION
+from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, GLOSSY, MICROFACET, REFRACTION
 from .textures import surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
@@ -513,7 +513,9 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
             break
         base = vertex * DIMS_PER_VERTEX
         u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
-        u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
+        u3 = 0.0   # the lobe choice: only glass and the glossy coat have one
+        if kind == GLASS or kind == GLOSSY:
+            u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
         wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
             kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, materials.eta,
             materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
