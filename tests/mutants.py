@@ -88,8 +88,8 @@ MUTANTS = {
         ["tests/accel/test_backends.py", "-k", "barycentrics"]),
     "light-pdf-doubled": (
         "an area light sample reports twice its solid-angle pdf",
-        [("ptrace/lights.py", "pdf = dist2 / (area[i] * -cos_light)",
-          "pdf = 2.0 * dist2 / (area[i] * -cos_light)")],
+        [("ptrace/solid_angle.py", "cz - 0.5 * (exz + eyz) + a * xz + b * yz, 1.0 / omega)",
+          "cz - 0.5 * (exz + eyz) + a * xz + b * yz, 2.0 / omega)")],
         ["tests/ptrace/test_bsdf.py", "-k", "area_light"]),
     "seed-in-dimension-slot": (
         "the Sobol sampler's key takes the seed where the dimension belongs",
@@ -132,7 +132,7 @@ MUTANTS = {
         [PROMISES, "-k", "sideways"]),
     "gltf-wrap-t-for-s": (
         "a glTF sampler's wrapT is read for the texture's u wrap as well as its v wrap",
-        [("ptrace/io/materials.py", 'return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),',
+        [("ptrace/io/gltf_materials.py", 'return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),',
           'return (GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT),')],
         ["tests/ptrace/test_hostile_gltf_wrap.py"]),
     "embree-grazing-refines-t-only": (

@@ -229,7 +229,7 @@ def light_record(kind, radiance, position, direction, edge_x, edge_y, area, mode
     return LightArrays(np.array([kind]), radiance, position, direction, edge_x, edge_y, area,
                        np.array([model]), np.array([cos_inner]), np.array([cos_outer]),
                        np.zeros(1, np.int64), np.zeros(0, np.int64), empty, empty, False,
-                       *environment_arrays(None))
+                       *environment_arrays(None), empty, empty)
 
 
 def test_area_light_pdf_integrates_its_solid_angle():

@@ -77,9 +77,9 @@ def test_normals_and_adaptive_renders_are_bit_identical(client, course_scene):
     assert np.array_equal(alone, spread)
     scene = ptrace.load(course_scene("sky/CBspheres_lambertian.dae"))
     stats_alone, stats_spread = {}, {}
-    alone = ptrace.render(scene, spp=32, adaptive=(4, 0.2), max_depth=2, resolution=(32, 24),
+    alone = ptrace.render(scene, spp=32, adaptive=(4, 0.1), max_depth=2, resolution=(32, 24),
                           stats=stats_alone)
-    spread = ptrace.render(scene, spp=32, adaptive=(4, 0.2), max_depth=2, resolution=(32, 24),
+    spread = ptrace.render(scene, spp=32, adaptive=(4, 0.1), max_depth=2, resolution=(32, 24),
                            stats=stats_spread, client=client)
     samples = stats_alone["samples"]
     assert samples.min() < 32 and samples.max() == 32   # adaptive stopped some pixels, not all
