@@ -132,7 +132,11 @@ def build_parser():
     add_camera_flags(parser)
     add("-e", "--environment", default=None, metavar="FILE|R,G,B",
         help="an environment light (the course's -e): an image OpenImageIO reads (.exr, .hdr, "
-             "...), lat-long with +Y up, or a constant colour such as 0.5,0.5,0.5")
+             "...), lat-long with +Y up, or a constant colour such as 0.5,0.5,0.5; on a mesh "
+             "file it replaces the default light")
+    add("--no-default-light", action="store_true",
+        help="never give a mesh file without lights the default ambient light (by default it "
+             "gets one unless its emissive surfaces light it)")
     add("-b", "--lens-radius", type=float, default=None, metavar="R",
         help="thin-lens aperture radius (the course's 3-2 -b; default 0: a pinhole, or the -c "
              "file's lensRadius)")
@@ -297,7 +301,7 @@ def run(argv):
                  seed=args.seed, adaptive=args.adaptive)
         check_frame(*args.resolution, args.crop, features=aovs is not None)
     check_pointing(args)
-    scene = load(args.scene)
+    scene = load(args.scene, default_light=not args.no_default_light)
     if args.environment is not None:
         from .environment import load_environment
         scene = scene.with_environment(load_environment(args.environment))

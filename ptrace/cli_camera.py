@@ -1,6 +1,8 @@
 """The camera flags of `ptrace` (and, through ptrace.cli.build_parser, of `ptrace view`):
 -c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing), -b/-d's
-thin lens, and the checks that refuse flags which do not go together in one line."""
+thin lens, and the checks that refuse flags which do not go together in one line. camera_from_flags is the one step both commands take after loading
+the scene and adding -e's environment, so it also applies what -e and --no-default-light say
+about a mesh file's default light."""
 import argparse
 
 import numpy as np
@@ -76,6 +78,9 @@ def check_pointing(args):
                                       ("--up", args.up), ("--fov", args.fov)) if value is not None]
     if args.camera is not None and given:
         raise PtraceError(f"-c (a camera file) and {given[0]} both give the camera: use one")
+    if getattr(args, "no_default_light", False) and is_course_path(args.scene):
+        raise PtraceError("--no-default-light: a course scene (.dae) has no default light (its "
+                          "lights are the file's)")
     if args.look_at is not None and args.eye is None:
         raise PtraceError("--look-at needs --eye (where the camera stands)")
     if args.eye is None and given and is_course_path(args.scene):
@@ -87,9 +92,16 @@ def check_pointing(args):
 
 def camera_from_flags(scene, args, width, height):
     """The camera the flags give (-c, --eye/--look-at/--up/--fov, -b/-d) at width x height, or
-    the scene's default camera (ptrace.pointing.default_camera)."""
+    the scene's default camera (ptrace.pointing.default_camera). First, a mesh file's default light is dropped from the scene when -e gave it an environment or
+    --no-default-light is given (its note says so)."""
     from .camera import load_camera_settings
-    from .pointing import default_camera, framing_camera, look_at
+    from .io.default_light import without_default_light
+    from .pointing import default_camera, framing_camera, is_course_scene, look_at
+    if not is_course_scene(scene):
+        if getattr(args, "no_default_light", False):
+            without_default_light(scene, "--no-default-light")
+        elif scene.environment is not None:
+            without_default_light(scene, "-e's environment lights the scene in its place")
     if args.camera is not None:
         camera = load_camera_settings(args.camera, width, height)
     elif args.eye is not None:

@@ -18,9 +18,7 @@ import accel
 
 from ..errors import SceneError
 from ..scene import (
-    AMBIENT,
     DIFFUSE,
-    EMISSION,
     CameraSpec,
     Lights,
     Materials,
@@ -29,25 +27,26 @@ from ..scene import (
     area_weighted_normals,
 )
 from . import files, gltf, gltf_materials, obj, ply
+from .default_light import default_lights
 from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl")
 FORMAT_NAMES = {".ply": "PLY", ".glb": "binary glTF", ".gltf": "glTF", ".stl": "STL"}
 TEXTURES = ("albedo_texture", "emission_texture", "roughness_texture")
-AMBIENT_RADIANCE = 1.0
 # The course's CB camera: 49.13434 degrees across a 4:3 frame.
 DEFAULT_HFOV = 49.13434
 DEFAULT_VFOV = math.degrees(2 * math.atan(math.tan(math.radians(DEFAULT_HFOV) / 2) * 3 / 4))
 DEFAULT_ZNEAR, DEFAULT_ZFAR = 0.001, 1e6
 
 
-def load_mesh(path):
+def load_mesh(path, default_light=True):
     """Read a mesh file into a Scene. Any problem raises SceneError.
 
     Each geometry keeps the material its file gives it (an OBJ's .mtl, a glTF's materials, a
     PLY's vertex colours; their textures and texture coordinates); a geometry without one gets
-    the default diffuse material. glTF files' KHR_lights_punctual lights are read; a file with
-    neither a light nor an emissive material gets the default ambient light."""
+    the default diffuse material. glTF files' KHR_lights_punctual lights are read. A file without lights gets the default ambient light unless its
+    emissive surfaces light it (ptrace.io.default_light says when) or default_light is
+    False."""
     path = str(path)
     files.require_regular_file(path)
     if os.path.getsize(path) == 0:
@@ -63,18 +62,18 @@ def load_mesh(path):
     if parts["non_finite"]:
         notes.insert(0, f"mesh file: dropped {parts['non_finite']} face(s) with NaN or "
                         f"infinite vertex coordinates")
-    records, light_records = parts["materials"], parts["lights"]
     if parts["defaulted"]:
         notes.append(f"mesh file: {parts['defaulted']} triangle(s) without a material: one "
                      f"diffuse material, albedo {DEFAULT_ALBEDO}")
-    emitters = any(r["kind"] == EMISSION for r in records)
-    if not light_records and not emitters:
-        light_records = [{"kind": AMBIENT, "radiance": (AMBIENT_RADIANCE,) * 3}]
-        notes.append(f"mesh file: no light and no emissive material: one ambient light, "
-                     f"radiance {AMBIENT_RADIANCE}")
-    elif not light_records:
-        notes.append("mesh file: no lights: its emissive materials are its only light (no "
-                     "default light; -e adds one)")
+    pool = parts["textures"]
+    materials = Materials.from_records(parts["materials"])
+    textures = Textures.from_images(pool.images, pool.wraps, pool.names)
+    uv = parts["uv"] if parts["uv"] is not None else np.zeros((0, 3, 2))
+    light_records = parts["lights"]
+    if not light_records:
+        light_records, note = default_lights(vertices, faces, parts["material_index"],
+                                             materials, uv, textures, on=default_light)
+        notes.append(note)
     notes += [
         "mesh file: default camera on the +Z side looking toward -Z, +Y up, framing the bounds "
         f"at any -r, its longer image side spanning {DEFAULT_HFOV} degrees (--up, --eye: others)",
@@ -93,14 +92,11 @@ def load_mesh(path):
         notes.append("mesh file: every face is edge-on to the default camera, which looks "
                      "along the Z axis: the image shows nothing of the model (it is flat, in a "
                      "plane that holds the Z axis)")
-    pool = parts["textures"]
     return Scene(path=path, geometry=geometry,
                  vertex_normals=area_weighted_normals(geometry.vertices, geometry.faces),
-                 material_index=parts["material_index"],
-                 materials=Materials.from_records(records),
+                 material_index=parts["material_index"], materials=materials,
                  lights=Lights.from_records(light_records), camera=camera, notes=notes,
-                 uv=parts["uv"], vertex_colours=parts["vertex_colours"],
-                 textures=Textures.from_images(pool.images, pool.wraps, pool.names))
+                 uv=parts["uv"], vertex_colours=parts["vertex_colours"], textures=textures)
 
 
 def _drop_non_finite(path, parts):

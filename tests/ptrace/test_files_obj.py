@@ -186,13 +186,16 @@ def test_bad_obj_files_are_one_line_in_words(tmp_path, content, words):
     assert "Error" not in message, message
 
 
-def test_a_file_lit_only_by_its_emitters_says_so(tmp_path):
+def test_a_file_whose_emitter_lights_nothing_gets_the_default_light_and_says_so(tmp_path):
+    """A lone emissive triangle lights no other surface: the default light is added beside it
+    (ptrace.io.default_light; tests/ptrace/test_default_light.py has the rule's cases)."""
     (tmp_path / "lamp.mtl").write_text("newmtl lamp\nKe 5 5 5\n")
     path = write(tmp_path, "lamp.obj", "mtllib lamp.mtl\nusemtl lamp\nv 0 0 0\nv 1 0 0\n"
                                        "v 0 1 0\nf 1 2 3\n")
     scene = ptrace.load(path)
-    assert len(scene.lights) == 0
-    assert any("emissive materials are its only light" in n for n in scene.notes), scene.notes
+    assert len(scene.lights) == 1
+    assert any("its emissive surfaces send" in n and "beside them" in n
+               for n in scene.notes), scene.notes
 
 
 CUBE = "".join(f"v {x} {y} {z}\n" for x in (0, 1) for y in (0, 1) for z in (0, 1)) + """
