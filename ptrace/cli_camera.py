@@ -1,6 +1,7 @@
 """The camera flags of `ptrace` (and, through ptrace.cli.build_parser, of `ptrace view`):
--c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing), -b/-d's
-thin lens, and the checks that refuse flags which do not go together in one line. camera_from_flags is the one step both commands take after loading
+-c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing),
+--camera-index's file camera, -b/-d's thin lens, and the checks that refuse flags which do not
+go together in one line. camera_from_flags is the one step both commands take after loading
 the scene and adding -e's environment, so it also applies what -e and --no-default-light say
 about a mesh file's default light."""
 import argparse
@@ -35,7 +36,8 @@ def _fov(text):
 
 
 VECTOR_FLAGS = ("--eye", "--look-at", "--up")
-POINTING_NAMES = {"eye": "--eye", "target": "--look-at", "up": "--up", "fov": "--fov"}
+POINTING_NAMES = {"eye": "--eye", "target": "--look-at", "up": "--up", "fov": "--fov",
+                  "index": "--camera-index"}
 
 
 def attach_negative_vectors(argv):
@@ -66,6 +68,20 @@ def add_camera_flags(parser):
              "default camera), from the image's bottom edge to its top edge, 0 < DEGREES < 180 "
              "(default: the longer image side spans the scene camera's horizontal view at "
              "800x600, 49.13434 degrees for a mesh file)")
+    add("--camera-index", type=_index, default=None, metavar="N",
+        help="render the file's own camera N (glTF cameras, counted from 0 in the file's node "
+             "order; default: its first perspective camera, if it has one)")
+
+
+def _index(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or value < 0:
+        raise argparse.ArgumentTypeError(f"--camera-index must be a whole number, 0 or more, "
+                                         f"got {text!r}")
+    return value
 
 
 def check_pointing(args):
@@ -78,6 +94,13 @@ def check_pointing(args):
                                       ("--up", args.up), ("--fov", args.fov)) if value is not None]
     if args.camera is not None and given:
         raise PtraceError(f"-c (a camera file) and {given[0]} both give the camera: use one")
+    index = getattr(args, "camera_index", None)
+    if index is not None and (given or args.camera is not None):
+        raise PtraceError(f"--camera-index and {given[0] if given else '-c'} both give the "
+                          f"camera: use one")
+    if index is not None and is_course_path(args.scene):
+        raise PtraceError("--camera-index: a course scene (.dae) keeps the course's camera; "
+                          "file cameras are read from glTF files")
     if getattr(args, "no_default_light", False) and is_course_path(args.scene):
         raise PtraceError("--no-default-light: a course scene (.dae) has no default light (its "
                           "lights are the file's)")
@@ -91,17 +114,28 @@ def check_pointing(args):
 
 
 def camera_from_flags(scene, args, width, height):
-    """The camera the flags give (-c, --eye/--look-at/--up/--fov, -b/-d) at width x height, or
-    the scene's default camera (ptrace.pointing.default_camera). First, a mesh file's default light is dropped from the scene when -e gave it an environment or
+    """The camera the flags give (-c, --eye/--look-at/--up/--fov, --camera-index, -b/-d) at
+    width x height, or the scene's default camera (ptrace.pointing.default_camera). First, a
+    mesh file's default light is dropped from the scene when -e gave it an environment or
     --no-default-light is given (its note says so)."""
     from .camera import load_camera_settings
     from .io.default_light import without_default_light
-    from .pointing import default_camera, framing_camera, is_course_scene, look_at
+    from .pointing import (
+        default_camera,
+        file_camera,
+        file_camera_notes,
+        first_perspective,
+        framing_camera,
+        is_course_scene,
+        look_at,
+    )
     if not is_course_scene(scene):
         if getattr(args, "no_default_light", False):
             without_default_light(scene, "--no-default-light")
         elif scene.environment is not None:
             without_default_light(scene, "-e's environment lights the scene in its place")
+    index = getattr(args, "camera_index", None)
+    file_index = None
     if args.camera is not None:
         camera = load_camera_settings(args.camera, width, height)
     elif args.eye is not None:
@@ -109,8 +143,15 @@ def camera_from_flags(scene, args, width, height):
                                 names=POINTING_NAMES)
     elif args.up is not None or args.fov is not None:   # a mesh file (check_pointing)
         camera = framing_camera(scene, width, height, args.up, args.fov, names=POINTING_NAMES)
+    elif index is not None:
+        camera = file_camera(scene, index, width, height, names=POINTING_NAMES)
+        file_index = index
     else:
         camera = default_camera(scene, width, height)
+        if not is_course_scene(scene):
+            file_index = first_perspective(scene)
+    if file_index is not None:
+        scene.notes.extend(file_camera_notes(scene, file_index, width, height))
     if args.lens_radius is not None or args.focal_distance is not None:
         camera = camera.with_lens(args.lens_radius, args.focal_distance)
     note = up_note(scene, args.up)

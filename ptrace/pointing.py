@@ -23,7 +23,9 @@ FRAMING_FOV = 49.13434
 PARALLEL_SINE = 1e-6
 # a scene without a camera spec (built by hand): its camera rays' interval
 DEFAULT_ZNEAR, DEFAULT_ZFAR = 0.001, 1e6
-PYTHON_NAMES = {"eye": "eye", "target": "target", "up": "up", "fov": "fov"}
+PYTHON_NAMES = {"eye": "eye", "target": "target", "up": "up", "fov": "fov", "index": "index"}
+# -r's aspect and a file camera's differ when their ratio is farther from 1 than this
+ASPECT_TOLERANCE = 1e-3
 
 
 def is_course_path(path):
@@ -39,10 +41,97 @@ def is_course_scene(scene):
 
 def default_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT):
     """The camera render() uses when given none: the course's (course_camera, which crops the
-    800x600 view at another size) for a course scene, framing_camera for a mesh file."""
+    800x600 view at another size) for a course scene; for a mesh file, its first perspective
+    camera (file_camera) if it carries one, else framing_camera."""
     if is_course_scene(scene):
         return course_camera(scene, width, height)
+    if first_perspective(scene) is not None:
+        return file_camera(scene, None, width, height)
     return framing_camera(scene, width, height)
+
+
+def first_perspective(scene):
+    """The index in scene.file_cameras of its first perspective camera, or None."""
+    return next((i for i, c in enumerate(getattr(scene, "file_cameras", ()))
+                 if c.kind == "perspective"), None)
+
+
+def file_camera(scene, index=None, width=BASE_WIDTH, height=BASE_HEIGHT, names=PYTHON_NAMES):
+    """The pinhole camera of the file's camera `index` (scene.file_cameras; None: its first
+    perspective camera) at width x height: its node's position and axes, its vertical field
+    of view at any size (the width's view follows from width / height, not from the file's
+    aspect ratio), rays from its znear to its zfar (no zfar: past the scene's bounds); the
+    focal distance of with_lens is the depth of the bounds' centre, when it is in front.
+    Raises PtraceError, naming `index` as names["index"], for an index the file does not have
+    and for an orthographic camera, which ptrace cannot render."""
+    width, height = _size(width, height)
+    cameras = getattr(scene, "file_cameras", ())
+    record = _file_camera_record(scene, index, names)
+    if record.kind != "perspective":
+        raise PtraceError(f"{names['index']} {index}: {scene.path}'s camera {index} "
+                          f"({record.name!r}) is orthographic, which ptrace cannot render (its "
+                          f"cameras are pinholes and thin lenses); pick a perspective one of its "
+                          f"{len(cameras)} cameras or point one with --eye")
+    axes = np.asarray(record.camera_to_world, dtype=np.float64)
+    position = np.asarray(record.position, dtype=np.float64)
+    focal = 0.5 * height / math.tan(math.radians(record.yfov) / 2)
+    forward = -axes[:, 2]
+    bounds = scene.bounds()
+    depth = 1.0
+    zfar = record.zfar
+    if bounds is not None:
+        lower, upper = (np.asarray(b, dtype=np.float64) for b in bounds)
+        ahead = float((0.5 * (lower + upper) - position) @ forward)
+        depth = ahead if ahead > 0 and math.isfinite(ahead) else \
+            max(float(np.linalg.norm(upper - lower)), 1.0)
+        if zfar is None:
+            with np.errstate(over="ignore"):
+                reach = np.linalg.norm(_corners(lower, upper) - position, axis=1).max()
+            zfar = max(DEFAULT_ZFAR, 2 * float(reach))
+    zfar = DEFAULT_ZFAR if zfar is None else zfar
+    return Camera(position, position + depth * forward, axes, float(focal), width, height,
+                  float(record.znear), float(zfar), focal_distance=depth)
+
+
+def file_camera_notes(scene, index, width, height):
+    """What the notes say about rendering the file's camera `index` (None: its first
+    perspective one) at width x height: -r's aspect in place of a different one of the
+    file's, and a zfar that cuts off part of the scene's bounds."""
+    record = _file_camera_record(scene, index, PYTHON_NAMES)
+    where = f"the file's camera {index if index is not None else first_perspective(scene)}"
+    notes = []
+    if record.aspect is not None and \
+            abs(math.log(width / height / record.aspect)) > ASPECT_TOLERANCE:
+        across = "more" if width / height > record.aspect else "less"
+        notes.append(f"{where} ({record.name!r}) has the aspect ratio {record.aspect:.4g}; "
+                     f"-r {width} {height} gives {width / height:.4g}: the image keeps its "
+                     f"vertical field of view ({record.yfov:.4g} degrees) and shows {across} "
+                     f"across than the file's")
+    bounds = scene.bounds()
+    if record.zfar is not None and bounds is not None:
+        with np.errstate(over="ignore"):
+            reach = float(np.linalg.norm(_corners(*bounds) - record.position, axis=1).max())
+        if reach > record.zfar:
+            notes.append(f"{where} ({record.name!r}) stops its rays at its zfar {record.zfar:g}"
+                         f", nearer than the far side of the scene's bounds ({reach:.4g}): "
+                         f"what lies beyond is not seen")
+    return notes
+
+
+def _file_camera_record(scene, index, names):
+    cameras = getattr(scene, "file_cameras", ())
+    if index is None:
+        index = first_perspective(scene)
+        if index is None:
+            raise PtraceError(f"{scene.path} has no perspective camera of its own")
+    if not cameras:
+        raise PtraceError(f"{names['index']} {index}: {scene.path} has no cameras of its own "
+                          f"(glTF files can carry them)")
+    if not (isinstance(index, (int, np.integer)) and 0 <= index < len(cameras)):
+        raise PtraceError(f"{names['index']} {index}: {scene.path} has {len(cameras)} "
+                          f"camera{'s' if len(cameras) > 1 else ''} ("
+                          f"{'index 0' if len(cameras) == 1 else f'indices 0 to {len(cameras) - 1}'})")
+    return cameras[index]
 
 
 def vector(value, name):

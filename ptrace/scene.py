@@ -211,6 +211,27 @@ class CameraSpec:
     zfar: float = 1000.0
 
 
+@dataclass(frozen=True, eq=False)
+class FileCamera:
+    """A camera a mesh file carries (a glTF camera on a node of the file's scene), as the file
+    gives it: kind "perspective" or "orthographic"; position and camera_to_world (columns
+    right, up, backward: unit and at right angles) from the node's world matrix; yfov (the
+    vertical field of view, degrees) and aspect (width / height, None when not given) of a
+    perspective camera; xmag, ymag (half the view's width and height) of an orthographic one;
+    znear, zfar (zfar None: no far plane)."""
+    name: str
+    node: int
+    kind: str
+    position: np.ndarray
+    camera_to_world: np.ndarray
+    znear: float
+    zfar: float = None
+    yfov: float = None
+    aspect: float = None
+    xmag: float = None
+    ymag: float = None
+
+
 @dataclass(eq=False)
 class Scene:
     path: str
@@ -228,6 +249,7 @@ class Scene:
     uv: np.ndarray = None
     vertex_colours: np.ndarray = None
     textures: Textures = None
+    file_cameras: tuple = ()        # FileCamera records of the file's own cameras (glTF)
 
     def __post_init__(self):
         if self.uv is None:

@@ -26,7 +26,7 @@ from ..scene import (
     Textures,
     area_weighted_normals,
 )
-from . import files, gltf, gltf_materials, obj, ply
+from . import files, gltf, gltf_cameras, gltf_materials, obj, ply
 from .default_light import default_lights
 from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
@@ -44,7 +44,8 @@ def load_mesh(path, default_light=True):
 
     Each geometry keeps the material its file gives it (an OBJ's .mtl, a glTF's materials, a
     PLY's vertex colours; their textures and texture coordinates); a geometry without one gets
-    the default diffuse material. glTF files' KHR_lights_punctual lights are read. A file without lights gets the default ambient light unless its
+    the default diffuse material. glTF files' KHR_lights_punctual lights and cameras are read
+    (Scene.file_cameras). A file without lights gets the default ambient light unless its
     emissive surfaces light it (ptrace.io.default_light says when) or default_light is
     False."""
     path = str(path)
@@ -74,7 +75,9 @@ def load_mesh(path, default_light=True):
         light_records, note = default_lights(vertices, faces, parts["material_index"],
                                              materials, uv, textures, on=default_light)
         notes.append(note)
+    cameras = parts.get("cameras", ())
     notes += [
+        gltf_cameras.camera_note(cameras) if cameras else
         "mesh file: default camera on the +Z side looking toward -Z, +Y up, framing the bounds "
         f"at any -r, its longer image side spanning {DEFAULT_HFOV} degrees (--up, --eye: others)",
         "mesh file: coordinates taken as they are (Y-up unless --up); file normals ignored",
@@ -88,7 +91,8 @@ def load_mesh(path, default_light=True):
         raise SceneError(path, f"invalid mesh: {error}") from error
     corners = vertices[faces]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    if not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
+    framed = not any(c.kind == gltf_cameras.PERSPECTIVE for c in cameras)
+    if framed and not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
         notes.append("mesh file: every face is edge-on to the default camera, which looks "
                      "along the Z axis: the image shows nothing of the model (it is flat, in a "
                      "plane that holds the Z axis)")
@@ -96,7 +100,8 @@ def load_mesh(path, default_light=True):
                  vertex_normals=area_weighted_normals(geometry.vertices, geometry.faces),
                  material_index=parts["material_index"], materials=materials,
                  lights=Lights.from_records(light_records), camera=camera, notes=notes,
-                 uv=parts["uv"], vertex_colours=parts["vertex_colours"], textures=textures)
+                 uv=parts["uv"], vertex_colours=parts["vertex_colours"], textures=textures,
+                 file_cameras=cameras)
 
 
 def _drop_non_finite(path, parts):
@@ -259,17 +264,22 @@ def _assemble(path, scene, document, missing, notes, untextured):
         notes.append("mesh file: vertex colours " + ("(COLOR_0, linear) multiply the base "
                      "colour" if document is not None else "(read as sRGB) are the albedo of "
                      "a diffuse material"))
-    lights = gltf.gltf_lights(path, document, notes) if document is not None else []
+    lights, cameras = [], ()
+    if document is not None:
+        lights = gltf.gltf_lights(path, document, notes)
+        cameras = gltf_cameras.gltf_cameras(path, document, gltf.node_matrices(path, document),
+                                            notes)
     if not vertices:
         return {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64),
                 "material_index": np.zeros(0, np.int32), "materials": [],
                 "uv": None, "vertex_colours": None, "textures": pool, "notes": notes,
-                "lights": lights, "defaulted": 0}
+                "lights": lights, "cameras": cameras, "defaulted": 0}
     return {"vertices": np.concatenate(vertices), "faces": np.concatenate(faces),
             "material_index": np.concatenate(material_index), "materials": records,
             "uv": np.concatenate(uvs) if textured else None,
             "vertex_colours": np.concatenate(colours) if coloured else None,
-            "textures": pool, "notes": notes, "lights": lights, "defaulted": defaulted}
+            "textures": pool, "notes": notes, "lights": lights, "cameras": cameras,
+            "defaulted": defaulted}
 
 
 def _check_stl(path, data):
