@@ -164,3 +164,16 @@ def test_camera_numbers_the_specification_forbids_are_refused(tmp_path, camera, 
         ptrace.load(path)
     message = str(caught.value)
     assert "camera 0" in message and words in message and "\n" not in message, message
+
+
+def test_a_zfar_that_cuts_off_the_scene_is_kept_and_noted(tmp_path, capsys):
+    near = {"type": "perspective", "perspective": {"yfov": 0.6, "znear": 0.1, "zfar": 4.0}}
+    path = write(tmp_path, [{"camera": 0, "translation": [0.0, 0.0, 5.0]}], [near])
+    assert main(["--info", str(path)]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["camera"]["zfar"] == pytest.approx(4.0)
+    assert any("zfar 4" in n and "not seen" in n for n in info["notes"]), info["notes"]
+    path = write(tmp_path, [{"camera": 0, "translation": [0.0, 0.0, 5.0]}], [PERSPECTIVE],
+                 name="far.gltf")
+    assert main(["--info", str(path)]) == 0
+    assert not any("zfar" in n for n in json.loads(capsys.readouterr().out)["notes"])
