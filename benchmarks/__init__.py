@@ -54,17 +54,12 @@ BENCHMARKS = {
     "view_latency": Benchmark("ptrace view: milliseconds from a camera drag to the first "
                               "refreshed image, pushed and drawn in headless chromium",
                               requires="selenium", in_all=False),
-    "side_by_side": Benchmark("issue 12's targets: an older checkout against this tree",
-                              quick=None, in_all=False),
     "repeated_rays": Benchmark("bvh and Embree with each ray traced 1, 4 and 64 times in a row: "
                                "what a repeat finds free (branch history, cache lines)",
                                in_all=False),
     "many_lights": Benchmark("a room of 64 area lights and 1024 emissive tiles: MSE x seconds "
                              "of each light sampler against every light at every vertex",
                              in_all=False),
-    "bvh_changes": Benchmark("what each kept change of the BVH traversal bought: bvh rays per "
-                             "second at each commit, side by side with Embree", quick=None,
-                             quick_skip="it compiles four revisions' kernels", in_all=False),
 }
 
 # modules of the package that are not benchmarks

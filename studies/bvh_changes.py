@@ -1,7 +1,7 @@
 """What each kept change of the BVH traversal bought (issue 14.3): bvh rays per second at several
 commits, side by side with Embree, in one run.
 
-    python -m benchmarks.bvh_changes [--rays 1000000] [--repeats 5] [--threads 2]
+    python studies/bvh_changes.py [--rays 1000000] [--repeats 5] [--threads 2]
         [--meshes meshedit/cow.dae ...] [--splits mean sah] [--leaf-sizes 2 8]
         [--revisions COMMIT=LABEL ... tree=LABEL] [--processes 1] [--output bvh_changes.md]
 
@@ -39,10 +39,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import report
-from .accel_rays import scenes_dir
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from benchmarks import report  # noqa: E402
+from benchmarks.accel_rays import scenes_dir  # noqa: E402
+
 # (commit, label); None is this tree
 REVISIONS = [
     ("11fa26c", "4-wide, scalar (before)"),

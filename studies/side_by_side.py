@@ -1,7 +1,7 @@
 """Issue 12's targets, side by side: an older checkout of ptrace against this tree, in one run.
 
     git worktree add /tmp/old 62c98f2          # the last wavefront commit
-    python -m benchmarks.side_by_side /tmp/old  # prints each figure, writes /tmp/targets.json
+    python studies/side_by_side.py /tmp/old  # prints each figure, writes /tmp/targets.json
 
 Each figure runs in a fresh process per version (the older one with PYTHONPATH at its checkout
 and its own numba cache): the seed's cow command through the CLI (median of 3, start-up
