@@ -79,6 +79,15 @@ def _positive_float(name):
     return parse
 
 
+def _size(text):
+    from .budget import parse_size
+    from .errors import PtraceError
+    try:
+        return parse_size(text)
+    except PtraceError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
 def build_parser():
     import accel
 
@@ -159,6 +168,11 @@ def build_parser():
         help="also write FILE_denoised (Intel Open Image Denoise guided by the albedo and "
              "normal AOVs; biased, so the noisy image is kept; needs pip install "
              "\"ptrace[denoise]\")")
+    add("--max-memory", type=_size, default=None, metavar="SIZE",
+        help="memory budget, e.g. 4G or 512M: a scene whose triangles after instancing, "
+             "textures, environment map and image buffers are estimated to need more is "
+             "refused before they are allocated (default: half the machine's memory, or 3/4 of "
+             "what a ulimit -v leaves)")
     add("--info", action="store_true", help="print a JSON summary of the scene and exit")
     add("-q", "--quiet", action="store_true",
         help="no progress bar, compile notice or notes of what the loader ignored or assumed")
@@ -262,6 +276,7 @@ def _notice(text):
 
 def run(argv):
     from . import load, render
+    from .budget import Budget
     from .cli_camera import attach_negative_vectors, camera_from_flags, check_pointing
     from .errors import PtraceError
     from .features import denoise, denoised_path, require_denoiser
@@ -269,6 +284,7 @@ def run(argv):
     from .renderer import check_frame
     from .settings import Settings
     args = build_parser().parse_args(attach_negative_vectors(argv))
+    budget = Budget.of(args.max_memory)     # one budget: the scene, -e and the render
     _one_line_warnings()
     if args.adaptive is not None:
         batch = _int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
@@ -299,12 +315,12 @@ def run(argv):
         # the numbers, before the scene is read (Settings and the frame check again in render)
         Settings(spp=args.spp, light_samples=args.light_samples, max_depth=args.max_depth,
                  seed=args.seed, adaptive=args.adaptive)
-        check_frame(*args.resolution, args.crop, features=aovs is not None)
+        check_frame(*args.resolution, args.crop, features=aovs is not None, max_memory=budget)
     check_pointing(args)
-    scene = load(args.scene, default_light=not args.no_default_light)
+    scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget)
     if args.environment is not None:
         from .environment import load_environment
-        scene = scene.with_environment(load_environment(args.environment))
+        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
     width, height = args.resolution
     camera = camera_from_flags(scene, args, width, height)
     if args.info:
@@ -338,7 +354,7 @@ def run(argv):
                            hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
                            light_sampler=args.light_sampler,
                            bvh_split=args.bvh_split, notice=None if args.quiet else _notice,
-                           aovs=aovs)
+                           aovs=aovs, max_memory=budget)
             images = [dict(path=output, radiance=image,
                            extra=[(name, aovs[name]) for name in aov_names]),
                       dict(path=rate_path(output),

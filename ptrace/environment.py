@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from . import budget
 from .errors import PtraceError, require_regular_file
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -51,9 +52,12 @@ class Environment:
                    name=f"constant {tuple(float(c) for c in rgb)}")
 
 
-def load_environment(spec):
+def load_environment(spec, max_memory=None):
     """An Environment from a file OpenImageIO reads (.exr, .hdr, .png, ...; its first three
-    channels, linear) or from "r,g,b" (or one number): a constant colour."""
+    channels, linear) or from "r,g,b" (or one number): a constant colour. An image whose size
+    (read from its header, before any pixel is decoded) would need more than max_memory (as
+    ptrace.budget takes it; default half the machine's memory) for its pixels and sampling
+    tables is refused (a BudgetError), not downsampled: see ptrace.budget."""
     text = str(spec)
     parts = text.split(",")
     try:
@@ -65,8 +69,12 @@ def load_environment(spec):
     require_regular_file(text, "environment map")
     import OpenImageIO as oiio
     buffer = oiio.ImageBuf(text)
+    spec = buffer.spec()
     if buffer.has_error:
         raise PtraceError(f"{text}: cannot read the environment map ({buffer.geterror()})")
+    pixels = spec.width * spec.height
+    budget.Budget.of(max_memory).charge(
+        text, f"the {spec.width}x{spec.height} environment map", pixels * budget.ENVIRONMENT_BYTES)
     pixels = buffer.get_pixels(oiio.FLOAT)
     if pixels is None or pixels.ndim != 3 or pixels.shape[2] < 3:
         channels = None if pixels is None else pixels.shape[-1]

@@ -6,13 +6,13 @@ cluster (ptrace.distributed). Random numbers are keyed by (seed, pixel, sample, 
 pass sizes depend only on -s and -a, so an image does not depend on threads, chunks, tiles or
 backend.
 """
-import os
 import sys
 import warnings
 
 import numba
 import numpy as np
 
+from .budget import Budget, check_render
 from .camera import BASE_HEIGHT, BASE_WIDTH
 from .errors import PtraceError
 from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
@@ -26,29 +26,16 @@ from .tiles import Passes, new_sums
 MAX_SIDE = 1 << 20   # pixels per side of the image (-r), a crop's window included
 # bytes held per rendered pixel: the pixel coordinates, the sums (rgb, l, l2, count), the image in
 # float64 and float32, the sample counts and the output file's pixels (the feature buffers add
-# FEATURE_BYTES); a render whose buffers pass MEMORY_FRACTION of the machine's memory is refused
-# rather than left to fail (or swap) part-way
-PIXEL_BYTES, FEATURE_BYTES, MEMORY_FRACTION = 160, 128, 0.5
+# FEATURE_BYTES); a render whose buffers pass the memory budget (ptrace.budget: by default half the
+# machine's memory) is refused rather than left to fail (or swap) part-way
+PIXEL_BYTES, FEATURE_BYTES = 160, 128
 
 
-def machine_memory():
-    """Bytes of memory this process may use: the machine's physical memory, or a smaller cgroup
-    limit (a container's)."""
-    total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    try:
-        with open("/sys/fs/cgroup/memory.max") as handle:
-            limit = handle.read().strip()
-        if limit.isdigit():
-            total = min(total, int(limit))
-    except OSError:
-        pass
-    return total
-
-
-def check_frame(width, height, crop=None, features=False):
+def check_frame(width, height, crop=None, features=False, max_memory=None):
     """Refuse an image size or crop the render cannot make: each side from 1 to MAX_SIDE, the
-    crop inside the image, and the per-pixel buffers of the rendered cell within MEMORY_FRACTION
-    of the machine's memory (the message says how much they would need)."""
+    crop inside the image, and the per-pixel buffers of the rendered cell within the memory
+    budget (ptrace.budget; max_memory as there); the message says how much they would need.
+    Returns the bytes of those buffers."""
     for value in (width, height):
         if not (isinstance(value, (int, np.integer)) and 1 <= value <= MAX_SIDE):
             raise PtraceError(f"resolution (-r) must be from 1 to {MAX_SIDE} pixels per side, "
@@ -60,12 +47,12 @@ def check_frame(width, height, crop=None, features=False):
                               f"{width}x{height} image")
     pixels = int(crop[2]) * int(crop[3]) if crop is not None else int(width) * int(height)
     need = pixels * (PIXEL_BYTES + (FEATURE_BYTES if features else 0))
-    memory = machine_memory()
-    if need > MEMORY_FRACTION * memory:
+    budget = Budget.of(max_memory)
+    if need > budget.limit:
         raise PtraceError(f"a {pixels}-pixel render: the image buffers would need "
-                          f"{need / 2 ** 30:.1f} GiB, more than {MEMORY_FRACTION:.0%} of this "
-                          f"machine's {memory / 2 ** 30:.1f} GiB; render a smaller -r or a crop "
-                          f"(-p)")
+                          f"{need / 2 ** 30:.1f} GiB, more than {budget.describe()}; render a "
+                          f"smaller -r or a crop (-p), or raise --max-memory")
+    return need
 
 
 _check_frame = check_frame   # the name ptrace.view imports
@@ -88,7 +75,7 @@ def scene_warnings(scene, settings):
 
 def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
            threads=None, crop=None, camera=None, progress=False, stats=None, client=None,
-           notice=None, aovs=None, **options):
+           notice=None, aovs=None, max_memory=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
     resolution is (W, H), default the camera's own size, or without a camera the course's
@@ -111,7 +98,10 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     compiled first (a cold numba cache). aovs, if a dict, receives the feature buffers of
     ptrace.features ("albedo" and "normal" (H, W, 3), "depth" (H, W)), averaged per pixel over
     the same samples as the image, at the cost of one more ray per sample (in-process only);
-    the image is the same bits with or without them.
+    the image is the same bits with or without them. max_memory (bytes, a size such as "4G", or
+    a ptrace.budget.Budget; default half the machine's memory, see ptrace.budget) bounds the
+    estimate of what the render needs (the scene, the backend's structure, the per-pixel
+    buffers): past it, a BudgetError names the scene and the figures.
     """
     phases = Phases(IN_PROCESS_PHASES if client is None else DASK_PHASES)
     phases.enter("setup")
@@ -124,7 +114,9 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
             width, height = camera.width, camera.height
         else:
             width, height = BASE_WIDTH, BASE_HEIGHT
-        check_frame(width, height, crop, features=aovs is not None)
+        buffers = check_frame(width, height, crop, features=aovs is not None,
+                              max_memory=max_memory)
+        check_render(scene, settings.accel, buffers, max_memory)
         width, height = int(width), int(height)
         previous_threads = numba.get_num_threads()
         worker_threads = None

@@ -265,6 +265,7 @@ def parse(argv):
 def prepare(args):
     """(scene, settings, camera, outputs) of the view's flags, checked as ptrace checks them."""
     from . import load
+    from .budget import Budget, check_render
     from .cli_camera import camera_from_flags
     from .renderer import _check_frame
     from .settings import Settings
@@ -288,12 +289,14 @@ def prepare(args):
         light_sampler=args.light_sampler,
         bvh_split=args.bvh_split)
     width, height = args.resolution
-    _check_frame(width, height, args.crop)
+    budget = Budget.of(args.max_memory)
+    buffers = _check_frame(width, height, args.crop, max_memory=budget)
     view_render.sessions_that_fit(width, height, MAX_SESSIONS, "-r")
-    scene = load(args.scene)
+    scene = load(args.scene, max_memory=budget)
     if args.environment is not None:
         from .environment import load_environment
-        scene = scene.with_environment(load_environment(args.environment))
+        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
+    check_render(scene, settings.accel, buffers, budget)
     camera = camera_from_flags(scene, args, width, height)   # -c, --eye ..., -b, -d
     return scene, settings, camera, (root + ".png", root + ".exr")
 

@@ -3,6 +3,7 @@ import numpy as np
 
 import accel
 
+from .. import budget
 from ..errors import SceneError
 from ..scene import Lights, Materials, Scene, area_weighted_normals
 from .collada_dialect import check_dialect
@@ -42,7 +43,9 @@ def _load(path):
     up_axis = read_up_axis(document)
     visual_scene = select_visual_scene(document)
     builder = SceneBuilder(document)
-    for node, world in walk_nodes_post_order(document, visual_scene, up_axis):
+    placed = list(walk_nodes_post_order(document, visual_scene, up_axis))
+    builder.charge(node for node, _ in placed)    # before any instance is expanded
+    for node, world in placed:
         builder.add_node(node, world)
     return builder.finish()
 
@@ -128,14 +131,37 @@ class SceneBuilder:
 
     def add_node(self, node, world):
         """The node's first instance_camera, else instance_light, else instance_geometry."""
-        document = self.document
-        for tag, add in (("instance_camera", self._add_camera),
-                         ("instance_light", self._add_light),
-                         ("instance_geometry", self._add_geometry)):
-            instance = document.child(node, tag)
+        tag, instance = self._instance(node)
+        if instance is not None:
+            {"instance_camera": self._add_camera, "instance_light": self._add_light,
+             "instance_geometry": self._add_geometry}[tag](node, instance, world)
+
+    def _instance(self, node):
+        for tag in ("instance_camera", "instance_light", "instance_geometry"):
+            instance = self.document.child(node, tag)
             if instance is not None:
-                add(node, instance, world)
-                return
+                return tag, instance
+        return None, None
+
+    def charge(self, nodes):
+        """Charge the memory budget (ptrace.budget) for the triangles the nodes place, each
+        instance of a mesh counting its own, before they are expanded."""
+        document, triangles, instances = self.document, 0, 0
+        for node in nodes:
+            tag, instance = self._instance(node)
+            if tag != "instance_geometry":
+                continue
+            geometry = document.resolve(instance, "url", ("geometry",))
+            mesh = document.child(geometry, "mesh")
+            if mesh is not None:
+                if geometry not in self._meshes:
+                    self._meshes[geometry] = read_mesh(document, mesh)
+                triangles += len(self._meshes[geometry][1])
+                instances += 1
+        budget.current().triangles(
+            document.path, triangles, f"the {triangles:,} triangles its nodes place "
+                                      f"({instances:,} instances of {len(self._meshes):,} "
+                                      f"mesh{'es' if len(self._meshes) != 1 else ''})")
 
     def _add_camera(self, node, instance, world):
         camera = self.document.resolve(instance, "url", ("camera",))

@@ -19,6 +19,7 @@ import struct
 
 import numpy as np
 
+from .. import budget
 from ..errors import SceneError
 from ..scene import DIRECTIONAL, PHYSICAL, POINT, SPOT
 from . import files
@@ -158,6 +159,39 @@ def check_nodes(path, document):
             i = parent[i]
 
 
+def placed_triangles(path, document):
+    """(triangles, mesh instances, meshes instanced) of the file's scene as its nodes place
+    them, each node counting its mesh's triangles (from the accessors' counts: triangle lists
+    and strips), read from the JSON before any mesh is read or expanded."""
+    accessors, meshes = _list(document.get("accessors")), _list(document.get("meshes"))
+
+    def count(index):
+        accessor = _dict(accessors[index]) if isinstance(index, int) and \
+            0 <= index < len(accessors) else {}
+        value = accessor.get("count", 0)
+        return value if isinstance(value, int) and value > 0 else 0
+
+    per_mesh = {}
+    for m, mesh in enumerate(meshes):
+        total = 0
+        for primitive in _list(_dict(mesh).get("primitives")):
+            primitive = _dict(primitive)
+            corners = count(primitive["indices"]) if "indices" in primitive else \
+                count(_dict(primitive.get("attributes")).get("POSITION"))
+            mode = primitive.get("mode", 4)
+            total += corners // 3 if mode == 4 else max(corners - 2, 0) if mode == 5 else 0
+        per_mesh[m] = total
+    nodes = _list(document.get("nodes"))
+    triangles, instances, used = 0, 0, set()
+    for i in node_matrices(path, document):
+        mesh = _dict(nodes[i]).get("mesh")
+        if isinstance(mesh, int) and mesh in per_mesh:
+            triangles += per_mesh[mesh]
+            instances += 1
+            used.add(mesh)
+    return triangles, instances, len(used)
+
+
 def prepare(path):
     """What trimesh needs to read a glTF file safely: (bytes of a copy of the file whose
     materials are renamed TAG + index and whose unreadable images are removed, file type,
@@ -168,6 +202,10 @@ def prepare(path):
     notes = []
     check_extensions(path, document, notes)
     check_nodes(path, document)
+    triangles, instances, meshes = placed_triangles(path, document)
+    budget.current().triangles(path, triangles, f"the {triangles:,} triangles its nodes place "
+                                                f"({instances:,} instances of {meshes:,} "
+                                                f"mesh{'es' if meshes != 1 else ''})")
     for i in range(len(_list(document.get("materials")))):
         material_values(path, document, i)        # refuses values the schema forbids
     directory = os.path.dirname(os.path.abspath(path))

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from .. import budget
+from ..budget import BudgetError
 from ..errors import SceneError
 from ..scene import CLAMP, EMISSION, GLASS, GLOSSY, MICROFACET, MIRROR_REPEAT, REPEAT
 from .materials import MIN_ALPHA, check_numbers, conductor_from_colour, linear_rgb
@@ -70,6 +72,8 @@ def material_record(index, material, document, missing, pool, notes, path):
         try:
             index = pool.add(image, srgb=srgb, wrap=_wrap(document, ref),
                              name=f"{name} {field}", key=("gltf image", source))
+        except BudgetError:
+            raise
         except Exception as error:      # Pillow decodes lazily: any decoder error lands here
             notes.append(f"<{where}>: {field}: its image could not be decoded "
                          f"({str(error)[:80] or 'no message'}): ignored")
@@ -97,7 +101,7 @@ def material_record(index, material, document, missing, pool, notes, path):
     elif metallic >= METALLIC_THRESHOLD:
         colour = list(base)
         if isinstance(pbr.get("baseColorTexture"), dict):
-            mean = _mean_colour(base_image)
+            mean = _mean_colour(base_image, path, f"{name} baseColorTexture")
             if mean is None:
                 notes.append(f"<{where}>: a metal's baseColorTexture is missing or could not "
                              f"be decoded: its factor sets the conductor's colour")
@@ -185,9 +189,13 @@ def _wrap(document, ref):
             GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT))
 
 
-def _mean_colour(image):
+def _mean_colour(image, path, what):
+    """The mean linear colour of a PIL image, or None if it cannot be decoded; BudgetError if
+    decoding it would pass the memory budget (its size is known before it is decoded)."""
     if image is None:
         return None
+    if hasattr(image, "size"):
+        budget.current().image(path, *image.size, f"{what!r}")
     try:
         return linear_rgb(image, srgb=True).reshape(-1, 3).mean(axis=0)
     except Exception:     # Pillow decodes lazily: any decoder error lands here

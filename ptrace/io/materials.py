@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from .. import budget
 from ..scene import REPEAT
 
 MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has no density)
@@ -18,17 +19,22 @@ DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (the 
 class TexturePool:
     """The textures a file's materials use, each image converted once to linear RGB."""
 
-    def __init__(self):
+    def __init__(self, path=None):
+        """path: the model file, named by a refusal of the memory budget (ptrace.budget)."""
         self.images, self.wraps, self.names, self._index = [], [], [], {}
+        self.path = path
 
     def add(self, image, srgb, wrap=(REPEAT, REPEAT), name="", key=None, encoded=None):
         """Index of the texture of a PIL image or an (H, W, C) array; srgb says whether its
         values are sRGB-encoded (colour textures) or linear (glTF's metallicRoughness), and
         encoded (see linear_rgb) whether float values came from integers. The same image (or
         the same key) with the same options is converted once. Raises ValueError if the image
-        cannot be decoded."""
+        cannot be decoded, BudgetError if a PIL image (decoded only here) would pass the
+        memory budget."""
         key = (key if key is not None else id(image), srgb, tuple(wrap))
         if key not in self._index:
+            if hasattr(image, "size") and hasattr(image, "mode"):    # a PIL image, not decoded
+                budget.current().image(self.path or name, *image.size, f"{name!r}")
             pixels = linear_rgb(image, srgb, encoded)
             self._index[key] = len(self.images)
             self.images.append(pixels)
@@ -101,19 +107,24 @@ def linear_rgb(image, srgb, encoded=None):
     return values.astype(np.float32)
 
 
-def read_image_file(path):
+def read_image_file(path, what="", model=None):
     """The pixels of an image file on disk, read by OpenImageIO (PNG of every colour type,
     JPEG, TGA, BMP, TIFF, EXR, HDR, ...): (H, W, C) float32 in the file's own scale, and
     whether the file stores integers (whose values are then sRGB-encoded colour). Raises
-    ValueError with OpenImageIO's message if it cannot be read. The caller has checked that
-    path is a regular file inside the model's folder."""
+    ValueError with OpenImageIO's message if it cannot be read, and BudgetError naming model
+    (default path) and `what` (how the model uses it) if its size, read from its header before
+    any pixel is decoded, passes the memory budget. The caller has checked that path is a
+    regular file inside the model's folder."""
     import OpenImageIO as oiio
     buffer = oiio.ImageBuf(path)
     if buffer.has_error:
         raise ValueError(buffer.geterror().strip() or "not a readable image")
     spec = buffer.spec()
+    if buffer.has_error:
+        raise ValueError(buffer.geterror().strip() or "not a readable image")
     if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
         raise ValueError("the image has no pixels")
+    budget.current().image(model or path, spec.width, spec.height, what or repr(path))
     pixels = buffer.get_pixels(oiio.FLOAT)
     if buffer.has_error:
         raise ValueError(buffer.geterror().strip() or "its pixels could not be decoded")

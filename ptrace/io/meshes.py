@@ -16,6 +16,8 @@ import numpy as np
 
 import accel
 
+from .. import budget
+from ..budget import BudgetError
 from ..errors import SceneError
 from ..scene import (
     DIFFUSE,
@@ -143,11 +145,18 @@ def _read_with_trimesh(path, extension):
         if extension == ".ply":
             elements = ply.read_header(path, data)
             notes += elements.pop("notes", [])
+            faces = elements.get("face", (0,))[0]
+            budget.current().triangles(path, faces, f"its {faces:,} faces")
         if extension == ".stl":
             _check_stl(path, data)
     quiet = logging.getLogger("trimesh")
     level = quiet.level
     quiet.setLevel(logging.CRITICAL)    # its warnings would print bare; ours are notes
+    import PIL.Image
+    bomb = PIL.Image.MAX_IMAGE_PIXELS
+    # Pillow's own size limit would raise inside trimesh, which drops the image without a
+    # word: the memory budget (ptrace.budget) decides instead, before an image is decoded
+    PIL.Image.MAX_IMAGE_PIXELS = None
     try:
         with np.errstate(all="ignore"):
             scene = trimesh.load_scene(io.BytesIO(data), file_type=file_type,
@@ -179,6 +188,7 @@ def _read_with_trimesh(path, extension):
                                f"{files.describe_failure(error)}") from None
     finally:
         quiet.setLevel(level)
+        PIL.Image.MAX_IMAGE_PIXELS = bomb
     parts["non_finite"] = non_finite
     if document is not None and len(parts["faces"]) == 0:
         parts["why_empty"] = gltf.why_empty(document)
@@ -186,7 +196,7 @@ def _read_with_trimesh(path, extension):
 
 
 def _assemble(path, scene, document, missing, notes, untextured):
-    pool = TexturePool()
+    pool = TexturePool(path)
     records, by_key, built = [], {}, {}
     vertices, faces, material_index, uvs, colours, vertex_sets = [], [], [], [], [], []
     defaulted, offset, skipped = 0, 0, 0
@@ -315,6 +325,8 @@ def _image_material(material, pool, notes, where):
     try:
         record["albedo_texture"] = pool.add(image, srgb=True, name="texture")
         notes.append(f"<{where}>: its texture is the albedo of a diffuse material")
+    except BudgetError:
+        raise
     except Exception as error:     # Pillow decodes lazily: any decoder error lands here
         record["albedo"] = (DEFAULT_ALBEDO,) * 3
         notes.append(f"<{where}>: its texture could not be decoded ({str(error)[:80]}): the "

@@ -85,7 +85,7 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
     """The scene parts (see ptrace.io.meshes) of an OBJ's triangles and their materials.
     Faces without texture coordinates get their material without its textures (noted), not
     the colour at (0, 0) of the texture."""
-    pool, ignored = TexturePool(), {}
+    pool, ignored = TexturePool(path), {}
     by_name = {index: name for name, index in names.items()}
     records, keys, built = [], {}, {}
     material_index = np.zeros(len(faces), np.int32)
@@ -264,7 +264,7 @@ def read_map(statement, field, where, directory, mtl_path, pool, notes):
     if remark:
         notes.append(f"<{label}>: {remark}")
     try:
-        pixels, encoded = read_image_file(path)
+        pixels, encoded = read_image_file(path, f"{name!r} ({field} of <{where}>)", mtl_path)
         texture = pool.add(pixels, srgb=True, wrap=wrap, name=name, key=path, encoded=encoded)
     except ValueError as error:
         notes.append(f"<{label}>: the texture could not be read as an image ({error}): "
