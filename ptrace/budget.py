@@ -18,8 +18,9 @@ A texture or environment map past the budget is refused, not downsampled: a smal
 renders a different picture than the file describes, and the user is the one to choose
 between raising the limit and resizing the image (the message says both).
 
-The figures below are peak resident bytes measured (the README's hostile-inputs report gives
-the runs) and rounded up; they are estimates, so the budget bounds memory to within them.
+The figures below are peak resident bytes, measured (benchmarks/results/hostile_inputs.md gives
+the runs) and rounded up; they are estimates, so the budget bounds memory only as well as they
+hold.
 """
 import contextlib
 import contextvars
@@ -33,8 +34,8 @@ ADDRESS_SPACE_FRACTION = 0.75   # of what an RLIMIT_AS or RLIMIT_DATA still leav
 # Peak bytes per triangle from reading a mesh file to the end of a render, by backend: the
 # reader's arrays and transients (positions, indices, texture coordinates and normals in
 # float64 and int64, trimesh's copies), the scene's arrays, the accelerator's build and its
-# structure. Measured on a binary PLY of one million triangles (the trimesh readers); the OBJ
-# reader's own transients are about twice these, but an OBJ cannot instance.
+# structure. Measured on a binary PLY of about a million triangles (the trimesh readers); the
+# OBJ reader's own transients are larger, but an OBJ cannot instance and its size bounds them.
 BYTES_PER_TRIANGLE = {"naive": 440, "bvh": 520, "embree": 440}
 # What a loader charges a triangle before it expands instances: the least any render needs.
 LOAD_BYTES_PER_TRIANGLE = min(BYTES_PER_TRIANGLE.values())

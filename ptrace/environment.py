@@ -69,9 +69,9 @@ def load_environment(spec, max_memory=None):
     require_regular_file(text, "environment map")
     import OpenImageIO as oiio
     buffer = oiio.ImageBuf(text)
-    spec = buffer.spec()
     if buffer.has_error:
         raise PtraceError(f"{text}: cannot read the environment map ({buffer.geterror()})")
+    spec = buffer.spec()
     pixels = spec.width * spec.height
     budget.Budget.of(max_memory).charge(
         text, f"the {spec.width}x{spec.height} environment map", pixels * budget.ENVIRONMENT_BYTES)

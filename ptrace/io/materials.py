@@ -120,8 +120,6 @@ def read_image_file(path, what="", model=None):
     if buffer.has_error:
         raise ValueError(buffer.geterror().strip() or "not a readable image")
     spec = buffer.spec()
-    if buffer.has_error:
-        raise ValueError(buffer.geterror().strip() or "not a readable image")
     if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
         raise ValueError("the image has no pixels")
     budget.current().image(model or path, spec.width, spec.height, what or repr(path))
