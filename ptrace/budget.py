@@ -153,7 +153,8 @@ class Budget:
         resident, transient = int(resident), int(transient)
         total = self.spent + resident + transient
         if total > self.limit:
-            rest = f" ({size_text(total)} with the rest of the scene)" if self.spent else ""
+            rest = f" ({size_text(total)} with the rest of the scene)" \
+                if size_text(total) != size_text(resident + transient) else ""
             raise BudgetError(path, f"{what} would need about {size_text(resident + transient)}"
                                     f"{rest}, more than {self.describe()}; {RAISE}")
         self.spent += resident
