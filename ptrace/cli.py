@@ -128,7 +128,7 @@ def build_parser():
     add("-r", "--resolution", nargs=2, type=_int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=(800, 600),
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
-             f"{PIXEL_BYTES} bytes a pixel) within half the machine's memory; a course scene's "
+             f"{PIXEL_BYTES} bytes a pixel) within --max-memory; a course scene's "
              f"camera (and -c's) keeps the focal length, so it crops; a mesh file's default "
              f"camera and --eye's frame the view at any size (default 800 600)")
     add("-f", "--output", default=None, metavar="FILE",

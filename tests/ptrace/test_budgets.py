@@ -168,6 +168,19 @@ def test_the_issues_environment_under_ulimit(tmp_path):
     assert "16384x8192 environment map" in lines[0] and "ulimit -v" in lines[0], lines
 
 
+def test_ptrace_view_takes_the_flag(tmp_path):
+    """`ptrace view` checks the same budget before it serves anything."""
+    from ptrace import view
+    path = glb_instancing(tmp_path / "many.glb", instances=2000, quads=10)
+    args = view.parse(["-r", "8", "6", "-f", str(tmp_path / "x.png"), "--max-memory", "8M",
+                       str(path)])
+    with pytest.raises(BudgetError, match=r"40,000 triangles its nodes place.*--max-memory"):
+        view.prepare(args)
+    args = view.parse(["-r", "8", "6", "-f", str(tmp_path / "x.png"), "--max-memory", "64M",
+                       str(path)])
+    assert view.prepare(args)[0].triangle_count == 40000
+
+
 def test_an_ordinary_scene_renders_within_a_stated_budget(tmp_path):
     path = glb_instancing(tmp_path / "few.glb", instances=3, quads=2)
     out = tmp_path / "few.png"
