@@ -112,6 +112,22 @@ def test_a_gltf_image_declaring_many_texels_is_refused(tmp_path, capsys, metalli
     assert "baseColorTexture" in line and "--max-memory" in line, line
 
 
+def test_a_ply_texture_file_declaring_many_texels_is_refused(tmp_path, capsys):
+    """A PLY's TextureFile comment: trimesh opens the image with Pillow, whose own limit (a
+    DecompressionBombError past 2 x 89,478,485 pixels) trimesh catches; the budget refuses it in
+    one line instead."""
+    (tmp_path / "big.png").write_bytes(png(16384, 16384, channels=1, bit_depth=1))
+    path = tmp_path / "uv.ply"
+    path.write_text("ply\nformat ascii 1.0\ncomment TextureFile big.png\nelement vertex 3\n"
+                    "property float x\nproperty float y\nproperty float z\nproperty float s\n"
+                    "property float t\nelement face 1\nproperty list uchar int vertex_indices\n"
+                    "end_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2\n")
+    code, line = one_line(capsys, "-f", tmp_path / "x.png", "--max-memory", "8G", path)
+    assert code == 2 and line.startswith(f"ptrace: error: {path}: the 16384x16384 texture"), \
+        line
+    assert "--max-memory" in line, line
+
+
 def test_pillows_own_limit_does_not_drop_a_texture_the_budget_allows(tmp_path, monkeypatch,
                                                                      recwarn):
     monkeypatch.setattr(PIL.Image, "MAX_IMAGE_PIXELS", 100)     # a 64 x 64 image is a "bomb"
