@@ -4,13 +4,15 @@ Conventions: wo and wi are unit vectors pointing away from the surface; f exclud
 term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`)
 return from bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf
 the discrete probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi),
-where the course's starter has pi).
+where the course's starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF
+(ptrace.gltf_brdf), the only kind the metallic argument matters to.
 """
 import math
 
 from numba import njit
 
-from .scene import DIFFUSE, GLASS, GLOSSY, MICROFACET, MIRROR, REFRACTION
+from .gltf_brdf import gltf_eval, gltf_pdf, gltf_sample
+from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, REFRACTION
 
 INV_PI = 1.0 / math.pi
 SQRT_PI = math.sqrt(math.pi)
@@ -155,9 +157,11 @@ def beckmann_half_vector(alpha, u1, u2):
 # -- the interface ---------------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
-    """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters. (ar, ag, ab) and alpha
-    are material m's albedo and roughness at the shading point (ptrace.textures)."""
+def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+              wiz):
+    """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters. (ar, ag, ab), alpha and
+    metallic are material m's albedo, roughness and metallic at the shading point
+    (ptrace.textures)."""
     if kind == DIFFUSE:
         if woz > 0.0 and wiz > 0.0:
             return ar * INV_PI, ag * INV_PI, ab * INV_PI
@@ -166,24 +170,29 @@ def bsdf_eval(kind, ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, 
         return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
     if kind == GLOSSY:
         return _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
+    if kind == GLTF_PBR:
+        return gltf_eval(ar, ag, ab, metallic, alpha, wox, woy, woz, wix, wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_pdf(kind, alpha, wox, woy, woz, wix, wiy, wiz):
-    """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise."""
+def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise. The albedo
+    and metallic matter only to GLTF_PBR, whose choice of lobe depends on them."""
     if kind == DIFFUSE:
         return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
     if kind == MICROFACET:
         return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
     if kind == GLOSSY:
         return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+    if kind == GLTF_PBR:
+        return gltf_pdf(metallic, alpha, ar, ag, ab, wox, woy, woz, wix, wiy, wiz)
     return 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, specular, m, wox, woy, woz,
-                u1, u2, u3):
+def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                woy, woz, u1, u2, u3):
     """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
 
     For delta BSDFs f carries the whole weight divided by |cos theta_i| and pdf is the discrete
@@ -227,6 +236,8 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, eta, k, specular, m
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
         fr, fg, fb = _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
         return wix, wiy, wiz, fr, fg, fb, _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+    if kind == GLTF_PBR:
+        return gltf_sample(ar, ag, ab, metallic, alpha, wox, woy, woz, u1, u2, u3)
     if kind == GLASS or kind == REFRACTION:
         if woz == 0.0:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0

@@ -52,7 +52,17 @@ from .lights import (
     sample_light,
 )
 from .sampling import sobol_1d, sobol_2d, uniform
-from .scene import AMBIENT, AREA, EMISSION, ENVIRONMENT, GLASS, GLOSSY, MICROFACET, REFRACTION
+from .scene import (
+    AMBIENT,
+    AREA,
+    EMISSION,
+    ENVIRONMENT,
+    GLASS,
+    GLOSSY,
+    GLTF_PBR,
+    MICROFACET,
+    REFRACTION,
+)
 from .textures import surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
@@ -86,7 +96,7 @@ MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance"
                                                "albedo_texture",
                                                "emission_texture", "roughness_texture",
                                                "texels", "tex_offset", "tex_width",
-                                               "tex_height", "tex_wrap"])
+                                               "tex_height", "tex_wrap", "metallic"])
 LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
                                          "edge_y", "area", "model", "cos_inner",
                                          "cos_outer", "faced", "emitter_prims",
@@ -130,7 +140,7 @@ def scene_records(scene):
                                index(m.roughness_texture),
                                np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),
                                index(tex.offset), index(tex.width), index(tex.height),
-                               index(tex.wrap).reshape(-1, 2))
+                               index(tex.wrap).reshape(-1, 2), _f64(m.metallic))
     faced, prims, cdf, prim_pdf = emitter_arrays(scene)
     extra = 1 if prims.shape[0] else 0     # one more light: the emissive primitives
     pad = lambda array: np.concatenate([_f64(array, array.shape[1:]),
@@ -171,6 +181,13 @@ def frame(nx, ny, nz):
     norm = math.sqrt(yx * yx + yy * yy + yz * yz)
     yx, yy, yz = yx / norm, yy / norm, yz / norm
     return ny * yz - nz * yy, nz * yx - nx * yz, nx * yy - ny * yx, yx, yy, yz
+
+
+@njit(cache=True, inline="always")
+def emits(kind):
+    """Whether a material of this kind may emit: an emitter, or glTF's material, which adds its
+    emission (zero if it has none) to what it reflects."""
+    return kind == EMISSION or kind == GLTF_PBR
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -266,8 +283,8 @@ def power_heuristic(pdf, other):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
-                 ar, ag, ab, alpha, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx,
-                 ny, nz, wox, woy, woz, tr, tg, tb):
+                 ar, ag, ab, alpha, metallic, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy,
+                 yz, nx, ny, nz, wox, woy, woz, tr, tg, tb):
     """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
 
     Light sampling: -l samples of each area, ambient, environment or emissive-geometry light and
@@ -275,8 +292,9 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
     (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also
     carries its power heuristic weight against the BSDF sample that trace_path takes next. With
     -H: -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the
-    emission its ray finds (or the environment's radiance where it escapes). (ar, ag, ab) and
-    alpha are the albedo and roughness at this vertex (ptrace.textures.surface_albedo)."""
+    emission its ray finds (or the environment's radiance where it escapes). (ar, ag, ab), alpha
+    and metallic are the albedo, roughness and metallic at this vertex
+    (ptrace.textures.surface_albedo)."""
     kind = materials.kind[m]
     base = vertex * DIMS_PER_VERTEX
     r = g = b = 0.0
@@ -290,7 +308,7 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             u1, u2 = sample_2d(options, pixel, sample, sample * count + j, base + DIM_LIGHT,
                                base + DIM_LIGHT + 2 * j)
             lx, ly, lz = uniform_hemisphere(u1, u2)
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k,
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, metallic, materials.eta, materials.k,
                                    materials.specular, m, wox, woy, woz, lx, ly, lz)
             scale = lz * 2.0 * math.pi / count
             wx = lx * xx + ly * yx + lz * nx
@@ -307,7 +325,7 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                     b += tb * (fb * scale) * eb
                 continue
             e = shapes.material_index[prim]
-            if materials.kind[e] != EMISSION:
+            if not emits(materials.kind[e]):
                 continue
             er, eg, eb = surface_emission(shapes, materials, e, prim, u, v)
             r += tr * (fr * scale) * er
@@ -366,12 +384,12 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 continue
             wix = wx * xx + wy * xy + wz * xz
             wiy = wx * yx + wy * yy + wz * yz
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, materials.eta, materials.k,
+            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, metallic, materials.eta, materials.k,
                                    materials.specular, m, wox, woy, woz, wix, wiy, wiz)
             scale = wiz / (weight * pdf)
             if options.mis and not delta:
-                scale *= power_heuristic(weight * pdf, bsdf_pdf(kind, alpha, wox, woy, woz, wix,
-                                                                wiy, wiz))
+                scale *= power_heuristic(weight * pdf, bsdf_pdf(kind, ar, ag, ab, alpha, metallic,
+                                                                wox, woy, woz, wix, wiy, wiz))
             ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
             sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional or ambient light
             if dist != math.inf:
@@ -444,7 +462,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
             r += weight * lights.radiance[light, 0]
             g += weight * lights.radiance[light, 1]
             b += weight * lights.radiance[light, 2]
-    if m >= 0 and materials.kind[m] == EMISSION:
+    if m >= 0 and emits(materials.kind[m]):
         weight = 1.0
         n = options.light_samples   # the emissive primitives are the last light
         if power and kinds.shape[0] > 0:
@@ -478,7 +496,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         if lights.env_image.shape[0] > 0:   # the environment is the background
             r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
         return r, g, b, rays
-    if kinds[m] == EMISSION:
+    if emits(kinds[m]):
         r, g, b = surface_emission(shapes, materials, m, prim, u, v)
     tr = tg = tb = 1.0
     lit = lights.kind.shape[0] > 0
@@ -495,12 +513,12 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         woz = -dx * nx - dy * ny - dz * nz
         kind = kinds[m]
         delta = is_delta(kind)
-        ar, ag, ab, alpha = surface_albedo(shapes, materials, m, prim, u, v)
+        ar, ag, ab, alpha, metallic = surface_albedo(shapes, materials, m, prim, u, v)
         if lit and kind != EMISSION and not delta:
             lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
-                                         pixel, sample, vertex, m, ar, ag, ab, alpha, px, py,
-                                         pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz, nx, ny,
-                                         nz, wox, woy, woz, tr, tg, tb)
+                                         pixel, sample, vertex, m, ar, ag, ab, alpha, metallic,
+                                         px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz,
+                                         nx, ny, nz, wox, woy, woz, tr, tg, tb)
             r += lr
             g += lg
             b += lb
@@ -513,12 +531,12 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
             break
         base = vertex * DIMS_PER_VERTEX
         u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
-        u3 = 0.0   # the lobe choice: only glass and the glossy coat have one
-        if kind == GLASS or kind == GLOSSY:
+        u3 = 0.0   # the lobe choice: only glass, the glossy coat and glTF's material have one
+        if kind == GLASS or kind == GLOSSY or kind == GLTF_PBR:
             u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
         wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
-            kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, materials.eta,
-            materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
+            kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
+            materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
         if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
             break
         weight = abs(wiz) / pdf
@@ -591,7 +609,7 @@ def first_hit_features(shapes, materials, record, scratch, ox, oy, oz, dx, dy, d
     if m < 0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     kind = materials.kind[m]
-    ar, ag, ab, alpha = surface_albedo(shapes, materials, m, prim, u, v)
+    ar, ag, ab, alpha, _ = surface_albedo(shapes, materials, m, prim, u, v)
     if kind == EMISSION:
         er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
         ar, ag, ab = min(er, 1.0), min(eg, 1.0), min(eb, 1.0)

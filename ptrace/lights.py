@@ -127,10 +127,9 @@ PAIR_TOLERANCE = 1e-4   # relative to the emitter group's size: "lies on the lig
 
 def _emitter_groups(scene):
     """{material: primitive ids} of the emissive materials that primitives use."""
-    from .scene import EMISSION
     index = np.asarray(scene.material_index)
-    return {int(m): np.nonzero(index == m)[0]
-            for m in np.unique(index) if scene.materials.kind[m] == EMISSION}
+    emits = scene.materials.emits()
+    return {int(m): np.nonzero(index == m)[0] for m in np.unique(index) if emits[m]}
 
 
 def _face_of(scene, prims, lights):

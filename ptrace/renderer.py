@@ -19,7 +19,6 @@ from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
 from .features import FEATURES, aov_images
 from .jit import cache_notes
 from .pointing import default_camera
-from .scene import EMISSION
 from .settings import Settings
 from .tiles import Passes, new_sums
 
@@ -62,7 +61,7 @@ def scene_warnings(scene, settings):
     """What a user should hear about this scene and these settings before a render."""
     out = []
     emitters = np.isin(scene.material_index,
-                       np.nonzero(scene.materials.kind == EMISSION)[0]).any()
+                       np.nonzero(scene.materials.emits())[0]).any()
     if settings.integrator == "path" and not emitters and len(scene.lights) == 0:
         out.append("the scene has no light and no emissive surface: the image will be black")
     elif settings.integrator == "path" and settings.hemisphere and settings.max_depth >= 1:

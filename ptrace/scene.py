@@ -6,8 +6,9 @@ import numpy as np
 import accel
 
 # BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
-DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY = range(7)
-BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy")
+DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR = range(8)
+BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy",
+              "gltf_pbr")
 
 # Light kinds (Lights.kind). The codes index KIND_NAMES; LIGHT_NAMES are those a scene file
 # may name. ENVIRONMENT is added by Scene.with_environment (the course's -e), never by a file.
@@ -27,13 +28,16 @@ class Materials:
     glass: albedo (reflectance), transmittance, ior; refraction: transmittance, ior;
     microfacet: alpha, eta, k; glossy (not the course's: a diffuse base under a glossy
     dielectric coat, for mesh files' plastics): albedo (the base), specular (the coat's
-    reflectance at normal incidence), alpha.
+    reflectance at normal incidence), alpha; gltf_pbr (glTF's metallic-roughness BRDF,
+    ptrace.gltf_brdf, for glTF files): albedo (the base colour), metallic, alpha (roughness^2),
+    and emission, which it adds to what it reflects (a gltf_pbr of non-zero emission is an
+    emitter too: emits()).
 
     albedo_texture, emission_texture and roughness_texture index Scene.textures (-1: none):
     a texture multiplies albedo or emission by its colour at the hit's UV, and a roughness
-    texture multiplies alpha by its green channel squared (glTF's metallicRoughness texture,
-    where roughness is G and alpha = roughness^2). File materials (mesh files) use them; the
-    course's scenes have none.
+    texture multiplies alpha by its green channel squared and metallic by its blue channel
+    (glTF's metallicRoughness texture: roughness is G, alpha = roughness^2, metallic is B).
+    File materials (mesh files) use them; the course's scenes have none.
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
@@ -49,16 +53,25 @@ class Materials:
     albedo_texture: np.ndarray = None      # (M,) int32, -1 for none
     emission_texture: np.ndarray = None    # (M,) int32
     roughness_texture: np.ndarray = None   # (M,) int32
+    metallic: np.ndarray = None            # (M,), gltf_pbr only
 
     def __post_init__(self):
         if self.specular is None:
             self.specular = np.zeros((len(self.kind), 3))
+        if self.metallic is None:
+            self.metallic = np.zeros(len(self.kind))
         for name in ("albedo_texture", "emission_texture", "roughness_texture"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full(len(self.kind), -1, dtype=np.int32))
 
     def __len__(self):
         return self.kind.shape[0]
+
+    def emits(self):
+        """(M,) bool: the materials that emit light: every emission material, and a gltf_pbr
+        one whose emission is not zero (it reflects as well)."""
+        glowing = np.asarray(self.emission).reshape(-1, 3).max(axis=1, initial=0.0) > 0.0
+        return (self.kind == EMISSION) | ((self.kind == GLTF_PBR) & glowing)
 
     @classmethod
     def from_records(cls, records):
@@ -79,6 +92,7 @@ class Materials:
             eta=rgb("eta", (0.0, 0.0, 0.0)),
             k=rgb("k", (0.0, 0.0, 0.0)),
             specular=rgb("specular", (0.0, 0.0, 0.0)),
+            metallic=one("metallic", 0.0),
             names=tuple(r.get("name", "") for r in records),
             albedo_texture=np.array([r.get("albedo_texture", -1) for r in records],
                                     dtype=np.int32).reshape(m),

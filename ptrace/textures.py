@@ -61,14 +61,16 @@ def _uv(uv, prim, u, v):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def surface_albedo(shapes, materials, m, prim, u, v):
-    """(albedo r, g, b, alpha) of material m at barycentrics (u, v) of primitive prim: the
-    material's values times its albedo texture and the vertex colours (triangles only), and its
-    alpha times the roughness texture's green channel squared."""
+    """(albedo r, g, b, alpha, metallic) of material m at barycentrics (u, v) of primitive
+    prim: the material's values times its albedo texture and the vertex colours (triangles
+    only), its alpha times the roughness texture's green channel squared and its metallic times
+    that texture's blue channel (glTF's metallicRoughness texture)."""
     ar, ag, ab = materials.albedo[m, 0], materials.albedo[m, 1], materials.albedo[m, 2]
     alpha = materials.alpha[m]
+    metallic = materials.metallic[m]
     n_tri = shapes.faces.shape[0]
     if prim < 0 or prim >= n_tri:
-        return ar, ag, ab, alpha
+        return ar, ag, ab, alpha, metallic
     colours = shapes.vertex_colours
     if colours.shape[0] > 0:
         a, b, c = shapes.faces[prim, 0], shapes.faces[prim, 1], shapes.faces[prim, 2]
@@ -85,11 +87,12 @@ def surface_albedo(shapes, materials, m, prim, u, v):
                                         materials.tex_wrap, t_albedo, s, tv)
             ar, ag, ab = ar * tr, ag * tg, ab * tb
         if t_rough >= 0:
-            _, roughness, _ = texture_lookup(materials.texels, materials.tex_offset,
-                                             materials.tex_width, materials.tex_height,
-                                             materials.tex_wrap, t_rough, s, tv)
+            _, roughness, blue = texture_lookup(materials.texels, materials.tex_offset,
+                                                materials.tex_width, materials.tex_height,
+                                                materials.tex_wrap, t_rough, s, tv)
             alpha = max(alpha * roughness * roughness, 1e-4)
-    return ar, ag, ab, alpha
+            metallic *= blue
+    return ar, ag, ab, alpha, metallic
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

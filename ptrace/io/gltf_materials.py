@@ -6,18 +6,21 @@ value the glTF schema bounds is checked (factors in [0, 1], strengths at least 0
 a value outside is refused with the material and field named, since no image made of it would
 be what the file means. A texture that is missing or cannot be decoded is a note and the
 material keeps its factors.
+
+An opaque material becomes ptrace's gltf_pbr, the specification's metallic-roughness BRDF
+(ptrace.gltf_brdf) with metallic blended as the specification mixes it, and its emission added
+to what it reflects; a transmissive one smooth glass.
 """
 import math
 
 import numpy as np
 
-from .. import budget
 from ..budget import BudgetError
 from ..errors import SceneError
-from ..scene import CLAMP, EMISSION, GLASS, GLOSSY, MICROFACET, MIRROR_REPEAT, REPEAT
-from .materials import MIN_ALPHA, check_numbers, conductor_from_colour, linear_rgb
+from ..scene import CLAMP, EMISSION, GLASS, GLTF_PBR, MIRROR_REPEAT, REPEAT
+from .materials import check_numbers
 
-METALLIC_THRESHOLD = 0.5  # glTF metallic at or above: a conductor; below: a dielectric
+SPEC_IOR = 1.5    # the index of refraction the core specification's BRDF fixes (f0 = 0.04)
 GLTF_WRAP = {10497: REPEAT, 33071: CLAMP, 33648: MIRROR_REPEAT}
 HANDLED = {"KHR_materials_emissive_strength", "KHR_materials_transmission",
            "KHR_materials_ior"}
@@ -86,52 +89,34 @@ def material_record(index, material, document, missing, pool, notes, path):
     rough_image = getattr(material, "metallicRoughnessTexture", None)
     rough_ref = pbr.get("metallicRoughnessTexture")
     record = {"name": name}
-    if max(emissive) * strength > 0.0:
-        record.update(kind=EMISSION, emission=[e * strength for e in emissive])
-        t = texture("emissiveTexture", spec.get("emissiveTexture"), emissive_image, True)
-        if t is not None:
-            record["emission_texture"] = t
-        notes.append(f"<{where}>: emissive, so an emitter; its base colour, metallic and "
-                     f"roughness are ignored (ptrace's emitters do not reflect)")
-    elif transmission > 0.0:
+    glows = max(emissive) * strength > 0.0
+    if glows:
+        record.update(emission=[e * strength for e in emissive])
+    if transmission > 0.0:
         record.update(kind=GLASS, albedo=(1.0, 1.0, 1.0), transmittance=tuple(base), ior=ior)
         if transmission < 1.0 or roughness > 0.0:
             notes.append(f"<{where} (transmission {transmission:g}, roughness "
                          f"{roughness:g})>: glass rendered fully transmissive and smooth")
-    elif metallic >= METALLIC_THRESHOLD:
-        colour = list(base)
-        if isinstance(pbr.get("baseColorTexture"), dict):
-            mean = _mean_colour(base_image, path, f"{name} baseColorTexture")
-            if mean is None:
-                notes.append(f"<{where}>: a metal's baseColorTexture is missing or could not "
-                             f"be decoded: its factor sets the conductor's colour")
-            else:
-                colour = [c * m for c, m in zip(colour, mean)]
-                notes.append(f"<{where}>: a metal's baseColorTexture: its mean colour times "
-                             f"the factor is the conductor's colour; the texture's pattern is "
-                             f"not applied (ptrace's conductor takes one colour per material)")
-        eta, k = conductor_from_colour(colour)
-        record.update(kind=MICROFACET, alpha=max(roughness * roughness, MIN_ALPHA),
-                      eta=tuple(eta), k=tuple(k))
-        t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
-        if t is not None:
-            record["roughness_texture"] = t
-        if metallic < 1.0:
-            notes.append(f"<{where} (metallic {metallic:g})>: metallic between 0.5 and 1 "
-                         f"rendered as a metal (ptrace has no blend)")
-    else:   # a dielectric: the base colour under a glossy coat of the ior's reflectance
-        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        record.update(kind=GLOSSY, albedo=tuple(base), specular=(r0, r0, r0),
-                      alpha=max(roughness * roughness, MIN_ALPHA))
+        if glows:   # ptrace's glass does not emit: the material's light wins
+            record.update(kind=EMISSION)
+            notes.append(f"<{where}>: emissive and transmissive: rendered as an emitter only "
+                         f"(ptrace's glass does not emit)")
+    else:   # the specification's BRDF: base colour, metallic and roughness, blended
+        record.update(kind=GLTF_PBR, albedo=tuple(base), metallic=metallic,
+                      alpha=roughness * roughness)
         t = texture("baseColorTexture", pbr.get("baseColorTexture"), base_image, True)
         if t is not None:
             record["albedo_texture"] = t
         t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
         if t is not None:
             record["roughness_texture"] = t
-        if metallic > 0.0:
-            notes.append(f"<{where} (metallic {metallic:g})>: metallic between 0 and 0.5 "
-                         f"rendered as a dielectric (ptrace has no blend)")
+        if ior != SPEC_IOR:
+            notes.append(f"<{where} (ior {ior:g})>: KHR_materials_ior on an opaque material "
+                         f"ignored: its dielectric reflects as ior 1.5 does (f0 0.04)")
+    if record["kind"] != GLASS and glows:
+        t = texture("emissiveTexture", spec.get("emissiveTexture"), emissive_image, True)
+        if t is not None:
+            record["emission_texture"] = t
     return record, _one_transform(where, transforms, notes)
 
 
@@ -187,19 +172,6 @@ def _wrap(document, ref):
         return (REPEAT, REPEAT)
     return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),
             GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT))
-
-
-def _mean_colour(image, path, what):
-    """The mean linear colour of a PIL image, or None if it cannot be decoded; BudgetError if
-    decoding it would pass the memory budget (its size is known before it is decoded)."""
-    if image is None:
-        return None
-    if hasattr(image, "size"):
-        budget.current().image(path, *image.size, f"{what!r}")
-    try:
-        return linear_rgb(image, srgb=True).reshape(-1, 3).mean(axis=0)
-    except Exception:     # Pillow decodes lazily: any decoder error lands here
-        return None
 
 
 def _transform_matrix(path, where, field, extension):

@@ -22,6 +22,7 @@ from ptrace.scene import (
     EMISSION,
     GLASS,
     GLOSSY,
+    GLTF_PBR,
     MICROFACET,
     MIRROR_REPEAT,
     PHYSICAL,
@@ -164,13 +165,15 @@ def test_pbr_glb_fields_and_lights():
     m = scene.materials
     by_name = {name: i for i, name in enumerate(m.names)}
     floor, metal, panel, glass = (by_name[n] for n in ("floor", "metal", "panel", "glass"))
-    # a dielectric (metallic 0): its base colour under a coat of ior 1.5's reflectance
-    assert m.kind[floor] == GLOSSY and m.albedo_texture[floor] >= 0
-    np.testing.assert_allclose(m.specular[floor], 0.04)
-    assert m.alpha[floor] == pytest.approx(1.0)
-    assert m.kind[metal] == MICROFACET and m.roughness_texture[metal] >= 0
+    # glTF's BRDF: a dielectric (metallic 0) with its base colour texture, a metal whose
+    # metallicRoughnessTexture scales roughness (G) and metallic (B)
+    assert m.kind[floor] == GLTF_PBR and m.albedo_texture[floor] >= 0
+    assert m.metallic[floor] == 0.0 and m.alpha[floor] == pytest.approx(1.0)
+    assert m.kind[metal] == GLTF_PBR and m.roughness_texture[metal] >= 0
+    assert m.metallic[metal] == 1.0
     assert m.alpha[metal] == pytest.approx(1.0)    # roughnessFactor 1, squared
-    assert m.kind[panel] == EMISSION and m.emission_texture[panel] >= 0
+    # an emissive material emits and still reflects (its black base colour)
+    assert m.kind[panel] == GLTF_PBR and m.emission_texture[panel] >= 0 and m.emits()[panel]
     np.testing.assert_allclose(m.emission[panel], [2, 2, 2])   # factor 1 x strength 2
     assert m.kind[glass] == GLASS and m.ior[glass] == pytest.approx(1.5)
     # the base colour as the file says it (trimesh's exporter wrote 0.9 as 230/255)
@@ -302,13 +305,14 @@ def test_textured_emitter_light_sampling_agrees_with_bsdf_sampling():
 
 def test_mesh_file_renders_and_its_notes_name_what_was_ignored(tmp_path):
     """The shipped pbr.glb renders with its own lights (no default ambient light) and its
-    notes say what was approximated (an emissive material's other fields, intensity units)."""
+    notes say what was approximated (intensity units), and nothing of its materials: an
+    emissive one reflects as well (glTF's BRDF), none is approximated."""
     out = tmp_path / "pbr.png"
     run = subprocess.run([sys.executable, "-m", "ptrace", "-s", "4", "-r", "64", "48", "-f",
                           str(out), str(FILES / "pbr.glb")], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr
     notes = [line for line in run.stderr.splitlines() if line.startswith("ptrace: note:")]
-    assert any("emissive, so an emitter" in n for n in notes), notes
+    assert not any("material" in n for n in notes), notes
     assert any("KHR_lights_punctual" in n for n in notes), notes
     assert not any("ambient light" in n for n in notes), notes
     image = oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)

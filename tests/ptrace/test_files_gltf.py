@@ -11,10 +11,9 @@ import pytest
 from files_by_hand import QUAD, QUAD_FACES, gltf, png_bytes, quad
 
 import ptrace
-from ptrace.bsdf import conductor_fresnel
 from ptrace.cli import grouped_notes
 from ptrace.io.materials import linear_rgb
-from ptrace.scene import AMBIENT, DIRECTIONAL, GLOSSY, MICROFACET, SPOT
+from ptrace.scene import AMBIENT, DIRECTIONAL, GLTF_PBR, SPOT
 
 TEXTURED = {"name": "skin", "pbrMetallicRoughness": {"baseColorTexture": {"index": 0},
                                                      "metallicFactor": 0.0}}
@@ -106,7 +105,7 @@ def test_a_missing_image_is_a_note_and_the_material_keeps_its_factor(tmp_path):
     path = tmp_path / "model.gltf"
     gltf(path, [quad(material=0)], materials=[TEXTURED], images=["gone.png"])
     scene = ptrace.load(path)
-    assert len(scene.textures) == 0 and scene.materials.kind[0] == GLOSSY
+    assert len(scene.textures) == 0 and scene.materials.kind[0] == GLTF_PBR
     assert any("gone.png" in n and "was not found" in n for n in scene.notes), scene.notes
 
 
@@ -135,30 +134,22 @@ def test_texture_transform_is_applied_to_the_texture_coordinates(tmp_path):
             np.testing.assert_allclose(scene.uv[f, k], [tu, 1 - tv], atol=1e-6)
 
 
-def test_a_metals_base_colour_texture_sets_its_colour(tmp_path):
-    """The conductor takes one colour per material: its texture's mean times the factor
-    (before: the factor alone, a gold can rendered silver); noted."""
-    half = np.zeros((4, 4, 3), np.uint8)
-    half[:2] = (255, 200, 0)
-    half[2:] = (255, 100, 0)
-    import io
-
-    import PIL.Image
-    stream = io.BytesIO()
-    PIL.Image.fromarray(half).save(stream, "PNG")
+def test_a_metals_base_colour_texture_is_applied_as_a_texture(tmp_path):
+    """glTF's BRDF takes the base colour at each point, metals included: the texture is the
+    material's albedo texture and the factor its albedo, with nothing to note (before, a metal
+    was a conductor of one colour, the texture's mean)."""
     material = {"name": "gold", "pbrMetallicRoughness": {
         "baseColorTexture": {"index": 0}, "metallicFactor": 1.0, "roughnessFactor": 0.3,
         "baseColorFactor": [0.5, 1.0, 1.0, 1.0]}}
     path = tmp_path / "gold.glb"
-    gltf(path, [quad(material=0)], materials=[material], images=[stream.getvalue()])
+    gltf(path, [quad(material=0)], materials=[material], images=[png_bytes("RGB")])
     scene = ptrace.load(path)
     m = scene.materials
-    assert m.kind[0] == MICROFACET
-    mean = linear_rgb(half, srgb=True).reshape(-1, 3).mean(axis=0) * [0.5, 1.0, 1.0]
-    for c in range(3):
-        assert conductor_fresnel(m.eta[0, c], m.k[0, c], 1.0) == pytest.approx(
-            float(np.clip(mean[c], 1e-4, 0.999)), rel=1e-6)
-    assert any("a metal's baseColorTexture" in n for n in scene.notes), scene.notes
+    assert m.kind[0] == GLTF_PBR and m.metallic[0] == 1.0
+    assert m.albedo_texture[0] >= 0 and len(scene.textures) == 1
+    np.testing.assert_allclose(m.albedo[0], [0.5, 1.0, 1.0])
+    assert m.alpha[0] == pytest.approx(0.09)
+    assert not any("gold" in n for n in scene.notes), scene.notes
 
 
 def test_materials_of_one_name_are_each_their_own(tmp_path):
@@ -228,7 +219,8 @@ def test_a_directional_light_on_a_zero_scale_node_is_dropped_with_a_note(tmp_pat
 def test_thirty_materials_give_one_note_line_per_kind(tmp_path):
     """A car with 30 materials printed 30 lines: now one per kind, with the count."""
     materials = [{"name": f"paint {i}", "pbrMetallicRoughness": {"metallicFactor": 0.7},
-                  "normalTexture": {"index": 0}} for i in range(30)]
+                  "normalTexture": {"index": 0}, "occlusionTexture": {"index": 0}}
+                 for i in range(30)]
     primitives = [dict(positions=QUAD + [3.0 * i, 0, 0], indices=QUAD_FACES.reshape(-1),
                        material=i) for i in range(30)]
     path = tmp_path / "car.glb"
