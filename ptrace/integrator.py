@@ -379,6 +379,11 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             j += 1
             if pdf < 1e-11:
                 continue
+            if light_kind == EMITTER and dist <= offset:
+                # a point of p's own emissive surface (one that reflects too: glTF's): within
+                # rounding of p, its direction is noise (from a sphere's own surface every
+                # sample lands on p), and no light leaves a surface into itself
+                continue
             wiz = wx * nx + wy * ny + wz * nz
             if wiz <= 0.0:
                 continue
