@@ -92,9 +92,17 @@ def build_parser():
     import accel
 
     from .cli_camera import add_camera_flags
-    from .integrator import AUTO_EVERY_LIGHT
+    from .integrator import AUTO_EVERY_LIGHT, AUTO_MANY
     from .renderer import MAX_SIDE, PIXEL_BYTES
-    from .settings import BVH_SPLITS, DIRECT, INTEGRATORS, LIGHT_SAMPLERS, SAMPLERS
+    from .settings import (
+        BVH_SPLITS,
+        DIRECT,
+        INTEGRATORS,
+        LIGHT_SAMPLER_CODES,
+        LIGHT_SAMPLERS,
+        SAMPLERS,
+    )
+    many = next(name for name, code in LIGHT_SAMPLER_CODES.items() if code == AUTO_MANY)
     parser = _Parser(prog="ptrace", description="Render a CS184 COLLADA scene (or a mesh file) "
                      "with a path tracer whose ray intersection is naive, a BVH, or Embree.")
     add = parser.add_argument
@@ -122,9 +130,10 @@ def build_parser():
     add("--light-sampler", choices=LIGHT_SAMPLERS, default="auto",
         help="which lights a vertex samples: all (-l samples of every light, one of each point "
              "or directional light: the course's), power (-l samples in all, each of one light "
-             "chosen by its estimated power) or auto (all for a scene of at most "
-             f"{AUTO_EVERY_LIGHT} lights, the emissive primitives counting as one; else power; "
-             "the default)")
+             "chosen by its estimated power), bvh (-l samples in all, each of one light or "
+             "emissive primitive chosen by a light BVH for the shading point) or auto (all for "
+             f"a scene of at most {AUTO_EVERY_LIGHT} lights, the emissive primitives counting "
+             f"as one; else {many}; the default)")
     add("-r", "--resolution", nargs=2, type=_int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=(800, 600),
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "

@@ -39,6 +39,7 @@ from .environment import (
     environment_radiance,
     environment_sample,
 )
+from .light_bvh import bvh_arrays, bvh_choose, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
 from .lights import (
     EMITTER,
     area_light_hit,
@@ -48,8 +49,11 @@ from .lights import (
     emitter_pdf,
     light_is_delta,
     light_selection,
+    primitive_pdf,
     sample_emitter,
     sample_light,
+    sample_primitive,
+    selection_weights,
 )
 from .sampling import sobol_1d, sobol_2d, uniform
 from .scene import (
@@ -81,12 +85,14 @@ DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an e
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 # Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
-# samples at a vertex each of one light chosen by power (ptrace.lights.light_selection), or
-# AUTO: every light while a scene has at most AUTO_EVERY_LIGHT of them, else by power
-LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO = 0, 1, 2
+# samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by
+# the light BVH at the vertex (ptrace.light_bvh), or AUTO: every light while a scene has at most
+# AUTO_EVERY_LIGHT of them, else AUTO_MANY
+LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO, LIGHTS_BVH = 0, 1, 2, 3
 AUTO_EVERY_LIGHT = 4
-DIM_CHOOSE = 4          # (power) key offsets from DIM_LIGHT: the choice of light, and the
-DIM_CHOOSE_PRIM = 5     # choice of an emissive primitive
+AUTO_MANY = LIGHTS_POWER
+DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
+DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
                                          "vertex_normals", "material_index", "scale", "uv",
@@ -102,7 +108,9 @@ LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direct
                                          "cos_outer", "faced", "emitter_prims",
                                          "emitter_cdf", "prim_pdf", "findable", "env_image",
                                          "env_marginal", "env_conditional", "env_table",
-                                         "select_cdf", "select_pmf"])
+                                         "select_cdf", "select_pmf", "tree", "entry_light",
+                                         "entry_prim", "light_entry", "prim_entry", "bvh_cdf",
+                                         "bvh_pmf"], defaults=no_bvh_arrays())
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width",
                                            "lens_radius", "focal_distance"])
@@ -124,8 +132,10 @@ def primitive_scale(geometry):
     return np.ascontiguousarray(np.concatenate([corners, spheres]))
 
 
-def scene_records(scene):
-    """(SceneArrays, MaterialArrays, LightArrays) of a scene, with the dtypes the kernel takes."""
+def scene_records(scene, light_tree=False):
+    """(SceneArrays, MaterialArrays, LightArrays) of a scene, with the dtypes the kernel takes;
+    with light_tree, the light BVH of --light-sampler bvh too (without it, the kernel chooses
+    by power where bvh is asked for)."""
     g, m, lights, tex = scene.geometry, scene.materials, scene.lights, scene.textures
     shapes = SceneArrays(g.vertices, g.faces, g.centers, g.radii, _f64(scene.vertex_normals, (3,)),
                          np.ascontiguousarray(scene.material_index, dtype=np.int64),
@@ -141,7 +151,7 @@ def scene_records(scene):
                                np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),
                                index(tex.offset), index(tex.width), index(tex.height),
                                index(tex.wrap).reshape(-1, 2), _f64(m.metallic))
-    faced, prims, cdf, prim_pdf = emitter_arrays(scene)
+    faced, prims, cdf, prim_pdf, prim_power = emitter_arrays(scene, power=True)
     extra = 1 if prims.shape[0] else 0     # one more light: the emissive primitives
     pad = lambda array: np.concatenate([_f64(array, array.shape[1:]),
                                         np.zeros((extra,) + array.shape[1:])])
@@ -155,7 +165,9 @@ def scene_records(scene):
         np.concatenate([faced, np.zeros(extra, np.int64)]),
         prims, cdf, prim_pdf,
         bool(extra or np.isin(lights.kind, [AREA, AMBIENT, ENVIRONMENT]).any()),
-        *environment_arrays(scene.environment), *light_selection(scene))
+        *environment_arrays(scene.environment), *light_selection(scene),
+        *(bvh_arrays(scene, prims, prim_power, selection_weights(scene)) if light_tree
+          else no_bvh_arrays()))
     return shapes, materials, light_arrays
 
 
@@ -282,6 +294,19 @@ def power_heuristic(pdf, other):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def light_mode(options, lights):
+    """The light sampler this scene's vertices use: LIGHTS_ALL, LIGHTS_POWER or LIGHTS_BVH
+    (AUTO resolved by the number of lights; bvh falls back to power in records built without
+    the tree)."""
+    mode = options.light_sampler
+    if mode == LIGHTS_AUTO:
+        mode = LIGHTS_ALL if lights.kind.shape[0] <= AUTO_EVERY_LIGHT else AUTO_MANY
+    if mode == LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
+        mode = LIGHTS_POWER
+    return mode
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
                  ar, ag, ab, alpha, metallic, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy,
                  yz, nx, ny, nz, wox, woy, woz, tr, tg, tb):
@@ -333,23 +358,31 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             b += tb * (fb * scale) * eb
         return r, g, b, rays
     n = options.light_samples
-    power = options.light_sampler == LIGHTS_POWER or (
-        options.light_sampler == LIGHTS_AUTO and lights.kind.shape[0] > AUTO_EVERY_LIGHT)
+    mode = light_mode(options, lights)
+    power = mode != LIGHTS_ALL      # one light per light sample, by power or by the tree
     j = 0
     for outer in range(n if power else lights.kind.shape[0]):
         index = 0
         light = outer
-        if power:   # light sample `outer` of -l: one light, chosen by power
+        prim = -1
+        chosen = 1.0
+        if power:   # light sample `outer` of -l: one light, chosen by power or by the tree
             index = sample * n + outer
-            light = choose(lights.select_cdf, sample_1d(
-                options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
-                base + DIM_LIGHT + 4 * outer + 2))
+            u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
+                           base + DIM_LIGHT + 4 * outer + 2)
+            if mode == LIGHTS_BVH:
+                light, prim, chosen = bvh_choose(lights, u0, px, py, pz, nx, ny, nz)
+                if light < 0:
+                    continue
+            else:
+                light = choose(lights.select_cdf, u0)
+                chosen = lights.select_pmf[light]
         light_kind = lights.kind[light]
         delta = light_is_delta(light_kind, lights.model[light])
         count = 1 if delta or power else n
         for s in range(count):
             if power:   # weight: the light's expected samples at this vertex
-                weight = n * lights.select_pmf[light]
+                weight = n * chosen
                 u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
                                    base + DIM_LIGHT + 4 * outer)
             else:
@@ -357,7 +390,10 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 index = sample * count + s
                 u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
                                    base + DIM_LIGHT + 2 * j)
-            if light_kind == EMITTER:
+            if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
+                lr, lg, lb, wx, wy, wz, dist, pdf = sample_primitive(shapes, materials, prim, px,
+                                                                     py, pz, u1, u2)
+            elif light_kind == EMITTER:
                 if power:
                     u0 = sample_1d(options, pixel, sample, index,
                                    base + DIM_LIGHT + DIM_CHOOSE_PRIM,
@@ -418,9 +454,20 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, ox, oy, oz,
-                   dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
-    """Emission a bounce ray from q (spawned at o, unit direction d, closest hit at t on prim at
+def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
+    """A light's expected light samples at vertex q (shading normal n) under light sampler
+    mode: -l, or -l times its probability of being chosen there."""
+    if mode == LIGHTS_POWER:
+        return options.light_samples * lights.select_pmf[light]
+    if mode == LIGHTS_BVH:
+        return options.light_samples * bvh_light_pmf(lights, light, qx, qy, qz, nx, ny, nz)
+    return float(options.light_samples)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny,
+                   qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
+    """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit at t on prim at
     barycentrics (u, v), material m) finds, as (r, g, b), before the throughput.
 
     After a delta bounce (mirror, glass), which light sampling cannot follow, everything it
@@ -430,15 +477,13 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     ambient light, the environment and the emissive primitives that are lights, each with its power heuristic
     weight against the light sampling that direct_light did at q (bsdf_pdf_ is this ray's
     density). Area lights are transparent, as in the course: a ray passes on through them.
-    When direct_light chose lights by power, a light's samples per vertex are -l times its
-    probability of being chosen, and its weight says so."""
+    When direct_light chose lights by power or by the light BVH, a light's samples per vertex
+    are -l times its probability of being chosen (at q, by the tree), and its weight says so."""
     r = g = b = 0.0
     kinds = lights.kind
-    power = options.light_sampler == LIGHTS_POWER or (
-        options.light_sampler == LIGHTS_AUTO and kinds.shape[0] > AUTO_EVERY_LIGHT)
+    mode = light_mode(options, lights)
     for light in range(kinds.shape[0]):
         kind = kinds[light]
-        n = options.light_samples * lights.select_pmf[light] if power else options.light_samples
         if kind == AREA:
             if delta and lights.faced[light]:
                 continue
@@ -448,6 +493,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
                 continue
             weight = 1.0
             if not delta:   # the light's density for this direction from q, as direct_light
+                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
                 weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
                                                                        dx, dy, dz))
             r += weight * lights.radiance[light, 0]
@@ -456,6 +502,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
         elif kind == ENVIRONMENT and prim < 0:
             weight = 1.0
             if not delta:
+                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
                 weight = power_heuristic(bsdf_pdf_, n * environment_pdf(lights.env_table, dx, dy,
                                                                         dz))
             er, eg, eb = environment_radiance(lights.env_image, dx, dy, dz)
@@ -463,23 +510,31 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
             g += weight * eg
             b += weight * eb
         elif kind == AMBIENT and prim < 0 and dy > 0.0:
-            weight = 1.0 if delta else power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
+            weight = 1.0
+            if not delta:
+                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
+                weight = power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
             r += weight * lights.radiance[light, 0]
             g += weight * lights.radiance[light, 1]
             b += weight * lights.radiance[light, 2]
     if m >= 0 and emits(materials.kind[m]):
         weight = 1.0
-        n = options.light_samples   # the emissive primitives are the last light
-        if power and kinds.shape[0] > 0:
-            n = options.light_samples * lights.select_pmf[kinds.shape[0] - 1]
         if not delta:
             if lights.prim_pdf[prim] == 0.0:
                 return r, g, b       # a light's face: its light was counted above
             if abs(dx * gx + dy * gy + dz * gz) == 0.0:
                 return r, g, b
             # the emitter sampler's density for this direction from q, as direct_light
-            weight = power_heuristic(bsdf_pdf_, n * emitter_pdf(shapes, lights.prim_pdf, prim,
-                                                                qx, qy, qz, dx, dy, dz))
+            if mode == LIGHTS_BVH:   # this primitive, chosen by the tree
+                density = options.light_samples * bvh_prim_pmf(
+                    lights, prim, qx, qy, qz, qnx, qny, qnz) * primitive_pdf(
+                    shapes, prim, qx, qy, qz, dx, dy, dz)
+            else:   # the emissive primitives' light (the last), then this primitive by power
+                n = expected_samples(options, lights, mode, kinds.shape[0] - 1, qx, qy, qz,
+                                     qnx, qny, qnz)
+                density = n * emitter_pdf(shapes, lights.prim_pdf, prim, qx, qy, qz, dx, dy,
+                                          dz)
+            weight = power_heuristic(bsdf_pdf_, density)
         er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
         r += weight * er
         g += weight * eg
@@ -560,7 +615,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         wz = wix * xz + wiy * yz + wiz * nz
         length = math.sqrt(wx * wx + wy * wy + wz * wz)
         dx, dy, dz = wx / length, wy / length, wz / length
-        qx, qy, qz = px, py, pz
+        qx, qy, qz, qnx, qny, qnz = px, py, pz, nx, ny, nz
         ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
         rays += 1
         t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
@@ -568,8 +623,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
                                                                 dy, dz, t, prim, u, v)
         if delta or mis:
             er, eg, eb = emission_found(shapes, materials, lights, options, delta, pdf, qx, qy,
-                                        qz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy,
-                                        gz)
+                                        qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t, prim, u,
+                                        v, m, gx, gy, gz)
             r += tr * er
             g += tg * eg
             b += tb * eb

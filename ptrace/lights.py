@@ -169,21 +169,21 @@ def _face_of(scene, prims, lights):
     return -1
 
 
-def emitter_arrays(scene):
+def emitter_arrays(scene, power=False):
     """What the integrator needs to treat emissive geometry as a light.
 
     Returns (faced (L,) int64: 1 where a file light has an emissive face, prims (E,) int64: the
     emissive primitives that are no light's face, cdf (E,) float64: their cumulative selection
     probability (by power, area times mean emission), prim_pdf (F + S,) float64: selection
     probability over area for those primitives, 0 elsewhere: the area density of sampling a
-    point there)."""
-    faced, prims, cdf, prim_pdf, _ = _emitters(scene)
-    return faced, prims, cdf, prim_pdf
+    point there), and with power, each of those primitives' power (E,)."""
+    faced, prims, cdf, prim_pdf, prim_power = _emitters(scene)
+    return (faced, prims, cdf, prim_pdf) + ((prim_power,) if power else ())
 
 
 def _emitters(scene):
-    """emitter_arrays' four arrays and the emissive primitives' total power (area times mean
-    emission, summed)."""
+    """emitter_arrays' four arrays and each of those primitives' power (E,) (area times mean
+    emission)."""
     g, lights = scene.geometry, scene.lights
     faced = np.zeros(len(lights), dtype=np.int64)
     sampled = []
@@ -195,7 +195,7 @@ def _emitters(scene):
             sampled.append(prims)
     prim_pdf = np.zeros(g.triangle_count + g.sphere_count)
     if not sampled:
-        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, 0.0
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, np.zeros(0)
     prims = np.sort(np.concatenate(sampled)).astype(np.int64)
     areas = np.empty(prims.shape[0])
     triangles = prims < g.triangle_count
@@ -218,30 +218,46 @@ def _emitters(scene):
     power = areas * np.maximum(emission, 0.0)
     total = power.sum()
     if not total > 0.0:
-        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, 0.0
+        return faced, np.zeros(0, dtype=np.int64), np.zeros(0), prim_pdf, np.zeros(0)
     probability = power / total
     cdf = np.cumsum(probability)
     cdf[-1] = 1.0
     nonzero = areas > 0.0
     prim_pdf[prims[nonzero]] = probability[nonzero] / areas[nonzero]
-    return faced, prims, cdf, prim_pdf, float(total)
+    return faced, prims, cdf, prim_pdf, power
 
 
-# -- choosing one light per light sample (--light-sampler power) ----------------------------------
+# -- choosing one light per light sample (--light-sampler power, and bvh's lights at infinity) --
 
 def light_selection(scene):
-    """(cdf, pmf) over the integrator's lights (the file's lights, then the emissive primitives
-    as one more light if there are any), each light's probability of being chosen for a light
-    sample in proportion to an estimate of the irradiance it gives a point of the scene: its
-    power over the square of the scene's radius r for lights that fall off (area lights, glTF's
-    point and spot lights, the emissive primitives), its radiance for the course's point lights
-    (which do not fall off) and directional lights, pi times it for the ambient light and the
-    environment (a hemisphere of that radiance). A light that can give light gets a probability
-    above zero (so choosing is unbiased); the course's spot lights, which give none, get zero."""
+    """(cdf, pmf) over the integrator's lights by selection_weights: each light's probability
+    of being chosen for a light sample (uniform where no light gives any)."""
+    weight = selection_weights(scene)
+    total = weight.sum()
+    if not total > 0.0:   # nothing gives light: choose uniformly (every estimate is zero)
+        weight = np.ones_like(weight)
+        total = weight.sum()
+    pmf = weight / total
+    cdf = np.cumsum(pmf)
+    if cdf.size:
+        cdf[-1] = 1.0
+    return cdf, pmf
+
+
+def selection_weights(scene):
+    """An estimate of the irradiance each of the integrator's lights (the file's lights, then
+    the emissive primitives as one more light if there are any) gives a point of the scene, as
+    a weight >= 0 (finite): its power over the square of the scene's radius r for lights that
+    fall off (area lights, glTF's point and spot lights, the emissive primitives), its radiance
+    for the course's point lights (which do not fall off) and directional lights, pi times it
+    for the ambient light and the environment (a hemisphere of that radiance). A light that can
+    give light gets a weight above zero (so choosing by it is unbiased); the course's spot
+    lights, which give none, get zero."""
     from .environment import LUMINANCE
     from .scene import ENVIRONMENT
     lights = scene.lights
-    _, prims, _, _, emitted = _emitters(scene)
+    _, prims, _, _, power = _emitters(scene)
+    emitted = float(power.sum())
     bounds = scene.bounds()
     radius = 0.5 * float(np.linalg.norm(bounds[1] - bounds[0])) if bounds is not None else 1.0
     r2 = max(radius * radius, 1e-300)
@@ -264,16 +280,7 @@ def light_selection(scene):
             weight[i] = np.pi * luminance[i] * float((image @ LUMINANCE).mean())
     if prims.shape[0]:
         weight[-1] = emitted / r2
-    weight = np.where(np.isfinite(weight) & (weight > 0.0), weight, 0.0)
-    total = weight.sum()
-    if not total > 0.0:   # nothing gives light: choose uniformly (every estimate is zero)
-        weight = np.ones_like(weight)
-        total = weight.sum()
-    pmf = weight / total
-    cdf = np.cumsum(pmf)
-    if cdf.size:
-        cdf[-1] = 1.0
-    return cdf, pmf
+    return np.where(np.isfinite(weight) & (weight > 0.0), weight, 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -306,20 +313,11 @@ def _primitive_area(shapes, prim):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, u2):
-    """A point on the emissive primitives as seen from p, the primitive chosen by power (u0)
-    and the point by solid angle (u1, u2: a spherical triangle, or a sphere's visible cone;
-    ptrace.solid_angle falls back to area sampling where that is not stable): (Lr, Lg, Lb, wix,
-    wiy, wiz, distance, pdf per unit solid angle, the choice's probability included). Emission
-    is two-sided, like the course's."""
-    lo, hi = 0, prims.shape[0] - 1
-    while lo < hi:        # the first k with u0 < cdf[k]
-        mid = (lo + hi) // 2
-        if u0 < cdf[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    prim = prims[lo]
+def sample_primitive(shapes, materials, prim, px, py, pz, u1, u2):
+    """A point on emissive primitive prim as seen from p, by solid angle (u1, u2: a spherical
+    triangle, or a sphere's visible cone; ptrace.solid_angle falls back to area sampling where
+    that is not stable): (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per unit solid angle), pdf 0
+    for no sample. Emission is two-sided, like the course's."""
     vertices, faces, centers, radii = shapes.vertices, shapes.faces, shapes.centers, shapes.radii
     n_tri = faces.shape[0]
     wb = wc = 0.0
@@ -339,7 +337,42 @@ def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, 
         return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
     wx, wy, wz = dx / dist, dy / dist, dz / dist
     er, eg, eb = surface_emission(shapes, materials, shapes.material_index[prim], prim, wb, wc)
+    return er, eg, eb, wx, wy, wz, dist, pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, u2):
+    """A point on the emissive primitives as seen from p, the primitive chosen by power (u0)
+    and the point by sample_primitive (u1, u2): (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per
+    unit solid angle, the choice's probability included)."""
+    lo, hi = 0, prims.shape[0] - 1
+    while lo < hi:        # the first k with u0 < cdf[k]
+        mid = (lo + hi) // 2
+        if u0 < cdf[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    prim = prims[lo]
+    er, eg, eb, wx, wy, wz, dist, pdf = sample_primitive(shapes, materials, prim, px, py, pz,
+                                                         u1, u2)
+    if not pdf > 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
     return er, eg, eb, wx, wy, wz, dist, prim_pdf[prim] * _primitive_area(shapes, prim) * pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def primitive_pdf(shapes, prim, px, py, pz, wx, wy, wz):
+    """The density per unit solid angle with which sample_primitive, at point p, gives the
+    unit direction w toward emissive primitive prim: the same computation as the sampler's."""
+    vertices, faces = shapes.vertices, shapes.faces
+    if prim < faces.shape[0]:
+        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
+        return triangle_pdf(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
+                            vertices[b, 0], vertices[b, 1], vertices[b, 2], vertices[c, 0],
+                            vertices[c, 1], vertices[c, 2], wx, wy, wz)
+    s = prim - faces.shape[0]
+    return sphere_pdf(px, py, pz, shapes.centers[s, 0], shapes.centers[s, 1],
+                      shapes.centers[s, 2], shapes.radii[s], wx, wy, wz)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -350,16 +383,7 @@ def emitter_pdf(shapes, prim_pdf, prim, px, py, pz, wx, wy, wz):
     chosen = prim_pdf[prim]
     if chosen == 0.0:
         return 0.0
-    vertices, faces = shapes.vertices, shapes.faces
-    if prim < faces.shape[0]:
-        a, b, c = faces[prim, 0], faces[prim, 1], faces[prim, 2]
-        pdf = triangle_pdf(px, py, pz, vertices[a, 0], vertices[a, 1], vertices[a, 2],
-                           vertices[b, 0], vertices[b, 1], vertices[b, 2], vertices[c, 0],
-                           vertices[c, 1], vertices[c, 2], wx, wy, wz)
-    else:
-        s = prim - faces.shape[0]
-        pdf = sphere_pdf(px, py, pz, shapes.centers[s, 0], shapes.centers[s, 1],
-                         shapes.centers[s, 2], shapes.radii[s], wx, wy, wz)
+    pdf = primitive_pdf(shapes, prim, px, py, pz, wx, wy, wz)
     return chosen * _primitive_area(shapes, prim) * pdf
 
 

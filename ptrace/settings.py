@@ -9,9 +9,11 @@ import accel
 from .errors import PtraceError
 from .integrator import (
     AUTO_EVERY_LIGHT,
+    AUTO_MANY,
     INDEPENDENT,
     LIGHTS_ALL,
     LIGHTS_AUTO,
+    LIGHTS_BVH,
     LIGHTS_POWER,
     NORMALS,
     PATH,
@@ -26,8 +28,9 @@ from .scene import DIRECTIONAL, POINT
 INTEGRATORS = ("path", "normals")
 DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
 SAMPLERS = ("sobol", "independent")   # --sampler
-LIGHT_SAMPLERS = ("auto", "all", "power")   # --light-sampler
-LIGHT_SAMPLER_CODES = {"auto": LIGHTS_AUTO, "all": LIGHTS_ALL, "power": LIGHTS_POWER}
+LIGHT_SAMPLERS = ("auto", "all", "power", "bvh")   # --light-sampler
+LIGHT_SAMPLER_CODES = {"auto": LIGHTS_AUTO, "all": LIGHTS_ALL, "power": LIGHTS_POWER,
+                       "bvh": LIGHTS_BVH}
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
@@ -74,9 +77,11 @@ class Settings:
     bvh_split: the BVH's split, "mean" (the seed's mean-centroid split) or "sah" (binned surface
     area heuristic); only with accel="bvh". light_sampler: "all" (at each vertex -l samples of
     every light, one of each point or directional light: the course's estimator), "power" (-l
-    samples at each vertex, each of one light chosen by its estimated power) or "auto" (all
-    while a scene has at most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive
-    primitives counting as one, else power).
+    samples at each vertex, each of one light chosen by its estimated power), "bvh" (-l samples
+    at each vertex, each of one light or emissive primitive chosen by a light BVH for that
+    vertex, ptrace.light_bvh) or "auto" (all while a scene has at most
+    ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives counting as one, else
+    ptrace.integrator.AUTO_MANY).
     """
     spp: int = 1
     accel: str = "bvh"
@@ -181,8 +186,21 @@ class Settings:
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
         emitters = int(emitter_arrays(scene)[1].shape[0] > 0)
         bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
-        if self.light_sampler == "power" or (self.light_sampler == "auto"
-                                             and len(lights) + emitters > AUTO_EVERY_LIGHT):
+        if self.light_mode(scene) != LIGHTS_ALL:
             return 1 + self.light_samples + bsdf_ray
         return 1 + delta + self.light_samples * (len(lights) - delta + emitters) + bsdf_ray
 
+    def light_mode(self, scene):
+        """The light sampler a render of this scene uses (LIGHTS_ALL, LIGHTS_POWER or
+        LIGHTS_BVH): auto resolved as the integrator resolves it (ptrace.integrator.light_mode),
+        by the file's lights and the emissive primitives counting as one."""
+        code = LIGHT_SAMPLER_CODES[self.light_sampler]
+        if code != LIGHTS_AUTO:
+            return code
+        count = len(scene.lights) + int(emitter_arrays(scene)[1].shape[0] > 0)
+        return LIGHTS_ALL if count <= AUTO_EVERY_LIGHT else AUTO_MANY
+
+    def uses_light_tree(self, scene):
+        """Whether a render of this scene chooses lights by the light BVH (its records then
+        need the tree: ptrace.integrator.scene_records)."""
+        return self.integrator == "path" and self.light_mode(scene) == LIGHTS_BVH

@@ -134,7 +134,7 @@ class TileWork:
     Dask tiles both call trace(), so their per-pixel arithmetic is the same."""
 
     def __init__(self, scene, backend, settings, camera):
-        self.records = scene_records(scene)
+        self.records = scene_records(scene, settings.uses_light_tree(scene))
         self.accel = backend.compiled
         self.settings = settings
         self.options = settings.kernel_options()
