@@ -87,10 +87,11 @@ INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 # Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
 # samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by
 # the light BVH at the vertex (ptrace.light_bvh), or AUTO: every light while a scene has at most
-# AUTO_EVERY_LIGHT of them, else AUTO_MANY
+# AUTO_EVERY_LIGHT of them, else AUTO_MANY: the tree, whose lower error outweighed the cost of
+# its walks in a room of a thousand lights (benchmarks/results/many_lights.md)
 LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO, LIGHTS_BVH = 0, 1, 2, 3
 AUTO_EVERY_LIGHT = 4
-AUTO_MANY = LIGHTS_POWER
+AUTO_MANY = LIGHTS_BVH
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
 
@@ -317,9 +318,11 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
     (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also
     carries its power heuristic weight against the BSDF sample that trace_path takes next. With
     -H: -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the
-    emission its ray finds (or the environment's radiance where it escapes). (ar, ag, ab), alpha
-    and metallic are the albedo, roughness and metallic at this vertex
-    (ptrace.textures.surface_albedo)."""
+    emission its ray finds (or the environment's radiance where it escapes). Under the power
+    or bvh light sampler (light_mode): -l samples in all, each of one light chosen by power, or
+    by the light BVH at p and its shading normal n (an emissive primitive on its own), each
+    weighted as if -l times that probability. (ar, ag, ab), alpha and metallic are the albedo,
+    roughness and metallic at this vertex (ptrace.textures.surface_albedo)."""
     kind = materials.kind[m]
     base = vertex * DIMS_PER_VERTEX
     r = g = b = 0.0

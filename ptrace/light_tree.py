@@ -68,30 +68,31 @@ def node_importance(tree, k, px, py, pz, nx, ny, nz):
     r2 = tree.radius2[k]
     if d2 <= r2 or d2 < 1e-300:   # p inside the bounding sphere: every direction is possible
         return tree.power[k] / max(r2, 1e-300)
-    d = math.sqrt(d2)
-    wx, wy, wz = dx / d, dy / d, dz / d
-    sin2_b = r2 / d2
-    sin_b, cos_b = math.sqrt(sin2_b), math.sqrt(1.0 - sin2_b)
-    cos_w = tree.axis[k, 0] * wx + tree.axis[k, 1] * wy + tree.axis[k, 2] * wz
+    inv = 1.0 / math.sqrt(d2)
+    wx, wy, wz = dx * inv, dy * inv, dz * inv
+    sin2_b = r2 * inv * inv
+    cos_b = math.sqrt(1.0 - sin2_b)
+    cos_w = axis[k, 0] * wx + axis[k, 1] * wy + axis[k, 2] * wz
     if tree.two_sided[k]:
         cos_w = abs(cos_w)
-    sin_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w))
-    cos_o, sin_o = tree.cos_o[k], tree.sin_o[k]
+    cos_o = tree.cos_o[k]
     # theta_x = max(0, theta_w - theta_o), then theta' = max(0, theta_x - theta_b)
-    if cos_w > cos_o:
-        cos_x, sin_x = 1.0, 0.0
-    else:
+    cos_p = 1.0
+    if not cos_w > cos_o:
+        sin_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w))
+        sin_o = tree.sin_o[k]
         cos_x = cos_w * cos_o + sin_w * sin_o
-        sin_x = sin_w * cos_o - cos_w * sin_o
-    cos_p = 1.0 if cos_x > cos_b else cos_x * cos_b + sin_x * sin_b
+        if not cos_x > cos_b:
+            sin_x = sin_w * cos_o - cos_w * sin_o
+            cos_p = cos_x * cos_b + sin_x * math.sqrt(sin2_b)
     if cos_p <= tree.cos_e[k]:
         return 0.0
-    importance = tree.power[k] * cos_p / d2
+    importance = tree.power[k] * cos_p * (inv * inv)
     if nx != 0.0 or ny != 0.0 or nz != 0.0:
         cos_i = -(nx * wx + ny * wy + nz * wz)    # n against the direction toward the light
         if cos_i < cos_b:      # else the light's sphere straddles n's axis: bound 1
             sin_i = math.sqrt(max(0.0, 1.0 - cos_i * cos_i))
-            cos_pi = cos_i * cos_b + sin_i * sin_b    # cos(max(0, theta_i - theta_b))
+            cos_pi = cos_i * cos_b + sin_i * math.sqrt(sin2_b)   # cos(max(0, theta_i - theta_b))
             if cos_pi <= 0.0:
                 return 0.0
             importance *= cos_pi

@@ -78,8 +78,8 @@ def test_the_emissive_primitives_are_one_light_by_their_power():
     assert lights.select_pmf[4] / lights.select_pmf[0] == pytest.approx(sphere_power / first_area)
 
 
-def test_auto_is_every_light_for_a_few_and_power_for_many():
-    """auto renders bit for bit as all up to AUTO_EVERY_LIGHT lights and as power above."""
+def test_auto_is_every_light_for_a_few_and_the_light_bvh_for_many():
+    """auto renders bit for bit as all up to AUTO_EVERY_LIGHT lights and as bvh above."""
     few = make_scene(vertices=[[-2, 0, -2], [2, 0, -2], [2, 0, 2]], faces=[[0, 2, 1]],
                      materials=[dict(kind=DIFFUSE)], material_index=[0],
                      lights=[area_light((0, 1, 0), 0.5, 2.0)] * AUTO_EVERY_LIGHT)
@@ -88,7 +88,8 @@ def test_auto_is_every_light_for_a_few_and_power_for_many():
     assert not np.array_equal(render(few, "auto", **options), render(few, "power", **options))
     many = many_lit_floor()   # five
     np.testing.assert_array_equal(render(many, "auto", **options),
-                                  render(many, "power", **options))
+                                  render(many, "bvh", **options))
+    assert not np.array_equal(render(many, "auto", **options), render(many, "power", **options))
 
 
 def test_power_sampling_traces_l_shadow_rays_a_vertex_whatever_the_lights():
