@@ -61,6 +61,12 @@ def close_emitters():
         lights=[area_light((2.0, 1.5, -2.0), 0.5, 4.0)] + [area_light((3, 2, 3), 0.1, 1.0)] * 4)
 
 
+def lit_floor_under_sky():
+    """lit_floor under a constant environment: one more light at infinity beside the tree."""
+    from ptrace.environment import Environment
+    return lit_floor().with_environment(Environment.constant((0.3, 0.4, 0.5)))
+
+
 def render(scene, sampler, **options):
     camera = looking_down(5.0, width=24, screen_dist=7.0)
     return ptrace.render(scene, camera=camera, resolution=(24, 24), light_sampler=sampler,
@@ -69,7 +75,8 @@ def render(scene, sampler, **options):
 
 @pytest.mark.parametrize("make, direct, depth", [(lit_floor, "mis", 1), (lit_floor, "light", 1),
                                                 (lit_floor, "mis", 3),
-                                                (close_emitters, "mis", 1)])
+                                                (close_emitters, "mis", 1),
+                                                (lit_floor_under_sky, "mis", 2)])
 def test_bvh_and_every_light_agree_on_the_mean(make, direct, depth):
     """Both estimators are unbiased: the image means, over a few seeds each, agree within four
     standard errors measured from the seeds' spread (a wrong MIS probability for a light the
