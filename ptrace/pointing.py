@@ -291,20 +291,47 @@ def front_for(up):
     return turned / np.linalg.norm(turned)
 
 
+def _face_on(scene, backward, up):
+    """(backward, up) for a framing camera: as given, unless the scene is a flat model (triangles
+    only, every one of them parallel to one plane) whose plane holds the view direction, which
+    the camera would see edge-on as nothing. Then it looks from the plane's normal (the side of
+    up, or else of backward), with up above the image's centre unless up is near that normal;
+    then the old view's far side is at the image's top (a model lying flat under a Y-up camera
+    is seen from above, its -Z side at the top)."""
+    geometry = scene.geometry
+    if geometry.faces.shape[0] == 0 or np.asarray(geometry.radii).shape[0] > 0:
+        return backward, up
+    corners = np.asarray(geometry.vertices)[np.asarray(geometry.faces)]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    lengths = np.linalg.norm(normals, axis=1)
+    total = float(lengths.sum())
+    if not total > 0.0 or float(np.abs(normals @ backward).sum()) > 1e-9 * total:
+        return backward, up
+    normal = normals[int(np.argmax(lengths))] / float(lengths.max())
+    if float(np.linalg.norm(np.cross(normals, normal), axis=1).sum()) > 1e-9 * total:
+        return backward, up     # not flat: faces in several orientations, all edge-on (a fence)
+    side = float(normal @ up)
+    if abs(side) > 1e-12:
+        normal = normal if side > 0 else -normal
+    image_up = -backward if abs(float(normal @ up)) > 0.5 else up
+    return normal, image_up
+
+
 def framing_camera(scene, width=BASE_WIDTH, height=BASE_HEIGHT, up=Y_UP, fov=None,
                    names=PYTHON_NAMES):
     """A mesh file's default camera: looking at the centre of the scene's bounds from
     front_for(up) (the +Z side with +Y up), with up above the image's centre, just far enough
     away that the projections of the bounds' eight corners lie inside the width x height frame
-    and touch its edge (on one axis, on at least one side). fov is the vertical field of view in
+    and touch its edge (on one axis, on at least one side). A flat model seen edge-on from there
+    is seen from its plane's normal instead (_face_on). fov is the vertical field of view in
     degrees; None: the longer image side spans FRAMING_FOV. Camera rays run from the scene
     camera's znear (made smaller if needed to reach the nearest corner's depth) to its zfar
     (made larger if needed to reach past the farthest corner)."""
     width, height = _size(width, height)
     lower, upper = _bounds(scene)
     up = unit(Y_UP if up is None else up, names["up"])
-    backward = front_for(up)
-    axes = axes_from(backward, up, names, "the default camera's")
+    backward, view_up = _face_on(scene, front_for(up), up)
+    axes = axes_from(backward, view_up, names, "the default camera's")
     if fov is None:
         focal = max(width, height) / (2 * math.tan(math.radians(FRAMING_FOV) / 2))
     else:

@@ -139,6 +139,18 @@ MUTANTS = {
         "on a grazing hit the embree backend recomputes t in float64 but keeps float32 u and v",
         [("accel/embree.py", "best_t, best_u, best_v = t, u, v", "best_t = t")],
         [PROMISES, "-k", "embree"]),
+    "bvh-prim-pmf-constant": (
+        "the MIS density of an emissive primitive a BSDF ray finds under the light BVH takes a "
+        "constant selection probability instead of the tree's pmf at that vertex",
+        [("ptrace/light_bvh.py", "    return lights.bvh_pmf[lights.bvh_pmf.shape[0] - 1] * "
+          "tree_pmf(lights.tree, px, py, pz, nx,", "    return 0.5 + 0.0 * tree_pmf(lights.tree, "
+          "px, py, pz, nx,")],
+        ["tests/ptrace/test_light_bvh.py"]),
+    "instances-counted-once": (
+        "the glTF budget counts each instanced mesh's triangles once, not once per node placing it",
+        [("ptrace/io/gltf.py", "            triangles += per_mesh[mesh]\n",
+          "            triangles += 0 if mesh in used else per_mesh[mesh]\n")],
+        ["tests/ptrace/test_budgets.py", "-k", "instancing"]),
 }
 
 

@@ -95,9 +95,9 @@ def load_mesh(path, default_light=True):
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     framed = not any(c.kind == gltf_cameras.PERSPECTIVE for c in cameras)
     if framed and not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
-        notes.append("mesh file: every face is edge-on to the default camera, which looks "
-                     "along the Z axis: the image shows nothing of the model (it is flat, in a "
-                     "plane that holds the Z axis)")
+        notes.append("mesh file: every face is edge-on to the default view along the Z axis "
+                     "(a flat model in a plane that holds it): the default camera looks at it "
+                     "from the plane's normal instead")
     return Scene(path=path, geometry=geometry,
                  vertex_normals=area_weighted_normals(geometry.vertices, geometry.faces),
                  material_index=parts["material_index"], materials=materials,

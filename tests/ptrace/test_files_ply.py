@@ -80,8 +80,12 @@ def test_a_texture_file_comment_is_the_albedo_texture(tmp_path):
 
 
 def test_a_flat_model_edge_on_to_the_default_camera_is_noted(tmp_path):
-    """One triangle in the plane x = 0, the default camera looking along -Z: an empty image,
-    said in a note rather than silently."""
+    """One triangle in the plane x = 0, which the default view along -Z sees edge-on: the
+    default camera looks from the plane's normal (+X) instead, and the note says so."""
     path = write(tmp_path, rows=("0 0 0", "0 1 0", "0 0 1"))
-    assert any("edge-on" in n for n in ptrace.load(path).notes)
+    scene = ptrace.load(path)
+    assert any("edge-on" in n and "plane's normal" in n for n in scene.notes)
+    np.testing.assert_allclose(ptrace.framing_camera(scene).camera_to_world[:, 2], [1, 0, 0],
+                               atol=1e-12)
+    assert (ptrace.render(scene, integrator="normals", resolution=(16, 12)).sum(-1) > 0).any()
     assert not any("edge-on" in n for n in ptrace.load(write(tmp_path)).notes)
