@@ -16,7 +16,7 @@ a delta bounce.
 -H is the course's uniform hemisphere sampling. The lights are the file's lights plus, as one
 more light, the emissive primitives that are not a file light's face (ptrace.lights). Random
 numbers come from the Sobol' sampler (stratified) or the independent one (ptrace.sampling).
-Departures from the course are listed in the README.
+Departures from the course are listed in docs/departures.md.
 
 Kernel state travels as a few named records (namedtuples of flat arrays and scalars, built once
 per scene by `scene_records`). Random numbers are keyed by (seed, pixel, sample, dimension), and

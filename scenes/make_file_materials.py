@@ -1,5 +1,5 @@
 """Write the small mesh-file scenes in scenes/files/ that show what ptrace reads of the materials
-mesh files carry (the README's table "What mesh files' materials become"):
+mesh files carry (docs/usage.md's table "What mesh files' materials become"):
 
 - room.obj + room.mtl + checker.png + glow.png: OBJ and MTL, a map_Kd checker floor, a red Kd
   wall, a Ke light panel with a map_Ke pattern, a Ks/Ns glossy sphere and an Ni/illum 7 glass

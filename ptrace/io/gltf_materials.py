@@ -1,7 +1,7 @@
 """A glTF material as a ptrace material record: its factors and extensions from the file's
 JSON, its images as trimesh decoded them (ptrace.io.gltf explains the split).
 
-What each field becomes is the README's table "What mesh files' materials become". Every
+What each field becomes is docs/usage.md's table "What mesh files' materials become". Every
 value the glTF schema bounds is checked (factors in [0, 1], strengths at least 0, all finite):
 a value outside is refused with the material and field named, since no image made of it would
 be what the file means. A texture that is missing or cannot be decoded is a note and the

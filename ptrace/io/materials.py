@@ -2,7 +2,7 @@
 and the checks every material value passes.
 
 The format readers (ptrace.io.obj, ptrace.io.gltf, ptrace.io.ply) decide what each field of
-their format means to ptrace and note every field they approximate or ignore; the README's
+their format means to ptrace and note every field they approximate or ignore; docs/usage.md's
 table "What mesh files' materials become" is the summary of their rules.
 """
 import math
@@ -13,7 +13,7 @@ from .. import budget
 from ..scene import REPEAT
 
 MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has no density)
-DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (the README says so)
+DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (docs/usage.md says so)
 
 
 class TexturePool:

@@ -1,7 +1,7 @@
 """An OBJ file's materials: its .mtl libraries read, each material as a ptrace material
 record, and the parts of the scene put together (ptrace.io.obj reads the geometry).
 
-What each MTL field becomes is the README's table "What mesh files' materials become". A
+What each MTL field becomes is docs/usage.md's table "What mesh files' materials become". A
 library, a material or a texture the file names but that cannot be read is a note, and the
 faces concerned get what is left (the default material, the material's colour alone): never
 silently. A NaN, infinite or negative value is refused with the material and field named.
