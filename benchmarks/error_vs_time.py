@@ -104,7 +104,8 @@ class Mitsuba:
     def available(self):
         return self.mi is not None and self.note is None
 
-    def render(self, scene, spp, sampler="independent", seed=0, repeats=1, integrator="path"):
+    def render(self, scene, spp, sampler="independent", seed=0, repeats=1, integrator="path",
+               **mapping):
         """(image, seconds of the fastest of `repeats` timed renders, actual spp)."""
         import drjit as dr
 
@@ -118,7 +119,8 @@ class Mitsuba:
         with tempfile.TemporaryDirectory() as workdir:
             # Schlick glass: ptrace's (and the course's) Fresnel
             description = mitsuba_scene(scene, course_camera(scene, *FULL), DEPTH, spp, seed,
-                                        workdir, glass="schlick", integrator=integrator)
+                                        workdir, glass="schlick", integrator=integrator,
+                                        **mapping)
             description["sensor"]["sampler"]["type"] = sampler
             loaded = mi.load_dict(description)
         actual = loaded.sensors()[0].sampler().sample_count()
@@ -138,8 +140,9 @@ class Mitsuba:
         return np.array(image, dtype=np.float32)[..., :3], best, actual
 
 
-def reference(name, mitsuba, spp):
-    """The scene's Mitsuba reference image, made once and cached."""
+def reference(name, mitsuba, spp, scene=None, **mapping):
+    """The scene's Mitsuba reference image, made once and cached (`scene`: what `name` names,
+    when it is not one of SCENES; `mapping`: mitsuba_scene's emissive and hide_emitters)."""
     from ptrace.image import read_image, write_image
     path = CACHE / f"{name}_m{DEPTH}_{mitsuba.variant}_{spp}spp.exr"
     if path.exists():
@@ -148,7 +151,8 @@ def reference(name, mitsuba, spp):
     print(f"{name}: rendering the {spp}-spp Mitsuba reference ...", flush=True)
     # volpath: Mitsuba's path integrator counts crossing the light rectangle's null BSDF as a
     # bounce, which leaves it 0.6 % dark at this depth (benchmarks/mitsuba_reference.py)
-    image, seconds, _ = mitsuba.render(test_scene(name), spp, seed=12345, integrator="volpath")
+    image, seconds, _ = mitsuba.render(test_scene(name) if scene is None else scene, spp,
+                                       seed=12345, integrator="volpath", **mapping)
     write_image(path, image)
     print(f"{name}: reference in {seconds:.0f} s -> {path}", flush=True)
     return image, path

@@ -291,10 +291,12 @@ def mitsuba_scene(scene, camera, max_depth, spp, seed, workdir, emissive=False,
                                 "emitter": {"type": "area", "radiance": radiance}}
     for s in range(geometry.sphere_count):
         m = int(scene.material_index[geometry.triangle_count + s])
-        if materials.kind[m] == EMISSION:
-            raise SystemExit("emissive spheres are not mapped to Mitsuba")
         description[f"sphere_{s}"] = {"type": "sphere", "center": geometry.centers[s].tolist(),
                                       "radius": float(geometry.radii[s]), "bsdf": bsdfs[m]}
+        if materials.kind[m] == EMISSION:     # (emissive=True was checked above)
+            # seen from outside only, so one-sided emission is ptrace's two-sided emission
+            description[f"sphere_{s}"]["emitter"] = {
+                "type": "area", "radiance": {"type": "rgb", "value": materials.emission[m].tolist()}}
     lights = scene.lights
     for i in range(len(lights)):
         if lights.kind[i] != AREA:

@@ -1,6 +1,7 @@
 """Study: area lights sampled by solid angle against by area, side by side with Mitsuba 3.
 
-    python studies/light_sampling.py --before CHECKOUT [--scenes CBspheres_lambertian CBbunny]
+    python studies/light_sampling.py --before CHECKOUT
+        [--scenes CBspheres_lambertian CBbunny CBsphere_light]
         [--spp 16 64] [--seeds 3] [--output light_sampling.md]
 
 CHECKOUT is a checkout of ptrace before the change (a git worktree of the commit before it);
@@ -14,6 +15,7 @@ relative MSE over the seeds and the median seconds of the render call (kernels c
 before; a ptrace process times only its render call). Writes benchmarks/results/OUTPUT.
 """
 import argparse
+import inspect
 import json
 import os
 import statistics
@@ -30,12 +32,55 @@ sys.path.insert(0, str(ROOT))
 from benchmarks import error_vs_time as evt  # noqa: E402
 from benchmarks import report  # noqa: E402
 
+SPHERE_LIT = "CBsphere_light"     # CBspheres_lambertian lit by one emissive sphere alone
+SPHERE_LIGHT = ((0.0, 1.15, 0.0), 0.2, 10.0)     # centre, radius, radiance (the quad's)
+
+
+def sphere_lit(scene, centre, radius, radiance):
+    """The scene without its lights, with one more sphere that emits `radiance`: a material
+    row appended to every per-material array (a copy of material 0's, then made EMISSION)."""
+    import dataclasses
+
+    import numpy as np
+
+    from accel import Geometry
+    from ptrace.scene import EMISSION, Lights
+    materials, rows = scene.materials, len(scene.materials.kind)
+    grown = {}
+    for field in dataclasses.fields(materials):
+        value = getattr(materials, field.name)
+        if isinstance(value, np.ndarray) and len(value) == rows:
+            grown[field.name] = np.concatenate([value, value[:1]])
+        elif isinstance(value, tuple) and len(value) == rows:
+            grown[field.name] = (*value, "sphere light")
+    grown["kind"][-1] = EMISSION
+    grown["emission"][-1] = radiance
+    g = scene.geometry
+    geometry = Geometry(g.vertices, g.faces, np.concatenate([g.centers, [centre]]),
+                        np.concatenate([g.radii, [radius]]))
+    return dataclasses.replace(
+        scene, geometry=geometry, materials=dataclasses.replace(materials, **grown),
+        material_index=np.concatenate([scene.material_index, [rows]]).astype(
+            scene.material_index.dtype),
+        lights=Lights.from_records([]))
+
+
+def study_scene(name):
+    """The scene `name` as both renderers see it (evt.test_scene, or the sphere-lit box)."""
+    from benchmarks.error_vs_time import test_scene
+    if name == SPHERE_LIT:
+        return sphere_lit(test_scene("CBspheres_lambertian"), *SPHERE_LIGHT)
+    return test_scene(name)
+
+
 WORKER = """
 import json, sys, time, numpy as np
 sys.path.insert(0, {root!r})
 import ptrace
-from benchmarks.error_vs_time import test_scene, FULL, DEPTH, THREADS
-scene = test_scene({name!r})
+from benchmarks.error_vs_time import FULL, DEPTH, THREADS
+{functions}
+SPHERE_LIT, SPHERE_LIGHT = {sphere_lit!r}, {sphere_light!r}
+scene = study_scene({name!r})
 ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=DEPTH)           # compile
 start = time.perf_counter()
 image = ptrace.render(scene, spp={spp}, resolution=FULL, max_depth=DEPTH, threads=THREADS,
@@ -49,7 +94,9 @@ print(json.dumps(dict(seconds=seconds, file=ptrace.__file__)))
 def ptrace_render(tree, name, spp, seed, folder):
     out = os.path.join(folder, f"{abs(hash((tree, name, spp, seed)))}.npy")
     env = dict(os.environ, PYTHONPATH=str(tree))
-    code = WORKER.format(root=str(tree), name=name, spp=spp, seed=seed, out=out)
+    functions = inspect.getsource(sphere_lit) + "\n" + inspect.getsource(study_scene)
+    code = WORKER.format(root=str(tree), name=name, spp=spp, seed=seed, out=out,
+                         functions=functions, sphere_lit=SPHERE_LIT, sphere_light=SPHERE_LIGHT)
     result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                             text=True, check=True, cwd=folder)
     answer = json.loads(result.stdout.strip().splitlines()[-1])
@@ -60,7 +107,7 @@ def ptrace_render(tree, name, spp, seed, folder):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", required=True)
-    parser.add_argument("--scenes", nargs="+", default=["CBspheres_lambertian", "CBbunny"])
+    parser.add_argument("--scenes", nargs="+", default=["CBspheres_lambertian", "CBbunny", SPHERE_LIT])
     parser.add_argument("--spp", type=int, nargs="+", default=[16, 64])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--output", default="light_sampling.md")
@@ -70,8 +117,10 @@ def main(argv=None):
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         for name in args.scenes:
-            ref, _ = evt.reference(name, mitsuba, evt.REFERENCE_SPP)
-            scene = evt.test_scene(name)
+            scene = study_scene(name)
+            # the sphere is seen: Mitsuba shows it (its pixels pass 1 and leave the error)
+            mapping = (dict(emissive=True, hide_emitters=False) if name == SPHERE_LIT else {})
+            ref, _ = evt.reference(name, mitsuba, evt.REFERENCE_SPP, scene=scene, **mapping)
             for spp in args.spp:
                 cells = {label: [] for label in [*trees, "Mitsuba multijitter"]}
                 for seed in range(args.seeds):
@@ -79,7 +128,7 @@ def main(argv=None):
                         image, seconds = ptrace_render(tree, name, spp, seed, folder)
                         cells[label].append((evt.relative_mse(image, ref), seconds))
                     image, seconds, _ = mitsuba.render(scene, spp, sampler="multijitter",
-                                                       seed=seed)
+                                                       seed=seed, **mapping)
                     cells["Mitsuba multijitter"].append((evt.relative_mse(image, ref), seconds))
                 for label, runs in cells.items():
                     mse = statistics.fmean(r[0] for r in runs)
