@@ -1,11 +1,11 @@
-"""Our hand-written BVH: the seed's mean-centroid split, built and traversed without recursion.
+"""Our hand-written BVH: the course's suggested mean-centroid split, built and walked iteratively.
 
 `split="sah"` chooses instead, among 16 bins of the centroid bounds on each axis, the plane of
 least surface-area cost (n_left * area_left + n_right * area_right); everything else is shared.
 
 Build: a node covers a contiguous range of the primitive order array. It becomes a leaf when it
 holds at most `max_leaf_size` primitives (the course's 4 by default, one block of the vector
-triangle test; leaves of 8 measured within a few percent of it either way,
+triangle test; leaves of 8 measured neither clearly faster nor slower:
 benchmarks/results/bvh_changes.md); otherwise it splits along the longest axis of its
 centroid bounds at the mean centroid. When that leaves one side empty (coincident centroids,
 rounding), or the node is deeper than `MEAN_SPLIT_DEPTH`, it splits by count instead (the lower
@@ -61,7 +61,9 @@ from .types import Hits
 
 STACK_SIZE = 128
 MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
-SPLITS = ("mean", "sah")   # the seed's mean-centroid split; a binned surface-area heuristic
+# the mean-centroid split the course suggests (its staff build uses the midpoint of the centroid
+# bounds); a binned surface-area heuristic
+SPLITS = ("mean", "sah")
 SAH_BINS = 16
 RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDTH = 8                # children per node of the traversal's tree (_closest's tournament: 8)
@@ -647,14 +649,12 @@ def _every_closest(record, shear, ray, lo, hi):
 def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     """Closest-hit traversal of one ray: (t, prim, u, v, wide nodes visited, primitive tests).
 
-    Ordered: at each node the nearest child hit is entered next and the others are pushed with
-    their entry t (in slot order); a popped entry beyond the nearest hit found is skipped. A node
-    with one child hit enters it directly, skipping the nearest-child tournament and the pushes
-    (closest-hit rays per second over the same tree without it, three side-by-side runs on four
-    meshes: medians 1.05x, 1.05x and 1.04x, single cells 0.84-1.14x; in
-    benchmarks/results/bvh_changes.md's run, three processes per revision, 0.99-1.08x on random
-    and secondary rays; the same shortcut measured 0.99-1.05x for any hit, which does without
-    it). The stack indices are unsigned, so numba emits no negative-index wraparound for them."""
+    Ordered: at each node the nearest child hit is entered next and the others are pushed with their
+    entry t (in slot order); a popped entry beyond the nearest hit found is skipped. A node with one
+    child hit enters it directly, skipping the nearest-child tournament and the pushes: closest-hit
+    rays gain from it, any-hit rays measured no clear gain and any_hit does without it
+    (benchmarks/results/bvh_changes.md, "+ one-hit shortcut"). The stack indices are unsigned, so
+    numba emits no negative-index wraparound for them."""
     nodes, payloads = record.nodes, record.payloads
     stack, entry = scratch
     planes, slab_ray, lo32, hi32, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
@@ -830,10 +830,9 @@ class BVHAccelerator:
     def traversal_work(self, rays):
         """(wide nodes visited, primitive tests) per ray, averaged over a closest-hit trace of
         `rays`, for benchmarks and tests: interior wide nodes only (leaves are counted by their
-        primitives; a block's unused lanes are not). A trace of its own, counting as it goes:
-        when intersect() counted too, the plain face ran 1.11-1.22x its rays per second
-        (CBbunny, random and secondary rays). Not comparable with figures from before the
-        8-wide traversal."""
+        primitives; a block's unused lanes are not). A trace of its own, counting as it goes,
+        so that intersect() counts nothing and pays nothing for it. Not comparable with counts
+        from before the 8-wide traversal."""
         rays.validate()
         visits = np.empty(len(rays), dtype=np.int64)
         tests = np.empty(len(rays), dtype=np.int64)

@@ -10,14 +10,13 @@ and prim = -1 on a miss, (u, v) barycentric for triangles and 0 for spheres.
 
 Each backend's record is a namedtuple class of its own, registered here with its three numba
 functions. The two query functions are compiled with `_nrt=False` (and so must be every function
-they call that takes arrays): a numba function that is not inlined increfs and decrefs every
-array it is passed, atomically, on every call; with a record of five arrays and a scratch of
-four, three levels of calls per ray cost more than the traversal itself (about 3x the time per
-camera ray when this was measured). Without NRT a function cannot allocate, which none of them
-needs. The three names above are numba overloads that pick the registered functions by the
-record's type, so a numba kernel written against them is compiled once per backend (one
-specialisation each, each in numba's on-disk cache) and never names a backend; called from plain
-Python (a kernel's py_func, in tests) they dispatch the same way.
+they call that takes arrays): a numba function that is not inlined increfs and decrefs every array
+it is passed, atomically, on every call; with a record of five arrays and a scratch of four, three
+levels of calls per ray cost more than the traversal itself. Without NRT a function cannot allocate,
+which none of them needs. The three names above are numba overloads that pick the registered
+functions by the record's type, so a numba kernel written against them is compiled once per backend
+(one specialisation each, each in numba's on-disk cache) and never names a backend; called from
+plain Python (a kernel's py_func, in tests) they dispatch the same way.
 """
 import numpy as np
 from numba import njit, prange, types

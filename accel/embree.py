@@ -23,15 +23,15 @@ rounding (t is unchanged by a translation). The median, not the bounding box's c
 outliers move the box's centre away from where the triangles are, which made a dense cluster with
 far outliers disagree on a large share of the rays (benchmarks/stability.py measures all of this,
 through the `centre` method). No translation helps a ray whose origin is far from the triangles
-(a camera 1e5 away from the cow disagreed with bvh on 14% of the rays): its float32 origin loses
-the ray. So each ray is first clipped, in float64, to the triangles' box in the re-centred frame
-(computed at build, padded outward by BOX_PAD of its scale so that no hit on its faces is lost to
-rounding): a ray whose [tmin, tmax] misses the box skips Embree (spheres are still tested), and
-an origin farther than the box's scale (its largest coordinate plus its diagonal) from where the
-ray enters the box is moved forward to that entry point before rounding, Embree's t being
-measured from there (the shift added back in float64, tnear and tfar reduced by it). Nearer
-origins are not moved: their float32 coordinates are already about as fine as the triangles',
-and such rays (a camera in or by the scene, every spawned ray) keep their answers bit for bit.
+(a camera far from the cow disagreed with bvh on many rays: benchmarks/results/stability.md):
+its float32 origin loses the ray. So each ray is first clipped, in float64, to the triangles' box in
+the re-centred frame (computed at build, padded outward by BOX_PAD of its scale so that no hit on
+its faces is lost to rounding): a ray whose [tmin, tmax] misses the box skips Embree (spheres are
+still tested), and an origin farther than the box's scale (its largest coordinate plus its diagonal)
+from where the ray enters the box is moved forward to that entry point before rounding, Embree's t
+being measured from there (the shift added back in float64, tnear and tfar reduced by it). Nearer
+origins are not moved: their float32 coordinates are already about as fine as the triangles', and
+such rays (a camera in or by the scene, every spawned ray) keep their answers bit for bit.
 `clip_to_bounds=False` turns the clipping off, for the stability study and the tests.
 
 Grazing hits. Embree's t is off by about a float32 ulp of the coordinates divided by the cosine

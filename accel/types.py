@@ -38,7 +38,8 @@ class Geometry:
             faces = faces.reshape(0, 3)
         if faces.ndim != 2 or faces.shape[1] != 3:
             raise ValueError(f"faces must have shape (F, 3) but has shape {faces.shape}")
-        centers = _float_array("centers", np.empty((0, 3)) if self.centers is None else self.centers, (3,))
+        centers = _float_array("centers",
+                               np.empty((0, 3)) if self.centers is None else self.centers, (3,))
         radii = np.ascontiguousarray(np.empty(0) if self.radii is None else self.radii,
                                      dtype=np.float64).reshape(-1)
         if radii.shape[0] != centers.shape[0]:

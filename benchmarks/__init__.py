@@ -25,7 +25,8 @@ class Benchmark:
 
 def _seed_commands_quick(module):
     """seed_commands has no --quick: its first two commands, -s divided by 64, bvh and embree."""
-    return ["--spp-scale", "64", "--backends", "bvh", "embree", "--only", *list(module.COMMANDS)[:2]]
+    return ["--spp-scale", "64", "--backends", "bvh", "embree",
+            "--only", *list(module.COMMANDS)[:2]]
 
 
 BENCHMARKS = {

@@ -26,8 +26,8 @@ the embree backend splits a batch over numba's thread count too):
   issue's target), otherwise accel.raygen.light_square(geometry), a small square above the
   bounds (a synthetic light above CBbunny's closed box would be hidden by its ceiling).
 Rates are rays per second, the median of --repeats runs after a warm-up call, the backends taking
-turns (each traces the batch once per round, so a slow spell of the machine touches all): closest hit
-(intersect) for random, camera and secondary rays; any hit (occluded) for shadow rays. naive
+turns (each traces the batch once per round, so a slow spell of the machine touches all): closest
+hit (intersect) for random, camera and secondary rays; any hit (occluded) for shadow rays. naive
 tests every triangle, so it runs on the first min(n, --naive-budget / triangles) rays of the same
 batch (the tables give the count). The traversal table gives, per ray, the bvh's nodes visited
 and ray-triangle tests (closest hit; mean and sah splits with the watertight test), counted by
@@ -122,7 +122,8 @@ def cold_compile_seconds():
     import tempfile
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        code = "import json; from benchmarks.accel_rays import warm_up; print(json.dumps(warm_up()))"
+        code = ("import json; from benchmarks.accel_rays import warm_up; "
+                "print(json.dumps(warm_up()))")
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
         output = subprocess.run([sys.executable, "-c", code], env=env, cwd=root, check=True,
                                 capture_output=True, text=True).stdout

@@ -286,7 +286,8 @@ def commands_table(results, args, resolution):
     ratios = []
     for hemisphere, light in HEMISPHERE_PAIRS:
         if hemisphere in results and light in results:
-            ours = results[hemisphere]["runs"]["bvh"]["wall"] / results[light]["runs"]["bvh"]["wall"]
+            ours = (results[hemisphere]["runs"]["bvh"]["wall"]
+                    / results[light]["runs"]["bvh"]["wall"])
             text = f"{light.replace('CBbunny ', '')}: ours (bvh) {ours:.2f}x"
             if light in STAFF_SECONDS:
                 staff = STAFF_SECONDS[hemisphere] / STAFF_SECONDS[light]
@@ -429,7 +430,8 @@ def growth_table(rows, f, args, chart_path):
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r, nlogn, power in zip(rows, f["nlogn"], f["power"]):
         lines.append(f"| {synthetic.name(r['n'])} | {r['n']:,} | {r['rays']:,} | "
-                     f"{r['hits']:.3f} | {r['naive_rays']:,} | {r['bvh']:,.0f} | {r['naive']:,.0f} | "
+                     f"{r['hits']:.3f} | {r['naive_rays']:,} | {r['bvh']:,.0f} | "
+                     f"{r['naive']:,.0f} | "
                      f"{r['speedup']:,.1f} | {float(n_log_n(r['n'])):,.0f} | {nlogn:,.1f} | "
                      f"{r['speedup'] / nlogn:.2f} | {power:,.1f} | {r['speedup'] / power:.2f} | "
                      f"{r['mismatches']} |")

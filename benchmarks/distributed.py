@@ -65,8 +65,9 @@ def main(argv=None):
         runs = [timed_render(threads=threads) for _ in range(repeats)]
         in_process[threads] = (statistics.median(r[0] for r in runs), runs[0][1], runs[0][2])
     reference = in_process[cores][1]
-    rows = ["| run | workers | wall s | vs in-process | tasks | median task s | overhead per task ms "
-            "| merge per task ms | identical |", "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    rows = ["| run | workers | wall s | vs in-process | tasks | median task s "
+            "| overhead per task ms | merge per task ms | identical |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     rows.append(f"| in-process, {cores} threads | - | {in_process[cores][0]:.2f} | 1.00 | - | - "
                 f"| - | - | reference |")
     rows.append(f"| in-process, 1 thread | - | {in_process[1][0]:.2f} | "
@@ -123,8 +124,8 @@ def main(argv=None):
         cluster.close()
     lines += ["", f"Empty-ish tasks (normals, one {resolution[0]}-pixel row each, "
               f"{stats['tasks']} tasks on {min(2, cores)} workers): {empty * 1e3:.1f} ms of "
-              f"wall time per task, of which {stats['task_seconds_total'] / stats['tasks'] * 1e3:.2f}"
-              f" ms inside the task.", ""]
+              f"wall time per task, of which "
+              f"{stats['task_seconds_total'] / stats['tasks'] * 1e3:.2f} ms inside the task.", ""]
 
     overhead = statistics.median(overheads)
     merge = statistics.median(merges)
@@ -149,7 +150,8 @@ def main(argv=None):
     lines += ["## The model against local clusters", "",
               f"Measured: {per_core * 1e6:.2f} us per pixel-sample per core inside the tasks of "
               f"the {cores}-worker cluster (every core busy; in-process on 1 thread with the "
-              f"other core idle: {in_process[1][0] / (pixels * spp) * 1e6:.2f} us), overhead {overhead * 1e3:.1f} ms per task, merge {merge * 1e3:.2f} ms "
+              f"other core idle: {in_process[1][0] / (pixels * spp) * 1e6:.2f} us), overhead "
+              f"{overhead * 1e3:.1f} ms per task, merge {merge * 1e3:.2f} ms "
               "per task (medians over the cluster runs above).", "",
               "| workers | busy cores | measured s | model s | model / measured |",
               "|---:|---:|---:|---:|---:|"]

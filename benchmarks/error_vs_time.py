@@ -222,7 +222,7 @@ def measure(names, spps, repeats, reference_spp=REFERENCE_SPP):
                        for name in names}}
 
 
-# -- what the numbers say ---------------------------------------------------------------------------
+# -- what the numbers say --------------------------------------------------------------------------
 
 def at_spp(points, spp):
     return next((p for p in points if p["spp"] == spp), None)
@@ -274,15 +274,19 @@ def roulette_rules(data):
 
 # -- writing ---------------------------------------------------------------------------------------
 
-TEMPLATE = """{header}Full {width}x{height} frames at ptrace's -m {depth} (Mitsuba max_depth {mitsuba_depth}), {threads} threads, \
+TEMPLATE = """{header}Full {width}x{height} frames at ptrace's -m {depth} \
+(Mitsuba max_depth {mitsuba_depth}), {threads} threads, \
 each scene without its emissive quad in both renderers (see the module docstring). Reference: \
 Mitsuba {mitsuba} {variant} at {reference_spp} spp per scene. Relative MSE leaves out pixels whose \
 reference exceeds 1 (directly seen lights). Seconds: the fastest of {repeats} render call(s) \
 (ptrace: kernels compiled, BVH build included; Mitsuba: after an untimed JIT render).
 
-## Targets (at {target_spp} samples per pixel; efficiency = lowest relative MSE x seconds on the curve)
+## Targets (at {target_spp} samples per pixel; efficiency = lowest relative MSE x seconds \
+on the curve)
 
-| scene | ptrace rel. MSE (mis, sobol) | Mitsuba multijitter | ptrace (mis, independent) | Mitsuba independent | ptrace efficiency | Mitsuba multijitter efficiency | Mitsuba independent efficiency | ptrace mean / reference |
+| scene | ptrace rel. MSE (mis, sobol) | Mitsuba multijitter | ptrace (mis, independent) \
+| Mitsuba independent | ptrace efficiency | Mitsuba multijitter efficiency \
+| Mitsuba independent efficiency | ptrace mean / reference |
 |---|---:|---:|---:|---:|---:|---:|---:|---:|
 {target_rows}
 
@@ -300,7 +304,8 @@ The default estimator's image denoised by Intel Open Image Denoise (`--denoise`:
 HDR, guided by the albedo and normal AOVs; their extra ray per sample and the denoiser's own time \
 are in its seconds). Its error does not go to zero with samples: it keeps the denoiser's bias.
 
-| scene | -s | default rel. MSE | denoised rel. MSE | default seconds | denoised seconds | denoised efficiency / default's |
+| scene | -s | default rel. MSE | denoised rel. MSE | default seconds | denoised seconds \
+| denoised efficiency / default's |
 |---|---:|---:|---:|---:|---:|---:|
 {denoise_rows}
 
@@ -364,7 +369,8 @@ def write_report(data, output="error_vs_time.md"):
     labels, roulette_rows, verdict = _roulette_section(data)
     denoise_rows = [
         f"| {name} | {a['spp']} | {a['rel_mse']:.5f} | {b['rel_mse']:.5f} | {a['seconds']:.2f} "
-        f"| {b['seconds']:.2f} | {b['rel_mse'] * b['seconds'] / (a['rel_mse'] * a['seconds']):.3f} |"
+        f"| {b['seconds']:.2f} "
+        f"| {b['rel_mse'] * b['seconds'] / (a['rel_mse'] * a['seconds']):.3f} |"
         for name, result in data["scenes"].items() if DENOISED in result["curves"]
         for a, b in zip(result["curves"][DEFAULT], result["curves"][DENOISED])]
     point_rows = [f"| {name} | {label} | {p['spp']} | {p['seconds']:.2f} | {p['rel_mse']:.5f} | "

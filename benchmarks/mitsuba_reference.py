@@ -1,7 +1,8 @@
 """Render a course scene with Mitsuba 3 (an independent renderer) as a reference for ptrace.
 
     pip install mitsuba          # not a ptrace dependency; only this script needs it
-    python -m benchmarks.mitsuba_reference [--spp 512] [--scene variants_sp23/sky/CBspheres_lambertian.dae]
+    python -m benchmarks.mitsuba_reference [--spp 512]
+        [--scene variants_sp23/sky/CBspheres_lambertian.dae]
     python -m benchmarks.mitsuba_reference --pixels all [--spp 16384] [--batches 32]
 
 The scene is mapped from ptrace's loaded Scene, so both renderers see the same numbers:

@@ -1,6 +1,7 @@
 """Wall time and rays per second of the seed's command lines, per backend.
 
-    python -m benchmarks.seed_commands [--backends bvh embree naive] [--spp-scale 1] [--only NAME ...]
+    python -m benchmarks.seed_commands [--backends bvh embree naive] [--spp-scale 1]
+        [--only NAME ...]
 
 Each command is the seed's flags run through `ptrace.render` (the CLI's code path) on 2
 threads. --spp-scale divides every -s (a quick look at the same commands); naive, which tests
@@ -25,7 +26,8 @@ from .accel_rays import scenes_dir
 
 # name: (scene, spp, light samples, max depth, resolution, extra options)
 COMMANDS = {
-    "CBspheres_lambertian -s 64 -l 16 -m 6": ("sky/CBspheres_lambertian.dae", 64, 16, 6, (480, 360), {}),
+    "CBspheres_lambertian -s 64 -l 16 -m 6": ("sky/CBspheres_lambertian.dae", 64, 16, 6,
+                                              (480, 360), {}),
     "CBbunny -s 64 -l 16 -m 6": ("sky/CBbunny.dae", 64, 16, 6, (480, 360), {}),
     "cow -s 64 -l 16 -m 6": ("meshedit/cow.dae", 64, 16, 6, (480, 360), {}),
     "CBbunny -s 16 -l 8 -m 6 -H": ("sky/CBbunny.dae", 16, 8, 6, (480, 360), {"hemisphere": True}),
@@ -38,8 +40,10 @@ COMMANDS = {
     "CBbunny -s 2048 -a 64 0.05 -l 1 -m 5": ("sky/CBbunny.dae", 2048, 1, 5, (480, 360),
                                              {"adaptive": (64, 0.05)}),
     "CBspheres -s 64 -l 16 -m 6": ("sky/CBspheres.dae", 64, 16, 6, (480, 360), {}),
-    "CBspheres_microfacet_al_ag -s 64 -l 16 -m 6": ("sky/CBspheres_microfacet_al_ag.dae", 64, 16, 6, (480, 360), {}),
-    "CBbunny_microfacet_cu -s 64 -l 16 -m 6": ("sky/CBbunny_microfacet_cu.dae", 64, 16, 6, (480, 360), {}),
+    "CBspheres_microfacet_al_ag -s 64 -l 16 -m 6": ("sky/CBspheres_microfacet_al_ag.dae", 64, 16,
+                                                    6, (480, 360), {}),
+    "CBbunny_microfacet_cu -s 64 -l 16 -m 6": ("sky/CBbunny_microfacet_cu.dae", 64, 16, 6,
+                                               (480, 360), {}),
     "bunny -s 64 -l 16 -m 6": ("sky/bunny.dae", 64, 16, 6, (480, 360), {}),
     "CBgems -s 64 -l 16 -m 6": ("sky/CBgems.dae", 64, 16, 6, (480, 360), {}),
     "maxplanck -s 64 -l 16 -m 6": ("meshedit/maxplanck.dae", 64, 16, 6, (480, 360), {}),

@@ -14,7 +14,8 @@ scenes/cornell.dae and $PTRACE_SCENES/sky/CBbunny.dae at ptrace view's defaults 
 -s 1024, -m 1) and at -m 5. Writes benchmarks/results/view_latency.md; with --screenshot, also
 a screenshot of the page (Cornell box, 320x240, -m 5) for the README; --only-screenshot makes
 the screenshot alone (no measurement, the results file untouched). The screenshot is cropped
-to the page's content and written as a 256-colour palette PNG (Pillow's octree, dithered), to keep it small.
+to the page's content and written as a 256-colour palette PNG (Pillow's octree, dithered), to
+keep it small.
 """
 import argparse
 import os

@@ -1,11 +1,12 @@
 """BSDFs in a local shading frame (normal = +z), as numba functions of one material index.
 
-Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine
-term; pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`)
-return from bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf
-the discrete probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi),
-where the course's starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF
-(ptrace.gltf_brdf), the only kind the metallic argument matters to.
+Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine term;
+pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`) return from
+bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf the discrete
+probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow
+docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi), where the course's
+starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF (ptrace.gltf_brdf), the only kind the
+metallic argument matters to.
 """
 import math
 
@@ -53,7 +54,8 @@ def beckmann_d(alpha, cos_h):
 
 @njit(cache=True, inline="always")
 def smith_lambda(alpha, cos_w):
-    """Beckmann Lambda, textbook form: (erf(a) - 1)/2 + exp(-a^2) / (2 a sqrt(pi)), a = 1/(alpha tan)."""
+    """Beckmann Lambda, textbook form: (erf(a) - 1)/2 + exp(-a^2) / (2 a sqrt(pi)),
+    a = 1/(alpha tan)."""
     cos_w = abs(cos_w)
     if cos_w >= 1.0:
         return 0.0
@@ -108,7 +110,7 @@ def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
     return p_h / (4.0 * (wix * hx + wiy * hy + wiz * hz))
 
 
-# -- glossy: a diffuse base under a glossy dielectric coat ------------------------------------------
+# -- glossy: a diffuse base under a glossy dielectric coat -----------------------------------------
 
 GLOSSY_DIFFUSE = 28.0 / (23.0 * math.pi)
 

@@ -18,9 +18,9 @@ A texture or environment map past the budget is refused, not downsampled: a smal
 renders a different picture than the file describes, and the user is the one to choose
 between raising the limit and resizing the image (the message says both).
 
-The figures below are peak resident bytes, measured (benchmarks/results/hostile_inputs.md gives
-the runs) and rounded up; they are estimates, so the budget bounds memory only as well as they
-hold.
+The byte constants below are peak resident bytes, measured (benchmarks/results/hostile_inputs.md
+gives the runs) and rounded up; they are estimates, so the budget bounds memory only as well as
+they hold.
 """
 import contextlib
 import contextvars
@@ -34,16 +34,16 @@ ADDRESS_SPACE_FRACTION = 0.75   # of what an RLIMIT_AS or RLIMIT_DATA still leav
 # Peak bytes per triangle from reading a mesh file to the end of a render, by backend: the
 # reader's arrays and transients (positions, indices, texture coordinates and normals in
 # float64 and int64, trimesh's copies), the scene's arrays, the accelerator's build and its
-# structure. Measured on a binary PLY of about a million triangles (the trimesh readers); the
-# OBJ reader's own transients are larger, but an OBJ cannot instance and its size bounds them.
+# structure, as the trimesh readers peak (measured on a large binary PLY); the OBJ reader's
+# own transients are larger, but an OBJ cannot instance and its size bounds them.
 BYTES_PER_TRIANGLE = {"naive": 440, "bvh": 520, "embree": 440}
 # What a loader charges a triangle before it expands instances: the least any render needs.
 LOAD_BYTES_PER_TRIANGLE = min(BYTES_PER_TRIANGLE.values())
-# A texture: its linear float32 RGB texels stay (12 bytes); decoding and converting them
-# (8- or 16-bit pixels, float copies, the sRGB conversion) peaks at about 80 bytes a texel.
+# A texture: its linear float32 RGB texels stay (three float32s); decoding and converting them
+# (8- or 16-bit pixels, float copies, the sRGB conversion) peaks at TEXTURE_PEAK_BYTES a texel.
 TEXEL_BYTES, TEXTURE_PEAK_BYTES = 12, 80
-# An environment map (-e): float64 radiance and its sampling tables stay (about 40 bytes a
-# pixel); reading it and building the tables peaks at about 80 bytes a pixel.
+# An environment map (-e): float64 radiance and its sampling tables stay; reading it and
+# building the tables peaks at ENVIRONMENT_BYTES a pixel.
 ENVIRONMENT_BYTES = 80
 UNITS = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
 RAISE = "--max-memory SIZE (max_memory= in Python) raises it"

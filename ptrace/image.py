@@ -14,7 +14,8 @@ FORMATS = (".png", ".exr")
 
 
 def course_8bit(radiance):
-    """floor(255 * min(1, (sqrt(2) * L) ** (1/2.2))) per channel (docs/course.md#output-files); NaN -> 255."""
+    """floor(255 * min(1, (sqrt(2) * L) ** (1/2.2))) per channel (docs/course.md#output-files);
+    NaN -> 255."""
     radiance = np.asarray(radiance, dtype=np.float64)
     with np.errstate(invalid="ignore"):
         curve = np.power(np.sqrt(2.0) * np.maximum(radiance, 0.0), 1 / 2.2)
@@ -23,7 +24,8 @@ def course_8bit(radiance):
 
 
 def rate_colours(rate):
-    """The course's sample-rate ramp (docs/course.md#output-files): blue (0) to green (0.5) to red (1), 8-bit."""
+    """The course's sample-rate ramp (docs/course.md#output-files): blue (0) to green (0.5) to
+    red (1), 8-bit."""
     rate = np.clip(np.asarray(rate, dtype=np.float64), 0.0, 1.0)[..., None]
     low = np.concatenate([np.zeros_like(rate), 2 * rate, 1 - 2 * rate], axis=-1)
     high = np.concatenate([2 * rate - 1, 2 - 2 * rate, np.zeros_like(rate)], axis=-1)

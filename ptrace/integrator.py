@@ -127,8 +127,8 @@ def _f64(array, shape_tail=None):
 
 def primitive_scale(geometry):
     """Largest absolute coordinate of each primitive: the magnitude its hit points carry."""
-    corners = np.abs(geometry.vertices[geometry.faces]).max(axis=(1, 2)) if geometry.triangle_count \
-        else np.zeros(0)
+    corners = (np.abs(geometry.vertices[geometry.faces]).max(axis=(1, 2))
+               if geometry.triangle_count else np.zeros(0))
     spheres = np.abs(geometry.centers).max(axis=1, initial=0.0) + geometry.radii
     return np.ascontiguousarray(np.concatenate([corners, spheres]))
 
@@ -470,18 +470,18 @@ def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
 @njit(cache=True, _nrt=False, forceinline=True)
 def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny,
                    qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
-    """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit at t on prim at
-    barycentrics (u, v), material m) finds, as (r, g, b), before the throughput.
+    """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit
+    at t on prim at barycentrics (u, v), material m) finds, as (r, g, b), before the throughput.
 
-    After a delta bounce (mirror, glass), which light sampling cannot follow, everything it
-    sees counts whole: emissive geometry (a light's face included), area lights without a face,
-    and the ambient light and the environment if it escapes. After a non-delta bounce, only with multiple importance
-    sampling: the area lights (faced or not; the face itself then does not count again), the
-    ambient light, the environment and the emissive primitives that are lights, each with its power heuristic
-    weight against the light sampling that direct_light did at q (bsdf_pdf_ is this ray's
-    density). Area lights are transparent, as in the course: a ray passes on through them.
-    When direct_light chose lights by power or by the light BVH, a light's samples per vertex
-    are -l times its probability of being chosen (at q, by the tree), and its weight says so."""
+    After a delta bounce (mirror, glass), which light sampling cannot follow, everything it sees
+    counts whole: emissive geometry (a light's face included), area lights without a face, and the
+    ambient light and the environment if it escapes. After a non-delta bounce, only with multiple
+    importance sampling: the area lights (faced or not; the face itself then does not count again),
+    the ambient light, the environment and the emissive primitives that are lights, each with its
+    power heuristic weight against the light sampling that direct_light did at q (bsdf_pdf_ is this
+    ray's density). Area lights are transparent, as in the course: a ray passes on through them.
+    When direct_light chose lights by power or by the light BVH, a light's samples per vertex are -l
+    times its probability of being chosen (at q, by the tree), and its weight says so."""
     r = g = b = 0.0
     kinds = lights.kind
     mode = light_mode(options, lights)
@@ -759,7 +759,7 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
     of pixels at once, one per thread (see there for why not prange). scratch is the backend's
     (accel.compiled.new_scratch), one per concurrent call. This function and every function it
     calls with arrays are compiled without NRT (`_nrt=False`, see accel.compiled): otherwise
-    each call between them increfs and decrefs the ~30 arrays of the records, atomically, once
+    each call between them increfs and decrefs every array of the records, atomically, once
     per path and per vertex."""
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
     width = camera.width

@@ -14,9 +14,9 @@ import os
 import stat
 import tempfile
 
-# A small render of scenes/cornell.dae with an empty cache on the 2-core development machine
-# took 43-52 s of wall time (2026-12-02, after the estimator work and the watertight test; load
-# 1-2.5; a warm run takes about 2 s): benchmarks/results/first_images.md predates that work.
+# The wait the first-run notice announces: a small render's wall time with an empty cache,
+# rounded (measured: benchmarks/results/first_images.md and commit 013e02a, which re-measured it
+# after the kernels grew; re-measure it when they change much).
 COLD_COMPILE_SECONDS = 45
 
 _NOTES = []   # one line per kind, in the order they happened

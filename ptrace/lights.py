@@ -1,5 +1,6 @@
-"""Lights: the file's lights (sample_light, sample_L, docs/course.md#sample-light, as a numba function of one
-light index) and emissive geometry as one more light (emitter_arrays, sample_emitter).
+"""Lights: the file's lights (sample_light, sample_L, docs/course.md#sample-light, as a numba
+function of one light index) and emissive geometry as one more light (emitter_arrays,
+sample_emitter).
 
 The course applies no distance falloff to point and directional lights (their colour is used as
 the radiance reaching every point): ptrace keeps that so course scenes look as the course made
@@ -136,10 +137,10 @@ def _face_of(scene, prims, lights):
     """The file light whose visible face these emissive primitives are, or -1.
 
     The course's Cornell-box files lay an emissive quad exactly in the plane of their area light
-    (docs/course.md#light-faces; in CBempty on the point light): the quad is what the camera and mirrors see of
-    the light, not a second light. A group of emissive triangles is a light's face when it is
-    planar, the light's centre (or point) lies in its plane and inside its bounding box, and an
-    area light faces along the group's normal."""
+    (docs/course.md#light-faces; in CBempty on the point light): the quad is what the camera and
+    mirrors see of the light, not a second light. A group of emissive triangles is a light's face
+    when it is planar, the light's centre (or point) lies in its plane and inside its bounding box,
+    and an area light faces along the group's normal."""
     from .scene import AREA, POINT
     g = scene.geometry
     if prims.size == 0 or prims.max() >= g.triangle_count:
@@ -402,7 +403,8 @@ def area_light_hit(position, direction, edge_x, edge_y, i, ox, oy, oz, dx, dy, d
     qx, qy, qz = t * dx - cx, t * dy - cy, t * dz - cz     # the hit point, from the centre
     ax, ay, az = edge_x[i, 0], edge_x[i, 1], edge_x[i, 2]
     bx, by, bz = edge_y[i, 0], edge_y[i, 1], edge_y[i, 2]
-    aa, ab, bb = ax * ax + ay * ay + az * az, ax * bx + ay * by + az * bz, bx * bx + by * by + bz * bz
+    aa, ab, bb = (ax * ax + ay * ay + az * az, ax * bx + ay * by + az * bz,
+                  bx * bx + by * by + bz * bz)
     qa, qb = qx * ax + qy * ay + qz * az, qx * bx + qy * by + qz * bz
     det = aa * bb - ab * ab
     if det <= 0.0:

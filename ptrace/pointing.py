@@ -128,9 +128,9 @@ def _file_camera_record(scene, index, names):
         raise PtraceError(f"{names['index']} {index}: {scene.path} has no cameras of its own "
                           f"(glTF files can carry them)")
     if not (isinstance(index, (int, np.integer)) and 0 <= index < len(cameras)):
+        which = "index 0" if len(cameras) == 1 else f"indices 0 to {len(cameras) - 1}"
         raise PtraceError(f"{names['index']} {index}: {scene.path} has {len(cameras)} "
-                          f"camera{'s' if len(cameras) > 1 else ''} ("
-                          f"{'index 0' if len(cameras) == 1 else f'indices 0 to {len(cameras) - 1}'})")
+                          f"camera{'s' if len(cameras) > 1 else ''} ({which})")
     return cameras[index]
 
 

@@ -22,8 +22,9 @@ y (and of the 1D sampler, under a different constant) are independent hashes of
 a per-dimension permutation): distinct keys give statistically independent sequences, the same
 key the same numbers. Written by hand because there is no maintained numba-callable library for
 it (scipy.stats.qmc.Sobol is a stateful Python object: not callable from a compiled kernel, and
-not keyed by pixel and dimension). All arithmetic is 32-bit unsigned, held in uint64 and masked; values are
-integer * 2**-32 as float64, so they lie in [0, 1) (never 1.0); indices wrap modulo 2**32.
+not keyed by pixel and dimension). All arithmetic is 32-bit unsigned, held in uint64 and masked;
+values are integer * 2**-32 as float64, so they lie in [0, 1) (never 1.0); indices wrap modulo
+2**32.
 
 Promise: the shuffle maps every aligned block of 2**k indices [m 2**k, (m+1) 2**k) onto an aligned
 block of 2**k Sobol' indices (bit i of the shuffled index depends only on bits >= i of the index,
@@ -77,7 +78,7 @@ def uniform_array(seed, pixels, samples, dimension):
     return out
 
 
-# -- Sobol' (0,2)-sequence, Owen-scrambled and index-shuffled ---------------------------------------
+# -- Sobol' (0,2)-sequence, Owen-scrambled and index-shuffled --------------------------------------
 _MASK32 = np.uint64(0xFFFFFFFF)
 _ONE = np.uint64(1)
 _S1 = np.uint64(1)

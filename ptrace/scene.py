@@ -250,7 +250,8 @@ class FileCamera:
 class Scene:
     path: str
     geometry: accel.Geometry
-    vertex_normals: np.ndarray      # (V, 3) unit, area-weighted (docs/course.md#meshes); 0 where undefined
+    # (V, 3) unit, area-weighted (docs/course.md#meshes); 0 where undefined
+    vertex_normals: np.ndarray
     material_index: np.ndarray      # (F + S,) int32 into materials
     materials: Materials
     lights: Lights
@@ -308,8 +309,8 @@ class Scene:
 def area_weighted_normals(vertices, faces):
     """Per-vertex sum of cross(p_j - p_i, p_k - p_i) over incident faces, normalised.
 
-    docs/course.md#meshes: file normals are ignored and these are recomputed. A vertex whose sum is zero
-    (unused, or only in zero-area faces) gets a zero normal.
+    docs/course.md#meshes: file normals are ignored and these are recomputed. A vertex whose sum
+    is zero (unused, or only in zero-area faces) gets a zero normal.
     """
     normals = np.zeros_like(vertices)
     if len(faces):

@@ -74,7 +74,8 @@ def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
     sx = cx - 0.5 * (exx + eyx) - px
     sy = cy - 0.5 * (exy + eyy) - py
     sz = cz - 0.5 * (exz + eyz) - pz
-    x0, y0, z0 = sx * xx + sy * xy + sz * xz, sx * yx + sy * yy + sz * yz, sx * zx + sy * zy + sz * zz
+    x0, y0, z0 = (sx * xx + sy * xy + sz * xz, sx * yx + sy * yy + sz * yz,
+                  sx * zx + sy * zy + sz * zz)
     if z0 > 0.0:
         zx, zy, zz, z0 = -zx, -zy, -zz, -z0
     x1, y1 = x0 + exl, y0 + eyl

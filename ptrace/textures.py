@@ -2,7 +2,7 @@
 vertex colours, looked up at a hit's texture coordinates by the compiled path loop.
 
 Written by hand rather than through OpenImageIO's TextureSystem: the lookup runs inside the
-compiled loop, millions of times per second, where a Python library cannot be called. Images
+compiled loop, once per hit, where a Python library cannot be called. Images
 are read and converted to linear RGB by the loaders (ptrace.io.materials); here they are flat
 arrays (ptrace.scene.Textures).
 """

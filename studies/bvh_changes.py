@@ -307,9 +307,9 @@ def tables(args, labels, rates):
         if args.leaf_sizes:
             sizes = sorted(args.leaf_sizes + [DEFAULT_LEAF])
             columns = [f"leaf {n}" if n != DEFAULT_LEAF else labels[-1] for n in sizes]
-            lines += [f"Leaf size, bvh {split} split, this tree: rays per second with max_leaf_size "
-                      f"{', '.join(map(str, sizes))} ({DEFAULT_LEAF}, the default, is the column "
-                      "above), and each over the default's.", "",
+            lines += [f"Leaf size, bvh {split} split, this tree: rays per second with "
+                      f"max_leaf_size {', '.join(map(str, sizes))} ({DEFAULT_LEAF}, the default, "
+                      "is the column above), and each over the default's.", "",
                       "| mesh | rays | " + " | ".join(f"leaf {n}" for n in sizes) + " | "
                       + " | ".join(f"leaf {n} / leaf {DEFAULT_LEAF}" for n in args.leaf_sizes)
                       + " |", "|---|---|" + "---:|" * (len(sizes) + len(args.leaf_sizes))]

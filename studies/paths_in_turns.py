@@ -33,4 +33,5 @@ for t in range(TURNS):
     print(t, {k: f"{v[-1]:,.0f}" if v[-1] else v[-1] for k, v in rates.items()}, flush=True)
 med = {k: statistics.median(v) for k, v in rates.items()}
 print("median", {k: f"{v:,.0f}" for k, v in med.items()},
-      "bvh/mitsuba %.2f embree/mitsuba %.2f" % (med["bvh"] / med["mitsuba"], med["embree"] / med["mitsuba"]))
+      "bvh/mitsuba %.2f embree/mitsuba %.2f" % (med["bvh"] / med["mitsuba"],
+                                                med["embree"] / med["mitsuba"]))

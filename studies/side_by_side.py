@@ -17,13 +17,15 @@ import sys
 import tempfile
 import time
 
-S = os.environ.get('PTRACE_SCENES', os.path.join(os.path.dirname(__file__), '..', '..', 'shared', 'scenes', 'cs184')) + '/'
+S = os.environ.get('PTRACE_SCENES', os.path.join(os.path.dirname(__file__), '..', '..', 'shared',
+                                                  'scenes', 'cs184')) + '/'
 SHIPPED = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'scenes', 'cornell.dae')
 NEW = dict(os.environ)
 PY = sys.executable
 def cli(env, args):
     t = time.perf_counter()
-    r = subprocess.run([PY, '-m', 'ptrace', *args], env=env, capture_output=True, text=True, cwd=tempfile.gettempdir())
+    r = subprocess.run([PY, '-m', 'ptrace', *args], env=env, capture_output=True, text=True,
+                       cwd=tempfile.gettempdir())
     assert r.returncode == 0, r.stderr
     return time.perf_counter() - t, r.stdout.strip().splitlines()[-1]
 RENDER = """
@@ -34,7 +36,8 @@ st = {}; t = time.perf_counter(); ptrace.render(s, resolution=(480, 360), thread
 print(time.perf_counter() - t, st['rays'])
 """
 def render(env, scene, kw):
-    r = subprocess.run([PY, '-c', RENDER, S + scene, json.dumps(kw)], env=env, capture_output=True, text=True, cwd=tempfile.gettempdir())
+    r = subprocess.run([PY, '-c', RENDER, S + scene, json.dumps(kw)], env=env, capture_output=True,
+                       text=True, cwd=tempfile.gettempdir())
     assert r.returncode == 0, r.stderr
     sec, rays = r.stdout.split()[-2:]
     return float(sec), int(rays)
@@ -45,19 +48,24 @@ def main(argv=None):
                NUMBA_CACHE_DIR=os.path.join(tempfile.gettempdir(), 'ptrace-old-numba-cache'))
     out = {}
     for name, env in (("old", OLD), ("new", NEW)):
-        cow = [cli(env, ['-t', '2', '-s', '64', '-l', '16', '-m', '6', '-r', '480', '360', '-f', os.path.join(tempfile.gettempdir(), f'cow_{name}.png'), S + 'meshedit/cow.dae'])[0] for _ in range(3)]
+        cow = [cli(env, ['-t', '2', '-s', '64', '-l', '16', '-m', '6', '-r', '480', '360', '-f',
+                         os.path.join(tempfile.gettempdir(), f'cow_{name}.png'),
+                         S + 'meshedit/cow.dae'])[0] for _ in range(3)]
         out[f"cow CLI {name}"] = sorted(cow)[1]
         print(name, "cow CLI", cow, flush=True)
     for name, env in (("old", OLD), ("new", NEW)):
-        out[f"CBbunny -s 16 -l 8 -m 6 {name}"] = render(env, 'sky/CBbunny.dae', dict(spp=16, light_samples=8, max_depth=6))
+        out[f"CBbunny -s 16 -l 8 -m 6 {name}"] = render(env, 'sky/CBbunny.dae',
+                                                        dict(spp=16, light_samples=8, max_depth=6))
         print(name, out[f"CBbunny -s 16 -l 8 -m 6 {name}"], flush=True)
     for name, env in (("old", OLD), ("new", NEW)):
-        out[f"CBspheres -s 64 -l 16 -m 6 {name}"] = render(env, 'sky/CBspheres.dae', dict(spp=64, light_samples=16, max_depth=6))
+        out[f"CBspheres -s 64 -l 16 -m 6 {name}"] = render(
+            env, 'sky/CBspheres.dae', dict(spp=64, light_samples=16, max_depth=6))
         print(name, out[f"CBspheres -s 64 -l 16 -m 6 {name}"], flush=True)
     for name, env in (("old", OLD), ("new", NEW)):
         with tempfile.TemporaryDirectory() as cache:
             e = dict(env, NUMBA_CACHE_DIR=cache)
-            args = ['-s', '16', '-l', '4', '-m', '5', '-f', os.path.join(tempfile.gettempdir(), f'cornell_{name}.png'), SHIPPED]
+            args = ['-s', '16', '-l', '4', '-m', '5', '-f',
+                    os.path.join(tempfile.gettempdir(), f'cornell_{name}.png'), SHIPPED]
             cold = cli(e, args)
             warm = [cli(e, args) for _ in range(3)]
         info = [cli(env, ['--info', SHIPPED])[0] for _ in range(3)]

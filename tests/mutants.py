@@ -132,7 +132,8 @@ MUTANTS = {
         [PROMISES, "-k", "sideways"]),
     "gltf-wrap-t-for-s": (
         "a glTF sampler's wrapT is read for the texture's u wrap as well as its v wrap",
-        [("ptrace/io/gltf_materials.py", 'return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),',
+        [("ptrace/io/gltf_materials.py",
+          'return (GLTF_WRAP.get(sampler.get("wrapS", 10497), REPEAT),',
           'return (GLTF_WRAP.get(sampler.get("wrapT", 10497), REPEAT),')],
         ["tests/ptrace/test_hostile_gltf_wrap.py"]),
     "embree-grazing-refines-t-only": (

@@ -45,7 +45,8 @@ class ColladaDocument:
                 else:
                     self.ids[element_id] = element
         if duplicate_ids:
-            self.notes.append(f"{duplicate_ids} duplicate id(s); the first element with each id is used")
+            self.notes.append(f"{duplicate_ids} duplicate id(s); the first element with each id "
+                              "is used")
         if self.root.tag != "COLLADA":
             self.fail(f"not a COLLADA file: the root element is <{self.root.tag}>")
 

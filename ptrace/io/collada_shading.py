@@ -1,4 +1,5 @@
-"""COLLADA materials, lights and cameras in the course dialect (docs/course.md#materials to #camera)."""
+"""COLLADA materials, lights and cameras in the course dialect (docs/course.md#materials to
+#camera)."""
 import math
 
 import numpy as np

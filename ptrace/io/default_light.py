@@ -20,8 +20,8 @@ whose landed power is at least EMITTER_SHARE of that light the file alone; weake
 default light beside them. The share does not depend on the file's units or tessellation.
 
 The rays are traced by Embree through embreex's own Python interface (a dependency of ptrace
-already), not through accel: accel's faces are numba code, whose first compilation would take
-tens of seconds inside a loader that is otherwise done in a fraction of one.
+already), not through accel: accel's faces are numba code, whose first compilation would cost
+far more than the rest of a loader's work.
 """
 import dataclasses
 import math
@@ -37,7 +37,8 @@ EMITTER_SHARE = 0.01
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])     # Rec. 709 / sRGB primaries
 # texture samples per emissive triangle (fewer on big meshes: at most MAX_LOOKUPS in all)
 SAMPLES, MAX_LOOKUPS = 16, 1 << 20
-RAYS = 1 << 14          # rays traced from the emitters (the landed share's standard error: at most 1/256)
+# rays traced from the emitters (the landed share's standard error: at most 1/256)
+RAYS = 1 << 14
 NEAR = 0.01             # light lands this far (times the box's largest side) or more, or not
 
 

@@ -9,7 +9,7 @@ Why a reader of our own (chosen by trying each on hand-written and exported file
   and gives a mesh with texture coordinates but no material a 2 x 2 placeholder texture as
   its colour. A text pre-pass could fix the first two, but not the material handling.
 - The assimp bindings on PyPI read such geometry right, but impasse needs a system libassimp
-  and assimp-py bundles a 12 MB native library; both flatten the MTL to assimp's keys (no
+  and assimp-py bundles a large native library; both flatten the MTL to assimp's keys (no
   `illum`, no map options), and assimp-py returns an empty scene for random bytes.
 OBJ is a line format; reading it whole here is short, and every statement it does not read
 is a note. Statements are read in order, so relative indices count the vertices read so far;

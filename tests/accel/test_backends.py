@@ -77,7 +77,8 @@ def test_backends_agree_on_course_meshes(course_geometry, relpath):
         reference = naive.intersect(rays)
         ours = bvh.intersect(rays)
         assert_same_hits(reference, ours)
-        assert (reference.prim >= 0).mean() > 0.05, "a ray batch that misses everything tests nothing"
+        assert (reference.prim >= 0).mean() > 0.05, \
+            "a ray batch that misses everything tests nothing"
         compare_to_float32(geometry, rays, ours, embree.intersect(rays), f"{relpath} {label}")
         for backend in (naive, bvh, embree):
             hits = reference if backend is naive else backend.intersect(rays)
@@ -140,7 +141,8 @@ def test_tmin_tmax_and_barycentrics(kind, options):
     origins = np.array([[0.25, 0.5, 1.0]] * 5)
     directions = np.array([[0, 0, -1.0], [0, 0, -2.0], [0, 0, -1.0], [0, 0, -1.0], [0, 0, -1.0]])
     tmin = np.array([0.0, 0.0, 1.5, 0.0, 1.0])     # ray 2 starts past the triangle
-    tmax = np.array([np.inf, np.inf, np.inf, 0.5, 1.0])   # ray 3 stops short; ray 4: t == tmin == tmax
+    # ray 3 stops short; ray 4: t == tmin == tmax
+    tmax = np.array([np.inf, np.inf, np.inf, 0.5, 1.0])
     hits = backend.intersect(accel.Rays(origins, directions, tmin, tmax))
     np.testing.assert_array_equal(hits.prim, [0, 0, -1, -1, 0])
     np.testing.assert_allclose(hits.t[[0, 1, 4]], [1.0, 0.5, 1.0], rtol=1e-6)

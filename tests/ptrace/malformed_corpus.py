@@ -8,7 +8,8 @@ import random
 import re
 
 ENTITY_BOMB = """<?xml version="1.0"?>
-<!DOCTYPE lolz [<!ENTITY lol "lol"><!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
+<!DOCTYPE lolz [<!ENTITY lol "lol">\
+<!ENTITY lol2 "&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;&lol;">
 <!ENTITY lol3 "&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;&lol2;">
 <!ENTITY lol4 "&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;&lol3;">
 <!ENTITY lol5 "&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;&lol4;">
@@ -73,7 +74,8 @@ def index_out_of_range(text, rng):
 
 
 def missing_id(text, rng):
-    pattern = r'((?:instance_geometry|instance_light|instance_camera|instance_effect) url="#)([^"]+)(")'
+    pattern = (r'((?:instance_geometry|instance_light|instance_camera|instance_effect) '
+               r'url="#)([^"]+)(")')
     material_pattern = r'(<instance_material symbol="[^"]*" target="#)([^"]+)(")'
     if rng.random() < 0.3 and re.search(material_pattern, text):
         pattern = material_pattern

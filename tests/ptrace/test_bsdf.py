@@ -24,7 +24,8 @@ from ptrace.scene import (
 
 MATERIALS = Materials.from_records([
     dict(kind=DIFFUSE, albedo=(0.8, 0.5, 0.2)),
-    dict(kind=MICROFACET, alpha=0.25, eta=(0.059193, 0.059881, 0.047366), k=(4.1283, 3.5892, 2.8132)),
+    dict(kind=MICROFACET, alpha=0.25, eta=(0.059193, 0.059881, 0.047366),
+         k=(4.1283, 3.5892, 2.8132)),
     dict(kind=MICROFACET, alpha=0.5, eta=(1.3352, 1.0109, 0.68955), k=(7.3398, 6.6157, 5.6471)),
     dict(kind=MIRROR, albedo=(1.0, 0.8, 0.4)),
     dict(kind=GLASS, albedo=(1, 1, 1), transmittance=(1, 1, 1), ior=1.45),

@@ -14,15 +14,22 @@ from scenes_by_hand import make_scene
 # file: (target, R, camera position, hfov, vfov, screen_dist, near, far) from the course's table
 TABLE = {
     "sky/bunny.dae": ((0, 0.3824, 0), 3.4953, (0, 1.4877, 3.3160), 49.134, 37.849, 875.0, 0.1, 100),
-    "meshedit/cow.dae": ((0, -0.0394, -0.0930), 3.3465, (0, -0.0394, 3.2536), 39.598, 30.219, 1111.1, 0.01, 10000),
-    "meshedit/maxplanck.dae": ((0, 0, 0), 3.6028, (0, 0, 3.6028), 39.598, 30.219, 1111.1, 0.01, 10000),
+    "meshedit/cow.dae": ((0, -0.0394, -0.0930), 3.3465, (0, -0.0394, 3.2536),
+                         39.598, 30.219, 1111.1, 0.01, 10000),
+    "meshedit/maxplanck.dae": ((0, 0, 0), 3.6028, (0, 0, 3.6028),
+                               39.598, 30.219, 1111.1, 0.01, 10000),
     "meshedit/beetle.dae": ((0, 0, 0), 2.8191, (0, 0, 2.8191), 39.598, 30.219, 1111.1, 0.01, 10000),
     "meshedit/teapot.dae": ((0, 0, 0), 3.0330, (0, 0, 3.0330), 39.598, 30.219, 1111.1, 0.01, 10000),
-    "meshedit/peter.dae": ((0, 0, 0), 3.4050, (0, 0.7338, -3.3250), 39.598, 30.219, 1111.1, 0.01, 10000),
-    "keenan/banana.dae": ((0, 0.2908, 0), 4.3314, (2.9428, 1.4910, 2.9428), 49.134, 37.849, 875.0, 0.1, 100),
-    "keenan/building.dae": ((0, 0.1901, 0), 4.2818, (0.0313, 0.9805, -4.2081), 54.432, 42.185, 777.8, 0.01, 10000),
-    "simple/plane.dae": ((0, 0.25, -0.9957), 3.75, (0, 0.25, 2.7543), 49.134, 37.849, 875.0, 0.1, 100),
-    "simple/cube.dae": ((-0.1298, 0.0217, -2.5714), 1.1148, (-0.1298, 0.0217, -1.4566), 49.134, 37.849, 875.0, 0.1, 100),
+    "meshedit/peter.dae": ((0, 0, 0), 3.4050, (0, 0.7338, -3.3250),
+                           39.598, 30.219, 1111.1, 0.01, 10000),
+    "keenan/banana.dae": ((0, 0.2908, 0), 4.3314, (2.9428, 1.4910, 2.9428),
+                          49.134, 37.849, 875.0, 0.1, 100),
+    "keenan/building.dae": ((0, 0.1901, 0), 4.2818, (0.0313, 0.9805, -4.2081),
+                            54.432, 42.185, 777.8, 0.01, 10000),
+    "simple/plane.dae": ((0, 0.25, -0.9957), 3.75, (0, 0.25, 2.7543),
+                         49.134, 37.849, 875.0, 0.1, 100),
+    "simple/cube.dae": ((-0.1298, 0.0217, -2.5714), 1.1148, (-0.1298, 0.0217, -1.4566),
+                        49.134, 37.849, 875.0, 0.1, 100),
 }
 for name in ["CBbunny", "CBbunny_microfacet_cu", "CBcoil", "CBempty", "CBgems", "CBspheres",
              "CBspheres_lambertian", "CBspheres_microfacet_al_ag", "CBspheres_tex"]:
@@ -100,12 +107,12 @@ def test_camera_settings_file_round_trip(tmp_path, scenes_dir):
 
 
 def test_a_hand_written_course_camera_dump_places_a_known_point(tmp_path):
-    """A camera file written by hand as the course's `D` key writes it (docs/course.md#camera-file: hFov vFov
-    aspect near far / pos target / phi theta r minR maxR / the camera-to-world rotation, row
-    major / screenW screenH screenDist / focalDistance lensRadius): at (5, 0, 0) looking down
-    -x with +y up, so the camera's right is world -z, and a 60 degree vertical field of view. A
-    small sphere at (0, 0, -1) is 1 right of the axis at depth 5: its image centre is pixel x =
-    400 + 0.2 * screenDist, y = 300 (from the bottom)."""
+    """A camera file written by hand as the course's `D` key writes it (docs/course.md#camera-file:
+    hFov vFov aspect near far / pos target / phi theta r minR maxR / the camera-to-world rotation,
+    row major / screenW screenH screenDist / focalDistance lensRadius): at (5, 0, 0) looking down -x
+    with +y up, so the camera's right is world -z, and a 60 degree vertical field of view. A small
+    sphere at (0, 0, -1) is 1 right of the axis at depth 5: its image centre is pixel x = 400 + 0.2
+    * screenDist, y = 300 (from the bottom)."""
     screen_dist = 300 / math.tan(math.radians(30))
     rotation = [0, 0, 1, 0, 1, 0, -1, 0, 0]      # columns: right (0,0,-1), up, back (1,0,0)
     numbers = [73.7, 60, 4 / 3, 0.01, 100, 5, 0, 0, 0, 0, 0, 1.5708, 1.5708, 5, 1, 50,

@@ -40,10 +40,10 @@ def test_cbempty_point_light_matches_the_course(scenes_dir):
 
 @pytest.mark.slow
 def test_cbempty_with_its_quad_is_not_the_courses_salt_and_pepper(scenes_dir):
-    """The Sp19 CBempty puts its point light exactly on the emissive quad, and the course's
-    program lets the quad block the shadow ray at random (docs/course.md#light-faces): its image is noise at
-    about half brightness. ptrace's shadow rays stop short of the light, so its Sp19 image is
-    the clean quad-free one (the documented departure), apart from the quad itself."""
+    """The Sp19 CBempty puts its point light exactly on the emissive quad, and the course's program
+    lets the quad block the shadow ray at random (docs/course.md#light-faces): its image is noise at
+    about half brightness. ptrace's shadow rays stop short of the light, so its Sp19 image is the
+    clean quad-free one (the documented departure), apart from the quad itself."""
     kwargs = dict(spp=16, light_samples=1, max_depth=1, resolution=(480, 360))
     with_quad = ptrace.render(ptrace.load(scenes_dir / "sky/CBempty.dae"), **kwargs)
     clean = staff_image(scenes_dir, "sp23_CBempty_s16_l1_m1.png")
@@ -68,8 +68,8 @@ def linear_from_8bit(pixels):
 def test_cbbunny_direct_light_follows_the_course_except_for_the_quad(scenes_dir):
     """Sp19 CBbunny at -m 1. By hemisphere sampling the course sees the emissive quad and its
     shadow rays are not involved, so ptrace agrees with it. By light sampling the course's quad
-    blocks about half its shadow rays (docs/course.md#light-faces): its image is 23-35% darker over the lower
-    80% of the frame than ptrace's, which does not let the quad shadow its own light."""
+    blocks about half its shadow rays (docs/course.md#light-faces): its image is 23-35% darker over
+    the lower 80% of the frame than ptrace's, which does not let the quad shadow its own light."""
     scene = ptrace.load(scenes_dir / "sky/CBbunny.dae")
     kwargs = dict(spp=8, light_samples=8, max_depth=1, resolution=(480, 360))
     lower = np.s_[72:355, 48:]        # the lower 80%, clear of the watermark

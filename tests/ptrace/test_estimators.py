@@ -113,8 +113,8 @@ def test_mis_takes_the_noise_out_of_glossy_highlights(course_scene):
 
 
 def test_the_course_quads_are_their_lights_faces_not_second_lights(course_scene):
-    """Every sp19 Cornell box's emissive quad lies on its <light> (docs/course.md#light-faces): it is that
-    light's face (seen by the camera and mirrors), not sampled again; CBempty's lies on its
+    """Every sp19 Cornell box's emissive quad lies on its <light> (docs/course.md#light-faces): it
+    is that light's face (seen by the camera and mirrors), not sampled again; CBempty's lies on its
     point light."""
     for path in ("sky/CBspheres_lambertian.dae", "sky/CBcoil.dae", "sky/CBbunny.dae",
                  "sky/CBempty.dae", "sky/CBspheres.dae"):

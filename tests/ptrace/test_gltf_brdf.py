@@ -108,7 +108,8 @@ def half_vector_rings(alpha):
 def half_vector_cells(wo, wi, edges, n_phi):
     h = wo + wi
     h /= np.linalg.norm(h, axis=1, keepdims=True)
-    ring = np.clip(np.searchsorted(edges, np.arccos(np.clip(h[:, 2], -1, 1))) - 1, 0, edges.size - 2)
+    ring = np.clip(np.searchsorted(edges, np.arccos(np.clip(h[:, 2], -1, 1))) - 1,
+                   0, edges.size - 2)
     sector = np.minimum((np.arctan2(h[:, 1], h[:, 0]) % (2 * math.pi)) / (2 * math.pi) * n_phi,
                         n_phi - 1).astype(int)
     return ring, sector
@@ -288,7 +289,8 @@ def reference_f(base, metallic, alpha, wo, wi):
     a2 = alpha ** 2
     d = a2 * heaviside(n_h) / (np.pi * (n_h ** 2 * (a2 - 1) + 1) ** 2)
     g = (2 * abs(n_l) * abs(n_v) * heaviside(h_l) * heaviside(v_h)
-         / (abs(n_v) * np.sqrt(a2 + (1 - a2) * n_l ** 2) + abs(n_l) * np.sqrt(a2 + (1 - a2) * n_v ** 2)))
+         / (abs(n_v) * np.sqrt(a2 + (1 - a2) * n_l ** 2)
+            + abs(n_l) * np.sqrt(a2 + (1 - a2) * n_v ** 2)))
     specular_brdf = (g * d / (4 * abs(n_l) * abs(n_v)))[:, None]
     diffuse_brdf = (1 / np.pi) * base[None, :]
 

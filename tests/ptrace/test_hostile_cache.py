@@ -120,7 +120,8 @@ def test_the_cli_says_a_cache_note_in_one_line(tmp_path, capsys, monkeypatch):
     assert jit.cache_notes() == []   # told once
 
 
-CALLEE = "from numba import njit\n\nSCALE = {scale}\n\n\n@njit(cache=True)\ndef scale(x):\n    return SCALE * x\n"
+CALLEE = ("from numba import njit\n\nSCALE = {scale}\n\n\n@njit(cache=True)\ndef scale(x):\n"
+          "    return SCALE * x\n")
 CALLER = ("from numba import njit\n\nfrom kernels.callee import scale\n\n\n@njit(cache=True)\n"
           "def twice_scaled(x):\n    return 2 * scale(x)\n")
 RUN_CALLER = ("import ptrace.jit, os; ptrace.jit.depend_on_folders([os.path.abspath('kernels')]); "

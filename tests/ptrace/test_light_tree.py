@@ -137,7 +137,8 @@ def distribution(tree, p, n, count):
             c0 = node_importance(tree, k + 1, *p, *n)
             c1 = node_importance(tree, tree.child[k], *p, *n)
             if c0 + c1 > 0.0:
-                prob[k + 1], prob[tree.child[k]] = prob[k] * (c0 / (c0 + c1)), prob[k] * (c1 / (c0 + c1))
+                prob[k + 1], prob[tree.child[k]] = (prob[k] * (c0 / (c0 + c1)),
+                                                    prob[k] * (c1 / (c0 + c1)))
             else:
                 dead += prob[k]
     return out, dead
@@ -315,7 +316,8 @@ def test_entries_of_power_zero_are_left_out():
     assert np.all(_pmfs(tree, p, n, 40)[::3] == 0.0)
     entries[2][:] = 0.0
     empty = build_light_tree(*entries)
-    assert len(empty.child) == 0 and tree_sample(empty, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5) == (-1, 0.0)
+    assert len(empty.child) == 0
+    assert tree_sample(empty, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5) == (-1, 0.0)
     assert tree_pmf(empty, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0) == 0.0
 
 

@@ -6,7 +6,8 @@ import pytest
 import ptrace
 from ptrace.scene import AREA, DIFFUSE, DIRECTIONAL, GLASS, MIRROR, POINT
 
-# the course's list (docs/course.md#course-scenes): file -> (triangles, spheres, {light kind: radiance}, BSDF kinds used).
+# the course's list (docs/course.md#course-scenes): file -> (triangles, spheres,
+# {light kind: radiance}, BSDF kinds used).
 DIFFUSE_ONLY = {"diffuse"}
 BOX = {"diffuse", "emission"}                  # CB box with the emissive quad
 COURSE_SCENES = {
@@ -159,7 +160,8 @@ def test_building_ground_without_material_is_grey(course_scene):
 def test_peter_uses_the_last_camera(course_scene):
     camera = load_course(course_scene, "meshedit/peter.dae").camera
     direction = camera.view_point / np.linalg.norm(camera.view_point)
-    # docs/course.md#camera-table: the orbit camera ends at (0, 0.7338, -3.3250) with R = 3.4050 about (0,0,0).
+    # docs/course.md#camera-table: the orbit camera ends at (0, 0.7338, -3.3250) with R = 3.4050
+    # about (0,0,0).
     np.testing.assert_allclose(direction * 3.4050, [0, 0.7338, -3.3250], atol=1e-3)
     assert camera.hfov == pytest.approx(39.5978)
     assert camera.znear == pytest.approx(0.00999999) and camera.zfar == pytest.approx(10000)
@@ -192,4 +194,5 @@ def test_each_mesh_instance_gets_its_own_vertices(course_scene):
     assert len(scene.geometry.vertices) == 24
     faces = scene.geometry.faces
     for block in range(6):
-        assert set(np.unique(faces[2 * block:2 * block + 2])) == set(range(4 * block, 4 * block + 4))
+        assert (set(np.unique(faces[2 * block:2 * block + 2]))
+                == set(range(4 * block, 4 * block + 4)))

@@ -66,7 +66,8 @@ def test_directory(tmp_path):
 
 
 @pytest.mark.parametrize("content", [b"", b"this is not xml <<<", b"\xff\xfe\x00garbage",
-                                     b"<COLLADA><asset>", b'<?xml version="1.0" encoding="nope"?><a/>'])
+                                     b"<COLLADA><asset>",
+                                     b'<?xml version="1.0" encoding="nope"?><a/>'])
 def test_not_xml(tmp_path, content):
     path = tmp_path / "garbage.dae"
     path.write_bytes(content)

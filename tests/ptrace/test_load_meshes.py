@@ -45,8 +45,9 @@ def test_gltf_scene_with_two_placed_meshes(tmp_path):
     first = trimesh.creation.box(extents=(1, 1, 1))
     second = trimesh.creation.box(extents=(1, 1, 1))
     gltf_scene = trimesh.Scene()
-    gltf_scene.add_geometry(first, node_name="a", transform=trimesh.transformations.translation_matrix((5, 0, 0)))
-    gltf_scene.add_geometry(second, node_name="b", transform=trimesh.transformations.translation_matrix((-5, 0, 0)))
+    move = trimesh.transformations.translation_matrix
+    gltf_scene.add_geometry(first, node_name="a", transform=move((5, 0, 0)))
+    gltf_scene.add_geometry(second, node_name="b", transform=move((-5, 0, 0)))
     path = tmp_path / "two.glb"
     gltf_scene.export(path)
     scene = ptrace.load(path)

@@ -34,5 +34,6 @@ def test_cbspheres_lambertian_matches_mitsuba(scenes_dir):
     assert error_high < error_low / 3
     # the red wall is on the left and the blue on the right in both
     for image in (high, reference):
-        left, right = image[150:250, 5:25].mean(axis=(0, 1)), image[150:250, 455:475].mean(axis=(0, 1))
+        left = image[150:250, 5:25].mean(axis=(0, 1))
+        right = image[150:250, 455:475].mean(axis=(0, 1))
         assert left[0] > 2 * left[2] and right[2] > 2 * right[0]

@@ -79,7 +79,8 @@ class Rectangle(Shape):
         self.args = np.array([*self.p, *self.centre, *self.ex, *self.ey])
         self.corner = self.centre - 0.5 * (self.ex + self.ey)
         # the dual basis of (ex, ey) in their plane: coordinates of a point on the parallelogram
-        gram = np.array([[self.ex @ self.ex, self.ex @ self.ey], [self.ex @ self.ey, self.ey @ self.ey]])
+        gram = np.array([[self.ex @ self.ex, self.ex @ self.ey],
+                         [self.ex @ self.ey, self.ey @ self.ey]])
         self.dual = np.linalg.solve(gram, np.array([self.ex, self.ey]))
         self.area = np.linalg.norm(np.cross(self.ex, self.ey))
         self.normal = np.cross(self.ex, self.ey) / self.area
@@ -126,7 +127,8 @@ class Triangle(Shape):
 
     def point(self, s, t):
         r = np.sqrt(s)[:, None]
-        return self.a + r * (1 - t[:, None]) * (self.b - self.a) + r * t[:, None] * (self.c - self.a)
+        return (self.a + r * (1 - t[:, None]) * (self.b - self.a)
+                + r * t[:, None] * (self.c - self.a))
 
     def normals(self, q):
         return np.broadcast_to(self.normal, q.shape)
@@ -374,7 +376,8 @@ def test_floor_irradiance_under_a_rectangle_light(p, margin):
     solid, area = irradiance_estimates(p, 20000, seed=5)
     for name, values in (("solid angle", solid), ("area", area)):
         se = values.std() / math.sqrt(values.size)
-        print(f"{name}: {values.mean():.5f} +- {se:.5f} (exact {exact:.5f}), var {values.var():.3g}")
+        print(f"{name}: {values.mean():.5f} +- {se:.5f} (exact {exact:.5f}), "
+              f"var {values.var():.3g}")
         assert abs(values.mean() - exact) < 4 * se + 1e-12
     ratio = area.var() / solid.var()
     print(f"variance ratio area / solid angle: {ratio:.3g}")
@@ -410,7 +413,8 @@ def test_rectangle_fallbacks():
         check_consistent(tiny, by_area=omega < RECTANGLE_MIN_SOLID_ANGLE, omega=omega)
     check_consistent(Rectangle(p, centre, 1e-30 * ex, 1e-30 * ey))
     assert rectangle_solid_angle(*Rectangle(p, centre, 1e-3 * ex, 1e-3 * ey).args) > \
-        RECTANGLE_MIN_SOLID_ANGLE > rectangle_solid_angle(*Rectangle(p, centre, 1e-5 * ex, 1e-5 * ey).args)
+        RECTANGLE_MIN_SOLID_ANGLE > \
+        rectangle_solid_angle(*Rectangle(p, centre, 1e-5 * ex, 1e-5 * ey).args)
     far = Rectangle(p, p + 1e7 * np.array([0.1, 1.0, 0.3]), ex, ey)
     check_consistent(far, by_area=True, omega=rectangle_solid_angle(*far.args))
     # grazing: p 1e-5 below the plane, 0.5 beside the rectangle ((0.5 / 1e-5)^2 > the limit)
@@ -437,13 +441,15 @@ def test_rectangle_fallbacks():
 
 def test_triangle_fallbacks():
     p, a, b, c = TRIANGLES["ordinary"]
-    check_consistent(Triangle(p, a, b, c), by_area=False, omega=triangle_solid_angle(*p, *a, *b, *c))
+    check_consistent(Triangle(p, a, b, c), by_area=False,
+                     omega=triangle_solid_angle(*p, *a, *b, *c))
     for scale in (1e-4, 1e-8, 1e-12):
         tiny = Triangle(p, a, a + scale * (b - a), a + scale * (c - a))
         omega = triangle_solid_angle(*tiny.args)
         check_consistent(tiny, by_area=omega < TRIANGLE_MIN_SOLID_ANGLE, omega=omega)
     assert triangle_solid_angle(*Triangle(p, a, a + 1e-8 * (b - a), a + 1e-8 * (c - a)).args) > \
-        TRIANGLE_MIN_SOLID_ANGLE > triangle_solid_angle(*Triangle(p, a, a + 1e-12 * (b - a), a + 1e-12 * (c - a)).args)
+        TRIANGLE_MIN_SOLID_ANGLE > \
+        triangle_solid_angle(*Triangle(p, a, a + 1e-12 * (b - a), a + 1e-12 * (c - a)).args)
     check_consistent(Triangle(p, *(v + 1e8 * np.array([0.3, 1.0, 0.2]) for v in (a, b, c))))
     # by area, the barycentrics are uniform over the triangle: (s, t) uniform over the square
     tiny = Triangle(p, a, a + 1e-12 * (b - a), a + 1e-12 * (c - a))
