@@ -296,8 +296,8 @@ def mitsuba_scene(scene, camera, max_depth, spp, seed, workdir, emissive=False,
                                       "radius": float(geometry.radii[s]), "bsdf": bsdfs[m]}
         if materials.kind[m] == EMISSION:     # (emissive=True was checked above)
             # seen from outside only, so one-sided emission is ptrace's two-sided emission
-            description[f"sphere_{s}"]["emitter"] = {
-                "type": "area", "radiance": {"type": "rgb", "value": materials.emission[m].tolist()}}
+            radiance = {"type": "rgb", "value": materials.emission[m].tolist()}
+            description[f"sphere_{s}"]["emitter"] = {"type": "area", "radiance": radiance}
     lights = scene.lights
     for i in range(len(lights)):
         if lights.kind[i] != AREA:

@@ -2,7 +2,7 @@
 
     python studies/light_sampling.py --before CHECKOUT
         [--scenes CBspheres_lambertian CBbunny CBsphere_light]
-        [--spp 16 64] [--seeds 3] [--output light_sampling.md]
+        [--spp 16 64] [--seeds 3] [--depth 5] [--output light_sampling.md]
 
 CHECKOUT is a checkout of ptrace before the change (a git worktree of the commit before it);
 this tree is the after. Each ptrace render runs in a fresh process of its tree (so both trees'
@@ -77,7 +77,8 @@ WORKER = """
 import json, sys, time, numpy as np
 sys.path.insert(0, {root!r})
 import ptrace
-from benchmarks.error_vs_time import FULL, DEPTH, THREADS
+from benchmarks.error_vs_time import FULL, THREADS
+DEPTH = {depth}
 {functions}
 SPHERE_LIT, SPHERE_LIGHT = {sphere_lit!r}, {sphere_light!r}
 scene = study_scene({name!r})
@@ -91,12 +92,13 @@ print(json.dumps(dict(seconds=seconds, file=ptrace.__file__)))
 """
 
 
-def ptrace_render(tree, name, spp, seed, folder):
-    out = os.path.join(folder, f"{abs(hash((tree, name, spp, seed)))}.npy")
+def ptrace_render(tree, name, spp, seed, folder, depth=evt.DEPTH):
+    out = os.path.join(folder, f"{abs(hash((tree, name, spp, seed, depth)))}.npy")
     env = dict(os.environ, PYTHONPATH=str(tree))
     functions = inspect.getsource(sphere_lit) + "\n" + inspect.getsource(study_scene)
     code = WORKER.format(root=str(tree), name=name, spp=spp, seed=seed, out=out,
-                         functions=functions, sphere_lit=SPHERE_LIT, sphere_light=SPHERE_LIGHT)
+                         functions=functions, sphere_lit=SPHERE_LIT, sphere_light=SPHERE_LIGHT,
+                         depth=depth)
     result = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                             text=True, check=True, cwd=folder)
     answer = json.loads(result.stdout.strip().splitlines()[-1])
@@ -107,11 +109,15 @@ def ptrace_render(tree, name, spp, seed, folder):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--before", required=True)
-    parser.add_argument("--scenes", nargs="+", default=["CBspheres_lambertian", "CBbunny", SPHERE_LIT])
+    parser.add_argument("--scenes", nargs="+",
+                        default=["CBspheres_lambertian", "CBbunny", SPHERE_LIT])
+    parser.add_argument("--depth", type=int, default=evt.DEPTH,
+                        help="-m: 1 is direct light alone, where the light sampler is all")
     parser.add_argument("--spp", type=int, nargs="+", default=[16, 64])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--output", default="light_sampling.md")
     args = parser.parse_args(argv)
+    evt.DEPTH = args.depth      # the references' and Mitsuba's depth (read at call time)
     trees = {"area (before)": Path(args.before).resolve(), "solid angle (after)": ROOT}
     mitsuba = evt.Mitsuba()
     rows = []
@@ -125,7 +131,7 @@ def main(argv=None):
                 cells = {label: [] for label in [*trees, "Mitsuba multijitter"]}
                 for seed in range(args.seeds):
                     for label, tree in trees.items():
-                        image, seconds = ptrace_render(tree, name, spp, seed, folder)
+                        image, seconds = ptrace_render(tree, name, spp, seed, folder, args.depth)
                         cells[label].append((evt.relative_mse(image, ref), seconds))
                     image, seconds, _ = mitsuba.render(scene, spp, sampler="multijitter",
                                                        seed=seed, **mapping)
@@ -136,9 +142,9 @@ def main(argv=None):
                     rows.append((name, spp, label, mse, seconds))
                     print(name, spp, label, f"{mse:.5f}", f"{seconds:.2f}", flush=True)
     lines = [report.header("Area lights by solid angle against by area, beside Mitsuba 3"),
-             f"480x360, `-m 5 -l 1`, 2 threads; before: `{args.before}`; mean relative MSE "
-             f"over {args.seeds} seeds against the cached {evt.REFERENCE_SPP}-spp Mitsuba "
-             "reference, median seconds of the render call.", "",
+             f"480x360, `-m {args.depth} -l 1`, 2 threads; before: `{args.before}`; mean "
+             f"relative MSE over {args.seeds} seeds against the cached {evt.REFERENCE_SPP}-spp "
+             "Mitsuba reference, median seconds of the render call.", "",
              "| scene | spp | renderer | rel. MSE | seconds | rel. MSE x s | rel. MSE / "
              "Mitsuba's | rel. MSE x s / Mitsuba's |", "|---|---:|---|---:|---:|---:|---:|---:|"]
     for name, spp, label, mse, seconds in rows:
