@@ -1,4 +1,4 @@
-"""The camera flags of `ptrace` (and, through ptrace.cli.build_parser, of `ptrace view`):
+"""The camera flags of `ptrace` (and, through ptrace.options.build_parser, of `ptrace view`):
 -c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing),
 --camera-index's file camera, -b/-d's thin lens, and the checks that refuse flags which do not
 go together in one line. camera_from_flags is the one step both commands take after loading

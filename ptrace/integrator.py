@@ -32,6 +32,21 @@ from numba import njit
 from accel.compiled import any_hit, closest_hit
 
 from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, conductor_fresnel, is_delta, uniform_hemisphere
+from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
+    AUTO_EVERY_LIGHT,
+    AUTO_MANY,
+    INDEPENDENT,
+    LIGHTS_ALL,
+    LIGHTS_AUTO,
+    LIGHTS_BVH,
+    LIGHTS_POWER,
+    NORMALS,
+    PATH,
+    RR_CAP,
+    RR_DEPTH,
+    SOBOL,
+    Options,
+)
 from .environment import (
     LUMINANCE,
     environment_arrays,
@@ -71,27 +86,10 @@ from .textures import surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
-RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
-# default first vertex after whose BSDF sample roulette may end a path: 5, Mitsuba's, chosen by
-# benchmarks/results/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
-# ptrace's earlier 2 and pbrt-v4's rule): starting at 2, q = min(0.95, throughput) ends dim
-# paths early and turns a dim mirror's chains into rare heavy ones (CBcoil: 4x the spread of a
-# pixel's mean, tests/ptrace/test_per_pixel.py)
-RR_DEPTH = 5
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
 DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 are the pixel jitter
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
-PATH, NORMALS = 0, 1    # what render_pixels computes per sample
-INDEPENDENT, SOBOL = 0, 1   # Options.sampler
-# Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
-# samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by
-# the light BVH at the vertex (ptrace.light_bvh), or AUTO: every light while a scene has at most
-# AUTO_EVERY_LIGHT of them, else AUTO_MANY: the tree, whose lower error outweighed the cost of
-# its walks in a room of a thousand lights (benchmarks/results/many_lights.md)
-LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO, LIGHTS_BVH = 0, 1, 2, 3
-AUTO_EVERY_LIGHT = 4
-AUTO_MANY = LIGHTS_BVH
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
 
@@ -115,9 +113,6 @@ LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direct
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width",
                                            "lens_radius", "focal_distance"])
-Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
-                                 "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
-                                 "sampler", "light_sampler"], defaults=[LIGHTS_AUTO])
 
 
 def _f64(array, shape_tail=None):

@@ -6,8 +6,7 @@ import numpy as np
 
 import accel
 
-from .errors import PtraceError
-from .integrator import (
+from .codes import (
     AUTO_EVERY_LIGHT,
     AUTO_MANY,
     INDEPENDENT,
@@ -22,7 +21,7 @@ from .integrator import (
     SOBOL,
     Options,
 )
-from .lights import emitter_arrays
+from .errors import PtraceError
 from .scene import DIRECTIONAL, POINT
 
 INTEGRATORS = ("path", "normals")
@@ -184,7 +183,7 @@ class Settings:
         if self.hemisphere:
             return 1 + max(len(lights), 1) * self.light_samples
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
-        emitters = int(emitter_arrays(scene)[1].shape[0] > 0)
+        emitters = int(_emissive_light(scene))
         bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
         if self.light_mode(scene) != LIGHTS_ALL:
             return 1 + self.light_samples + bsdf_ray
@@ -197,10 +196,18 @@ class Settings:
         code = LIGHT_SAMPLER_CODES[self.light_sampler]
         if code != LIGHTS_AUTO:
             return code
-        count = len(scene.lights) + int(emitter_arrays(scene)[1].shape[0] > 0)
+        count = len(scene.lights) + int(_emissive_light(scene))
         return LIGHTS_ALL if count <= AUTO_EVERY_LIGHT else AUTO_MANY
 
     def uses_light_tree(self, scene):
         """Whether a render of this scene chooses lights by the light BVH (its records then
         need the tree: ptrace.integrator.scene_records)."""
         return self.integrator == "path" and self.light_mode(scene) == LIGHTS_BVH
+
+
+def _emissive_light(scene):
+    """Whether the scene's emissive primitives make one more light (some are no file light's
+    face): ptrace.lights.emitter_arrays decides, imported here when a render's work is sized
+    rather than when the settings are read, since ptrace.lights is compiled code."""
+    from .lights import emitter_arrays
+    return emitter_arrays(scene)[1].shape[0] > 0

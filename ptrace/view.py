@@ -9,7 +9,6 @@ every message is checked (ptrace.view_messages) and answered, an error with an e
 closing the socket stops its render within one kernel call (ptrace.view_render.Blocks), and a
 session counts against the cap until its render thread has ended.
 """
-import argparse
 import asyncio
 import hmac
 import json
@@ -25,9 +24,9 @@ import numba
 
 import accel
 
-from . import view_messages, view_render
+from . import options, view_messages, view_render
+from .cli_camera import check_pointing
 from .errors import PtraceError
-from .image import FORMATS
 from .view_render import Backends, denoiser_missing, page_settings
 from .view_session import Preview
 
@@ -238,17 +237,17 @@ def _open_browser(url):
 
 
 def parse(argv):
-    from .cli import _positive_float, _positive_int, build_parser
-    parser = build_parser()
-    parser.prog = "ptrace view"
-    parser.description = ("Preview a scene in the browser, refining pass by pass: a server on "
-                          "127.0.0.1 prints a URL with a token (and opens it when there is a "
-                          "browser); Ctrl-C stops it.")
+    """The arguments of `ptrace view`: ptrace's flags (ptrace.options) and --no-browser, -s
+    defaulting to VIEW_SPP; the flags of what the viewer does not do are refused."""
+    parser = options.build_parser(
+        prog="ptrace view",
+        description="Preview a scene in the browser, refining pass by pass: a server on "
+                    "127.0.0.1 prints a URL with a token (and opens it when there is a "
+                    "browser); Ctrl-C stops it.")
     parser.add_argument("--no-browser", action="store_true",
                         help="only print the URL, do not open a browser")
     parser.set_defaults(spp=VIEW_SPP)
-    from .cli_camera import attach_negative_vectors, check_pointing
-    args = parser.parse_args(attach_negative_vectors(argv))
+    args = options.parse(parser, argv)
     check_pointing(args)
     for flag, given in (("--info", args.info), ("--aov", args.aov is not None),
                         ("--workers", args.workers is not None),
@@ -256,49 +255,23 @@ def parse(argv):
                         ("--dashboard", args.dashboard)):
         if given:
             raise PtraceError(f"ptrace view renders in this process and has no {flag}")
-    if args.adaptive is not None:
-        args.adaptive = (_positive_int("adaptive batch")(args.adaptive[0]),
-                         _positive_float("adaptive tolerance")(args.adaptive[1]))
     return args
 
 
 def prepare(args):
-    """(scene, settings, camera, outputs) of the view's flags, checked as ptrace checks them."""
-    from . import load
-    from .budget import Budget, check_render
-    from .cli_camera import camera_from_flags
-    from .renderer import _check_frame
-    from .settings import Settings
-    output = args.output or os.path.splitext(os.path.basename(args.scene))[0] + ".png"
-    root, extension = os.path.splitext(output)
-    if extension.lower() not in FORMATS:
-        raise PtraceError(f"{output}: output must end in {' or '.join(FORMATS)}")
-    directory = os.path.dirname(os.path.abspath(output))
-    if not (os.path.isdir(directory) and os.access(directory, os.W_OK)):
-        raise PtraceError(f"{output}: cannot write to directory {directory}")
-    if args.denoise:            # the page's denoised toggle starts on
-        from .features import require_denoiser
-        require_denoiser()
+    """(scene, settings, camera, outputs) of the view's flags, checked as ptrace checks them
+    (ptrace.options), and against what a viewer holds: its threads, its sessions' buffers."""
+    from .budget import check_render
+    job = options.plan(args, lambda output: [os.path.splitext(output)[0] + extension
+                                             for extension in (".png", ".exr")])
     if args.threads is not None and args.threads > numba.config.NUMBA_NUM_THREADS:
         raise PtraceError(f"threads must be between 1 and {numba.config.NUMBA_NUM_THREADS}, "
                           f"got {args.threads}")
-    settings = Settings.from_options(
-        spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
-        light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
-        hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-        light_sampler=args.light_sampler,
-        bvh_split=args.bvh_split)
     width, height = args.resolution
-    budget = Budget.of(args.max_memory)
-    buffers = _check_frame(width, height, args.crop, max_memory=budget)
     view_render.sessions_that_fit(width, height, MAX_SESSIONS, "-r")
-    scene = load(args.scene, max_memory=budget)
-    if args.environment is not None:
-        from .environment import load_environment
-        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
-    check_render(scene, settings.accel, buffers, budget)
-    camera = camera_from_flags(scene, args, width, height)   # -c, --eye ..., -b, -d
-    return scene, settings, camera, (root + ".png", root + ".exr")
+    scene, camera = options.scene_and_camera(args, job.budget)   # -e, -c, --eye ..., -b, -d
+    check_render(scene, job.settings.accel, job.buffers, job.budget)
+    return scene, job.settings, camera, tuple(job.files)
 
 
 async def _serve(args, scene, settings, camera, outputs):
@@ -322,21 +295,12 @@ async def _serve(args, scene, settings, camera, outputs):
 
 def main(argv):
     """`ptrace view ...`: exit 0 never (it serves until Ctrl-C: 130), 2 for a user's error."""
-    from .cli import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_USAGE, _internal_error, _UsageError
-    try:
+    def command():
         args = parse(argv)
         scene, settings, camera, outputs = prepare(args)
         asyncio.run(_serve(args, scene, settings, camera, outputs))
-    except (_UsageError, argparse.ArgumentTypeError, PtraceError) as error:
-        print(f"ptrace: error: {error}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("ptrace: interrupted: the viewer stopped", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except Exception as error:   # noqa: BLE001 - a bug, told as one
-        _internal_error(error)
-        return EXIT_INTERNAL
-    return 0
+        return 0
+    return options.guarded(command, interrupted="interrupted: the viewer stopped")
 
 
 class Background:

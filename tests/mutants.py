@@ -37,7 +37,7 @@ MUTANTS = {
         [RR_TEST]),
     "rr-cap-half": (
         "the default roulette cap is 0.5 instead of 0.95",
-        [(INTEGRATOR, "RR_CAP = 0.95 ", "RR_CAP = 0.5 ")],
+        [("ptrace/codes.py", "RR_CAP = 0.95 ", "RR_CAP = 0.5 ")],
         [RR_TEST]),
     "tie-highest-id": (
         "between hits at the same t the higher primitive id wins (the shared better())",

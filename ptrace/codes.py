@@ -1,0 +1,28 @@
+"""The integrator's integer codes and defaults that the settings need, in a module without
+numba: ptrace.settings (read by both commands, pickled to Dask workers) imports them from here,
+and ptrace.integrator (the compiled loop, which compiles them in as constants) imports and
+re-exports them, so `from ptrace.integrator import SOBOL` still names the same value."""
+from collections import namedtuple
+
+RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
+# default first vertex after whose BSDF sample roulette may end a path: 5, Mitsuba's, chosen by
+# benchmarks/results/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
+# ptrace's earlier 2 and pbrt-v4's rule): starting at 2, q = min(0.95, throughput) ends dim
+# paths early and turns a dim mirror's chains into rare heavy ones (CBcoil: 4x the spread of a
+# pixel's mean, tests/ptrace/test_per_pixel.py)
+RR_DEPTH = 5
+PATH, NORMALS = 0, 1    # what render_pixels computes per sample
+INDEPENDENT, SOBOL = 0, 1   # Options.sampler
+# Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
+# samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by
+# the light BVH at the vertex (ptrace.light_bvh), or AUTO: every light while a scene has at most
+# AUTO_EVERY_LIGHT of them, else AUTO_MANY: the tree, whose lower error outweighed the cost of
+# its walks in a room of a thousand lights (benchmarks/results/many_lights.md)
+LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO, LIGHTS_BVH = 0, 1, 2, 3
+AUTO_EVERY_LIGHT = 4
+AUTO_MANY = LIGHTS_BVH
+
+# The integrator's options record (ptrace.settings.Settings.kernel_options builds it).
+Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
+                                 "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
+                                 "sampler", "light_sampler"], defaults=[LIGHTS_AUTO])

@@ -1,0 +1,333 @@
+"""The options of `ptrace` and `ptrace view`: their flags, the types that check each flag's
+value, and the one path from parsed arguments to what a render needs (its Settings, the files it
+may write, the scene and the camera), so that both commands read a flag alike and refuse a bad
+one with the same line. Neither command imports the other for any of this.
+
+A user's error (a bad flag, a PtraceError) ends in one line on stderr and exit code 2, never a
+traceback; anything else is a bug in ptrace: `ptrace: internal error: ...`, the traceback, and
+exit code 1 (guarded).
+"""
+import argparse
+import os
+import sys
+import traceback
+from dataclasses import dataclass
+
+import numpy as np
+
+EXIT_INTERNAL = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141   # 128 + SIGPIPE, as a shell reports a writer whose reader left
+
+
+class UsageError(Exception):
+    """A bad flag or flag value: told as one line, exit code 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):   # one line, not argparse's usage block
+        raise UsageError(message)
+
+
+# --- the types of the flags' values ------------------------------------------------------
+
+def int_at_least(name, minimum, maximum=None):
+    """A parser of integers in [minimum, maximum] (no maximum: any size) for a flag `name`."""
+    def parse(text):
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+        if value < minimum:
+            bound = "at least 1" if minimum == 1 else f"at least {minimum}" if minimum else \
+                "not negative"
+            raise argparse.ArgumentTypeError(f"{name} must be {bound}, got {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"{name} must be an integer from {minimum} to "
+                                             f"{maximum}, got {value}")
+        return value
+    return parse
+
+
+def int_range(name, setting):
+    """A parser of the integer setting `setting` in its ptrace.settings.RANGES range."""
+    from .settings import RANGES
+    return int_at_least(name, *RANGES[setting])
+
+
+def range_text(setting):
+    """The range of the integer setting `setting`, as the help says it."""
+    from .settings import RANGES
+    low, high = RANGES[setting]
+    return f"{low} to {high:,}".replace(",", "_") if high > 10 ** 6 else f"{low} to {high}"
+
+
+def positive_int(name):
+    return int_at_least(name, 1)
+
+
+def nonnegative_int(name):
+    return int_at_least(name, 0)
+
+
+def positive_float(name):
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not value > 0 or not np.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{name} must be a positive number, got {text}")
+        return value
+    return parse
+
+
+def size(text):
+    """A memory size such as 4G or 512M, in bytes (ptrace.budget.parse_size)."""
+    from .budget import parse_size
+    from .errors import PtraceError
+    try:
+        return parse_size(text)
+    except PtraceError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+
+
+# --- the flags -----------------------------------------------------------------------------
+
+DESCRIPTION = ("Render a CS184 COLLADA scene (or a mesh file) with a path tracer whose ray "
+               "intersection is naive, a BVH, or Embree.")
+
+
+def build_parser(prog="ptrace", description=DESCRIPTION):
+    """The parser of `ptrace`'s flags (`ptrace view` adds its own to the same)."""
+    import accel
+
+    from .cli_camera import add_camera_flags
+    from .codes import AUTO_EVERY_LIGHT, AUTO_MANY
+    from .renderer import MAX_SIDE, PIXEL_BYTES
+    from .settings import (
+        BVH_SPLITS,
+        DIRECT,
+        INTEGRATORS,
+        LIGHT_SAMPLER_CODES,
+        LIGHT_SAMPLERS,
+        SAMPLERS,
+    )
+    many = next(name for name, code in LIGHT_SAMPLER_CODES.items() if code == AUTO_MANY)
+    parser = Parser(prog=prog, description=description)
+    add = parser.add_argument
+    add("scene", help="scene file: .dae (CS184 COLLADA) or .obj .ply .stl .glb .gltf")
+    add("-t", "--threads", type=positive_int("threads"), default=None,
+        help="render threads (default: all cores; with --workers or --scheduler, threads per "
+             "task on each worker, default its share of its machine's cores)")
+    add("-s", "--spp", type=int_range("samples per pixel (-s)", "spp"), default=1,
+        help=f"camera rays per pixel, {range_text('spp')} (default 1)")
+    add("-l", "--light-samples", type=int_range("light samples (-l)", "light_samples"),
+        default=1, help=f"samples per area light per shading point, "
+                        f"{range_text('light_samples')} (default 1)")
+    add("-m", "--max-depth", type=int_range("max depth (-m)", "max_depth"), default=1,
+        help=f"maximum ray depth, {range_text('max_depth')} (default 1)")
+    add("-a", "--adaptive", nargs=2, metavar=("BATCH", "TOL"), default=None,
+        help="adaptive sampling: samples per batch and tolerance")
+    add("-H", "--hemisphere", action="store_true",
+        help="direct light by uniform hemisphere sampling instead of light sampling")
+    add("--direct", choices=DIRECT, default="mis",
+        help="direct light: mis (light samples and BSDF samples combined by multiple importance "
+             "sampling; default) or light (the course's light sampling alone)")
+    add("--sampler", choices=SAMPLERS, default="sobol",
+        help="random numbers: sobol (Owen-scrambled Sobol', stratified; default) or "
+             "independent (uniform, like the course)")
+    add("--light-sampler", choices=LIGHT_SAMPLERS, default="auto",
+        help="which lights a vertex samples: all (-l samples of every light, one of each point "
+             "or directional light: the course's), power (-l samples in all, each of one light "
+             "chosen by its estimated power), bvh (-l samples in all, each of one light or "
+             "emissive primitive chosen by a light BVH for the shading point) or auto (all for "
+             f"a scene of at most {AUTO_EVERY_LIGHT} lights, the emissive primitives counting "
+             f"as one; else {many}; the default)")
+    add("-r", "--resolution", nargs=2, type=int_at_least("resolution (-r)", 1, MAX_SIDE),
+        metavar=("W", "H"), default=(800, 600),
+        help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
+             f"{PIXEL_BYTES} bytes a pixel) within --max-memory; a course scene's "
+             f"camera (and -c's) keeps the focal length, so it crops; a mesh file's default "
+             f"camera and --eye's frame the view at any size (default 800 600)")
+    add("-f", "--output", default=None, metavar="FILE",
+        help="output image, .png (the course's 8-bit curve) or .exr (linear float); "
+             "default SCENE_NAME.png in the current directory")
+    add("-p", "--crop", nargs=4, type=nonnegative_int("crop"), metavar=("X", "Y", "DX", "DY"),
+        default=None, help="render only this cell (y counted from the bottom) and save just it")
+    add("-c", "--camera", default=None, metavar="FILE",
+        help="the course's camera settings file (its focalDistance and lensRadius included)")
+    add_camera_flags(parser)
+    add("-e", "--environment", default=None, metavar="FILE|R,G,B",
+        help="an environment light (the course's -e): an image OpenImageIO reads (.exr, .hdr, "
+             "...), lat-long with +Y up, or a constant colour such as 0.5,0.5,0.5; on a mesh "
+             "file it replaces the default light")
+    add("--no-default-light", action="store_true",
+        help="never give a mesh file without lights the default ambient light (by default it "
+             "gets one unless its emissive surfaces light it)")
+    add("-b", "--lens-radius", type=float, default=None, metavar="R",
+        help="thin-lens aperture radius (the course's 3-2 -b; default 0: a pinhole, or the -c "
+             "file's lensRadius)")
+    add("-d", "--focal-distance", type=float, default=None, metavar="D",
+        help="thin-lens focal distance along the view axis (the course's -d; default 4.7, or "
+             "the -c file's focalDistance, or for --eye and a mesh file's default camera the "
+             "distance to the point looked at)")
+    add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
+    add("--bvh-split", choices=BVH_SPLITS, default="mean",
+        help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
+             "(binned surface area heuristic)")
+    add("--seed", type=int_range("seed (--seed)", "seed"), default=0,
+        help=f"random seed, {range_text('seed')} (default 0)")
+    add("--integrator", choices=INTEGRATORS, default="path",
+        help="path (light transport) or normals (the course's normal shading)")
+    add("--aov", default=None, metavar="LIST",
+        help="feature buffers to add to an .exr output as extra channels, any of albedo, normal, "
+             "depth (first hit, averaged per pixel like the radiance; one more ray per sample)")
+    add("--denoise", action="store_true",
+        help="also write FILE_denoised (Intel Open Image Denoise guided by the albedo and "
+             "normal AOVs; biased, so the noisy image is kept; needs pip install "
+             "\"ptrace[denoise]\")")
+    add("--max-memory", type=size, default=None, metavar="SIZE",
+        help="memory budget, e.g. 4G or 512M: a scene whose triangles after instancing, "
+             "textures, environment map and image buffers are estimated to need more is "
+             "refused before they are allocated (default: half the machine's memory, or 3/4 of "
+             "what a ulimit -v leaves)")
+    add("--info", action="store_true", help="print a JSON summary of the scene and exit")
+    add("-q", "--quiet", action="store_true",
+        help="no progress bar, compile notice or notes of what the loader ignored or assumed")
+    dist = parser.add_argument_group("distributed rendering (needs: pip install \"ptrace[dist]\")")
+    where = dist.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=positive_int("workers"), default=None, metavar="N",
+                       help="render on a local Dask cluster of N worker processes (127.0.0.1)")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="render on an existing Dask cluster, e.g. tcp://host:8786 or tls://")
+    dist.add_argument("--dashboard", action="store_true",
+                      help="with --workers: serve Dask's dashboard on 127.0.0.1:8787")
+    return parser
+
+
+def parse(parser, argv):
+    """The arguments of argv (a vector flag's negative value attached: `--eye -1,2,3`), -a's
+    two words read as (batch, tolerance)."""
+    from .cli_camera import attach_negative_vectors
+    args = parser.parse_args(attach_negative_vectors(argv))
+    if args.adaptive is not None:
+        batch = int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
+        tolerance = positive_float("adaptive tolerance")(args.adaptive[1])
+        args.adaptive = (batch, tolerance)
+    return args
+
+
+# --- from the arguments to a render --------------------------------------------------------
+
+@dataclass
+class Plan:
+    """What the flags ask of a render, checked before the scene is read: settings (None with
+    --info, which renders nothing), the budget, the image path (-f or SCENE_NAME.png), the
+    files the command may write (each checked writable), the AOVs asked for and the bytes of
+    the image buffers."""
+    settings: object
+    budget: object
+    output: str
+    files: list
+    aov_names: tuple
+    buffers: int
+
+
+def settings_of(args):
+    """The Settings of the parsed flags."""
+    from .settings import Settings
+    return Settings.from_options(
+        spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
+        light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
+        hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
+        light_sampler=args.light_sampler, bvh_split=args.bvh_split)
+
+
+def plan(args, files_of):
+    """Check the flags before the scene is read: the output's format, --aov's names (they need
+    an .exr output), --denoise's library, every file files_of(output) says the command may
+    write, the settings and the image buffers against --max-memory (with --denoise or --aov,
+    the AOVs' buffers too); with --info only the output's format and --aov. Returns a Plan."""
+    from .budget import Budget
+    from .errors import PtraceError
+    from .features import require_denoiser
+    from .image import FORMATS, check_output_path
+    from .renderer import check_frame
+    budget = Budget.of(args.max_memory)     # one budget: the scene, -e and the render
+    output = args.output
+    if output is None:
+        output = os.path.splitext(os.path.basename(args.scene))[0] + ".png"
+    if os.path.splitext(output)[1].lower() not in FORMATS:
+        raise PtraceError(f"{output}: output must end in {' or '.join(FORMATS)}")
+    aov_names = ()
+    if args.aov is not None:
+        from .features import parse_aovs
+        try:
+            aov_names = parse_aovs(args.aov)
+        except ValueError as error:
+            raise UsageError(str(error)) from None
+        if not output.lower().endswith(".exr"):
+            raise PtraceError(f"{output}: --aov adds channels to an .exr output; use -f "
+                              f"NAME.exr")
+    if args.denoise:
+        require_denoiser()
+    files = list(files_of(output))
+    settings, buffers = None, 0
+    if not args.info:   # every file the command may write, checked before anything is rendered
+        for path in files:
+            check_output_path(path)
+        settings = settings_of(args)
+        buffers = check_frame(*args.resolution, args.crop,
+                              features=bool(aov_names or args.denoise), max_memory=budget)
+    return Plan(settings, budget, output, files, aov_names, buffers)
+
+
+def scene_and_camera(args, budget):
+    """The scene of the flags (its file, -e's environment, a mesh file's default light unless
+    --no-default-light) and the camera they give at -r's size (ptrace.cli_camera)."""
+    from . import load
+    from .cli_camera import camera_from_flags, check_pointing
+    check_pointing(args)
+    scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget)
+    if args.environment is not None:
+        from .environment import load_environment
+        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
+    width, height = args.resolution
+    return scene, camera_from_flags(scene, args, width, height)
+
+
+# --- the end of a command ------------------------------------------------------------------
+
+def guarded(command, interrupted="interrupted"):
+    """command()'s exit code, or the one of what it raised: a user's error as one line and 2,
+    Ctrl-C as `ptrace: <interrupted>` and 130, a reader that left (`ptrace --info X | head`)
+    as 141, and anything else as a bug (internal_error) and 1."""
+    from .errors import PtraceError
+    try:
+        return command()
+    except (UsageError, argparse.ArgumentTypeError, PtraceError) as error:
+        print(f"ptrace: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"ptrace: {interrupted}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:   # the reader has gone, as with any tool
+        try:
+            sys.stdout = open(os.devnull, "w")   # so Python's exit flush does not fail again
+        except OSError:
+            pass
+        return EXIT_BROKEN_PIPE
+    except Exception as error:   # noqa: BLE001 - not the user's fault: a bug, told as one
+        internal_error(error)
+        return EXIT_INTERNAL
+
+
+def internal_error(error):
+    """A bug, not a user error: say so, with the traceback (its causes included, e.g. the one
+    a Dask worker sent back), so that it can be reported and fixed."""
+    print(f"ptrace: internal error: {type(error).__name__}: {error}", file=sys.stderr)
+    traceback.print_exception(type(error), error, error.__traceback__, file=sys.stderr)
+    print("ptrace: this is a bug in ptrace, not in your input or flags; please report it with "
+          "the traceback above", file=sys.stderr, flush=True)
