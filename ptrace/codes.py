@@ -6,10 +6,10 @@ from collections import namedtuple
 
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
 # default first vertex after whose BSDF sample roulette may end a path: 5, Mitsuba's, chosen by
-# benchmarks/results/error_vs_time.md (relative MSE x seconds on three course scenes at -m 5, against
-# ptrace's earlier 2 and pbrt-v4's rule): starting at 2, q = min(0.95, throughput) ends dim
-# paths early and turns a dim mirror's chains into rare heavy ones (CBcoil: 4x the spread of a
-# pixel's mean, tests/ptrace/test_per_pixel.py)
+# relative MSE x seconds on three course scenes at -m 5 against ptrace's earlier 2 and pbrt-v4's
+# rule (benchmarks/results/error_vs_time.md): starting at 2, q = min(0.95, throughput) ends dim
+# paths early and turns a dim mirror's chains into rare heavy ones (CBcoil's per-pixel spread,
+# tests/ptrace/test_per_pixel.py)
 RR_DEPTH = 5
 PATH, NORMALS = 0, 1    # what render_pixels computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler

@@ -173,9 +173,10 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
         help="thin-lens focal distance along the view axis (the course's -d; default 4.7, or "
              "the -c file's focalDistance, or for --eye and a mesh file's default camera the "
              "distance to the point looked at)")
-    add("--accel", choices=accel.KINDS, default="bvh", help="ray intersection backend (default bvh)")
+    add("--accel", choices=accel.KINDS, default="bvh",
+        help="ray intersection backend (default bvh)")
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
-        help="with --accel bvh: mean (split at the mean centroid, the seed's; default) or sah "
+        help="with --accel bvh: mean (split at the mean centroid; default) or sah "
              "(binned surface area heuristic)")
     add("--seed", type=int_range("seed (--seed)", "seed"), default=0,
         help=f"random seed, {range_text('seed')} (default 0)")

@@ -73,8 +73,8 @@ class Settings:
     batch, tolerance); direct: "mis" (light samples and the BSDF's sample combined by multiple
     importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
     (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers);
-    bvh_split: the BVH's split, "mean" (the seed's mean-centroid split) or "sah" (binned surface
-    area heuristic); only with accel="bvh". light_sampler: "all" (at each vertex -l samples of
+    bvh_split: the BVH's split, "mean" (at the mean centroid, the course's suggestion) or "sah"
+    (binned surface area heuristic); only with accel="bvh". light_sampler: "all" (at each vertex -l samples of
     every light, one of each point or directional light: the course's estimator), "power" (-l
     samples at each vertex, each of one light chosen by its estimated power), "bvh" (-l samples
     at each vertex, each of one light or emissive primitive chosen by a light BVH for that

@@ -304,7 +304,8 @@ def main(argv):
 
 
 class Background:
-    """A ViewServer on its own asyncio loop in a background thread (ViewServer.start_in_background)."""
+    """A ViewServer on its own asyncio loop in a background thread
+    (ViewServer.start_in_background)."""
 
     def __init__(self, server):
         self.server, self.url = server, None

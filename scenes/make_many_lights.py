@@ -3,7 +3,8 @@
     python scenes/make_many_lights.py [--tiles 32] [--lights 8] [--brightest-only] [-o FILE]
 
 A 16 x 3 x 16 m room open toward +Z, where the course's camera rule puts the camera (white
-floor and ceiling, three grey walls, four pillars) in the CS184 COLLADA dialect, lit by a ceiling of tiles x tiles small emissive squares (2 tiles^2 triangles; four
+floor and ceiling, three grey walls, four pillars) in the CS184 COLLADA dialect, lit by a
+ceiling of tiles x tiles small emissive squares (2 tiles^2 triangles; four
 radiances from 0.25 to 2) and lights x lights small area lights under the ceiling whose
 radiances span 1 to 64 (a fixed pseudo-random order). Most lights are far from most of the
 room, so at a point few of them matter: the case for one light per sample chosen by power

@@ -49,7 +49,8 @@ def main(path=os.path.join(os.path.dirname(os.path.abspath(__file__)), "sky.exr"
     if output is None or not output.open(path, spec) or not output.write_image(image):
         raise SystemExit(f"{path}: cannot write ({oiio.geterror()})")
     output.close()
-    print(f"{path}: {image.shape[1]} x {image.shape[0]}, sun pixels {int((image[..., 0] > 100).sum())}")
+    sun = int((image[..., 0] > 100).sum())
+    print(f"{path}: {image.shape[1]} x {image.shape[0]}, sun pixels {sun}")
 
 
 if __name__ == "__main__":

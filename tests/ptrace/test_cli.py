@@ -62,7 +62,8 @@ def test_normals_render_written_and_read_back(tmp_path, scenes_dir, extension):
     expected = ptrace.render(ptrace.load(scenes_dir / "meshedit/cow.dae"), integrator="normals",
                              resolution=(120, 90), accel="embree")
     if extension == "png":
-        np.testing.assert_array_equal(np.round(pixels * 255).astype(np.uint8), course_8bit(expected))
+        np.testing.assert_array_equal(np.round(pixels * 255).astype(np.uint8),
+                                      course_8bit(expected))
     else:
         np.testing.assert_array_equal(pixels, expected)
     # the image and the course's rate image, and no temporary left behind
