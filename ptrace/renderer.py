@@ -2,9 +2,9 @@
 
 The work itself is ptrace.tiles (the pass schedule and the render job, through the compiled path
 loop of ptrace.integrator); an executor runs it in this process (ptrace.executors) or on a Dask
-cluster (ptrace.distributed), and ptrace.timing clocks the phases. Random numbers are keyed by (seed, pixel, sample, dimension), and
-pass sizes depend only on -s and -a, so an image does not depend on threads, chunks, tiles or
-backend.
+cluster (ptrace.distributed), and ptrace.timing clocks the phases. Random numbers are keyed by
+(seed, pixel, sample, dimension), and pass sizes depend only on -s and -a, so an image does not
+depend on threads, chunks, tiles or backend.
 """
 import sys
 import warnings
