@@ -5,14 +5,15 @@ default mode never imports dask. Install the extra with `pip install "ptrace[dis
 
 The unit of work is one tile (a contiguous run of the image's pixels, bottom row first) for one
 pass; a task returns per-pixel sums of radiance, of illuminance and of its square, and sample
-counts, computed by the same ptrace.tiles.TileWork as in-process. The client adds them into
+counts, traced by a ptrace.tiles.RenderJob as in-process. The client adds them into
 the image in a fixed (pass, tile) order, whatever order tasks finish in, and each pixel's
 arithmetic is then the in-process one: previous sum + this pass's sum. Adaptive sampling decides
 convergence after each pass's merge, exactly as in-process (so adaptive passes run one after
 another); without -a, passes are submitted ahead while about 4 tasks per worker are in flight.
 
-The scene is scattered to every worker once; a worker builds its acceleration structure once per
-(scene, accelerator) and keeps the last few (its numba cache stays warm between jobs).
+The scene is scattered to every worker once; a worker builds its RenderJob (the acceleration
+structure and the kernel's records) once per (scene, accelerator) and keeps the last few (its
+numba cache stays warm between renders).
 """
 import collections
 import contextlib
@@ -28,17 +29,14 @@ import warnings
 import numba
 import numpy as np
 
-import accel
-
 from .errors import PtraceError
-from .tiles import TileWork, new_sums
+from .tiles import RenderJob, new_sums
 
 TASK_RAYS = 1 << 19       # rays per task: about 0.1-0.3 s of work at 2-5 M rays/s
 CONNECT_TIMEOUT = 10      # seconds to reach a scheduler before giving up
 INSTALL_HINT = 'distributed rendering needs Dask: pip install "ptrace[dist]"'
 
-_built = collections.OrderedDict()   # (scene key, accel kind, bvh split) -> backend
-_works = collections.OrderedDict()   # job token -> (backend, TileWork)
+_jobs = collections.OrderedDict()    # (scene key, accel kind, bvh split) -> (token, RenderJob)
 _lock = threading.Lock()             # one tile at a time per worker process: numba runs threads
 _KEEP = 2
 builds = 0                           # acceleration structures built by this process (tests)
@@ -133,40 +131,43 @@ def default_worker_threads(client):
     return None   # remote machines: numba's default, all of the worker's cores
 
 
-def tile_task(scene, job, pass_index, tile_index, first_sample, pass_n, pixel_x, pixel_y):
-    """Run on a worker: sums for one tile of one pass (see the module docstring)."""
+def _job(scene, request):
+    """This worker's RenderJob for a render's request: its backend built once per (scene key,
+    accelerator, BVH split), the last _KEEP kept; a later render of the same key reuses that
+    backend (and the scene's records) with its own settings and camera. Returns (the job,
+    seconds spent building for it)."""
     global builds
+    settings = request["settings"]
+    key = (request["scene_key"], settings.accel, settings.bvh_split)
+    if key not in _jobs:
+        job = RenderJob.build(scene, settings, request["camera"])
+        builds += 1
+        _jobs[key] = (request["token"], job)
+        while len(_jobs) > _KEEP:
+            _jobs.popitem(last=False)
+        return job, job.build_seconds
+    token, job = _jobs[key]
+    if token != request["token"]:
+        job = job.reused(settings, request["camera"])
+        _jobs[key] = (request["token"], job)
+    return job, 0.0
+
+
+def tile_task(scene, request, pass_index, tile_index, first_sample, pass_n, pixel_x, pixel_y):
+    """Run on a worker: sums for one tile of one pass (see the module docstring)."""
     try:
         with _lock:
-            build_seconds = 0.0
-            settings = job["settings"]
-            key = (job["scene_key"], settings.accel, settings.bvh_split)
-            if key not in _built:
-                start = time.perf_counter()
-                _built[key] = accel.build(settings.accel, scene.geometry,
-                                          **settings.accel_options())
-                build_seconds = time.perf_counter() - start
-                builds += 1
-                while len(_built) > _KEEP:
-                    _built.popitem(last=False)
-            backend = _built[key]
-            work = _works.get(job["token"])
-            if work is None or work[0] is not backend:
-                work = (backend, TileWork(scene, backend, settings, job["camera"]))
-                _works[job["token"]] = work
-                while len(_works) > _KEEP:
-                    _works.popitem(last=False)
-            work = work[1]
-            threads = job["threads"]
+            job, build_seconds = _job(scene, request)
+            threads = request["threads"]
             if threads is not None:
                 numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
             n = pixel_x.shape[0]
             sums = new_sums(n)
-            rays_before = work.rays_traced
             start = time.perf_counter()
-            nonfinite = work.trace(pixel_x, pixel_y, first_sample, pass_n, sums, np.arange(n))
+            nonfinite, rays = job.trace(pixel_x, pixel_y, first_sample, pass_n, sums,
+                                        np.arange(n))
             seconds = time.perf_counter() - start
-            return sums, nonfinite, work.rays_traced - rays_before, build_seconds, seconds
+            return sums, nonfinite, rays, build_seconds, seconds
     except Exception as error:
         where = (f"tile {tile_index} (pixels {pixel_y[0]}:{pixel_x[0]} .., {len(pixel_x)} of "
                  f"them) of pass {pass_index} (samples {first_sample}.."
@@ -186,13 +187,21 @@ def tile_pixels(n_pixels, rays_per_path, pass_n, workers):
     return max(1, size)
 
 
-def render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
+def render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, phases,
                   worker_threads=None):
     """Run the pass schedule as tiles x passes on the cluster; the settings travel whole. Ctrl-C
-    (KeyboardInterrupt) cancels the tasks and keeps what was merged."""
+    (KeyboardInterrupt) cancels the tasks and keeps what was merged. phases (a running
+    ptrace.timing.Phases of DASK_PHASES) gets the scatter and render phases and the count of
+    tasks. Returns the render's figures for stats."""
+    phases.enter("render")
     with dropping_the_sync_cancel_race():
-        return _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
-                              worker_threads)
+        outcome = _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,
+                                 worker_threads)
+    # the executor's first seconds were the scatter (timed by it)
+    phases.seconds["render"] -= outcome["scatter_seconds"]
+    phases.seconds["scatter"] += outcome["scatter_seconds"]
+    phases.count("tasks", outcome["tasks"])
+    return outcome
 
 
 def _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, worker_threads):
@@ -204,10 +213,10 @@ def _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, wo
     token = uuid.uuid4().hex
     scene_future = client.scatter(scene, broadcast=True, hash=False)
     rays_per_path = settings.rays_per_path(scene)
-    job = dict(token=token, scene_key=scene_future.key, settings=settings, camera=camera,
-               threads=worker_threads if worker_threads is not None
-               else default_worker_threads(client))
-    [job_future] = client.scatter([job], broadcast=True, hash=False)
+    request = dict(token=token, scene_key=scene_future.key, settings=settings, camera=camera,
+                   threads=worker_threads if worker_threads is not None
+                   else default_worker_threads(client))
+    [request_future] = client.scatter([request], broadcast=True, hash=False)
     totals = dict(nonfinite=0, rays=0, build_seconds=0.0, task_seconds=[], tasks=0,
                   merge_seconds=0.0, scatter_seconds=time.perf_counter() - start)
     interrupted = False
@@ -220,7 +229,7 @@ def _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, wo
         for tile_index, first in enumerate(range(0, active.size, size)):
             rows = active[first:first + size]
             key = f"ptrace-tile-{token}-{pass_index}-{tile_index}"
-            pending[key] = client.submit(tile_task, scene_future, job_future, pass_index,
+            pending[key] = client.submit(tile_task, scene_future, request_future, pass_index,
                                          tile_index, first_sample, pass_n, pixel_x[rows],
                                          pixel_y[rows], key=key, pure=False)
             tiles.append((rows, key, pass_n))
@@ -270,7 +279,7 @@ def _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, wo
         if pending:
             client.cancel(list(pending.values()))
             pending.clear()
-        client.cancel([scene_future, job_future])
+        client.cancel([scene_future, request_future])
     task_seconds = sorted(totals.pop("task_seconds"))
     return dict(totals, render_seconds=time.perf_counter() - start, accel={},
                 interrupted=interrupted, workers=workers, task_seconds_total=sum(task_seconds),

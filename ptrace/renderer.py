@@ -1,10 +1,10 @@
 """render(): validate the settings, pick an executor, assemble the image.
 
-The work itself is ptrace.tiles (the pass schedule and the tile work, through the compiled path
+The work itself is ptrace.tiles (the pass schedule and the render job, through the compiled path
 loop of ptrace.integrator); an executor runs it in this process (ptrace.executors) or on a Dask
-cluster (ptrace.distributed). Random numbers are keyed by (seed, pixel, sample, dimension), and
-pass sizes depend only on -s and -a, so an image does not depend on threads, chunks, tiles or
-backend.
+cluster (ptrace.distributed), and ptrace.timing clocks the phases. Random numbers are keyed by
+(seed, pixel, sample, dimension), and pass sizes depend only on -s and -a, so an image does not
+depend on threads, chunks, tiles or backend.
 """
 import sys
 import warnings
@@ -15,12 +15,13 @@ import numpy as np
 from .budget import Budget, check_render
 from .camera import BASE_HEIGHT, BASE_WIDTH
 from .errors import PtraceError
-from .executors import DASK_PHASES, IN_PROCESS_PHASES, Phases, render_in_process
+from .executors import render_in_process
 from .features import FEATURES, aov_images
 from .jit import cache_notes
 from .pointing import default_camera
 from .settings import Settings
 from .tiles import Passes, new_sums
+from .timing import DASK_PHASES, IN_PROCESS_PHASES, Phases
 
 MAX_SIDE = 1 << 20   # pixels per side of the image (-r), a crop's window included
 # bytes held per rendered pixel: the pixel coordinates, the sums (rgb, l, l2, count), the image in
@@ -90,7 +91,7 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
     if a dict, receives build and render seconds, rays traced, per-pixel sample counts
     ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C interrupted
-    the render, "phases" ({phase: wall seconds} of ptrace.executors.IN_PROCESS_PHASES, or
+    the render, "phases" ({phase: wall seconds} of ptrace.timing.IN_PROCESS_PHASES, or
     DASK_PHASES with a client: they cover this call without overlapping) and "counts" (passes
     and kernel calls in-process, functions numba compiled; tasks on Dask). client renders on a
     Dask cluster; notice, if given, is called with a one-line message when the kernels must be
@@ -166,18 +167,13 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
                    file=sys.stderr)
     passes = Passes(settings, sums, bar)
     try:
-        if client is not None:
-            from . import distributed
-            phases.enter("render")
-            outcome = distributed.render_passes(client, scene, settings, camera, pixel_x,
-                                                pixel_y, passes, worker_threads)
-            # the executor's first seconds were the scatter (timed by it)
-            phases.seconds["render"] -= outcome["scatter_seconds"]
-            phases.seconds["scatter"] += outcome["scatter_seconds"]
-            phases.count("tasks", outcome["tasks"])
-        else:
+        if client is None:
             outcome = render_in_process(scene, settings, camera, pixel_x, pixel_y, passes,
                                         phases, notice, features)
+        else:
+            from . import distributed
+            outcome = distributed.render_passes(client, scene, settings, camera, pixel_x,
+                                                pixel_y, passes, phases, worker_threads)
     finally:
         if bar is not None:
             bar.close()

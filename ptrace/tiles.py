@@ -1,19 +1,24 @@
 """The work of a render, apart from who runs it: the pass schedule with adaptive sampling's
-decisions between passes, and the tile work (samples of a set of pixels, through the compiled
-path loop) that an executor runs in-process or a Dask worker runs for one tile.
+decisions between passes, and the render job (RenderJob: the backend built once, the kernel's
+records, and the trace of a set of pixels through the compiled path loop) that the in-process
+executor, a Dask worker (for one tile) and the viewer's sessions run.
 
 Knows nothing of Dask. Per pixel a render keeps four sums: radiance (RGB), illuminance and its
 square, and the count of finite samples; every pass adds each pixel's pass sum, summed from
 zero, so a tile computed elsewhere and added later gives the same bits as one computed here.
 """
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor, wait
 
 import numba
 import numpy as np
 
+import accel
 from accel.compiled import new_scratch
 
 from .integrator import camera_record, render_pixels, scene_records
+from .jit import COLD_COMPILE_SECONDS, is_cold
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
@@ -128,18 +133,62 @@ def _run_blocks(function, blocks):
         wait(futures)
 
 
-class TileWork:
-    """What rendering any set of pixels needs and a render keeps fixed: the scene's records, the
-    accelerator's compiled face, the kernel options and the camera. In-process renders and
-    Dask tiles both call trace(), so their per-pixel arithmetic is the same."""
+class RenderJob:
+    """What rendering any set of pixels needs beside the pixels, kept fixed while a render runs:
+    the backend (built once for the scene and settings), the scene's kernel records, the
+    settings' kernel options and the camera's record. The in-process executor, a Dask worker and
+    the viewer's sessions all trace through a RenderJob, so their per-pixel arithmetic is the
+    same; they differ only in where the blocks of pixels go. Never pickled: each process builds
+    its own (RenderJob.build). rays_traced counts the rays of every trace() so far."""
 
-    def __init__(self, scene, backend, settings, camera):
-        self.records = scene_records(scene, settings.uses_light_tree(scene))
+    def __init__(self, scene, backend, settings, camera, records=None):
+        """A job on a built backend; records: the scene's records (scene_records) for these
+        settings' choice of light tree, or None to make them here."""
+        if records is None:
+            records = scene_records(scene, settings.uses_light_tree(scene))
+        self.scene, self.backend, self.settings, self.records = scene, backend, settings, records
         self.accel = backend.compiled
-        self.settings = settings
         self.options = settings.kernel_options()
         self.camera = camera_record(camera)
         self.rays_traced = 0
+        self.build_seconds = self.records_seconds = 0.0
+        self._counting = threading.Lock()
+
+    @classmethod
+    def build(cls, scene, settings, camera, notice=None, lap=None):
+        """Build the backend (accel.build, of the settings' kind and options) and the job on it.
+        notice(message), if given, hears that the kernels must be compiled first (a cold numba
+        cache); lap(phase), if given, is called as the "compile" check, the "build" and the
+        "records" begin (ptrace.timing.Phases.enter). The job's build_seconds and
+        records_seconds are the wall time of the build and of the records."""
+        lap = lap if lap is not None else (lambda phase: None)
+        lap("compile")
+        if notice is not None and is_cold(accel.record_class(settings.accel)):
+            notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
+        lap("build")
+        start = time.perf_counter()
+        backend = accel.build(settings.accel, scene.geometry, **settings.accel_options())
+        build_seconds = time.perf_counter() - start
+        lap("records")
+        start = time.perf_counter()
+        job = cls(scene, backend, settings, camera)
+        job.build_seconds, job.records_seconds = build_seconds, time.perf_counter() - start
+        return job
+
+    def reused(self, settings, camera):
+        """A job for other settings of the same backend (kind and options) and another camera,
+        without building anything again: the backend, and the scene's records unless the
+        settings choose lights by the light tree where this job does not (or the reverse), are
+        this job's; the kernel options and the camera's record are the new ones'."""
+        if (settings.accel, settings.accel_options()) != \
+                (self.settings.accel, self.settings.accel_options()):
+            raise ValueError(f"a job on a {self.settings.accel} backend cannot be reused for "
+                             f"{settings.accel} {settings.accel_options()}")
+        lights = (settings.integrator, settings.light_sampler)
+        same = lights == (self.settings.integrator, self.settings.light_sampler) or \
+            settings.uses_light_tree(self.scene) == self.settings.uses_light_tree(self.scene)
+        return RenderJob(self.scene, self.backend, settings, camera,
+                         self.records if same else None)
 
     def trace(self, pixel_x, pixel_y, first_sample, pass_n, sums, rows, on_chunk=None,
               features=None):
@@ -147,8 +196,9 @@ class TileWork:
         the bottom) and add each pixel's sums into `sums` at `rows`. Work goes to the kernel in
         blocks of about BLOCK_PATHS paths (whole pixels), on all threads; on_chunk(samples) is
         called after each block, in order. features, if given, an (N, 8) array beside the sums,
-        gets the per-pixel sums of the AOVs (ptrace.features). Returns the number of non-finite
-        samples dropped."""
+        gets the per-pixel sums of the AOVs (ptrace.features). Returns (non-finite samples
+        dropped, rays traced) of this call. A call keeps its state to itself (and the count of
+        rays_traced is locked), so several threads may trace one job at once."""
         shapes, materials, lights = self.records
         sum_rgb, sum_l, sum_l2, count = sums
         pixel_x = np.ascontiguousarray(pixel_x, dtype=np.int64)
@@ -166,10 +216,15 @@ class TileWork:
         size = max(1, BLOCK_PATHS // pass_n)
         blocks = [(start, min(start + size, pixel_x.shape[0]))
                   for start in range(0, pixel_x.shape[0], size)]
-        dropped = 0
+        dropped = traced = 0
         for pixels, (block_dropped, rays) in _run_blocks(block, blocks):
             dropped += block_dropped
-            self.rays_traced += rays
+            traced += rays
+            with self._counting:
+                self.rays_traced += rays
             if on_chunk is not None:
                 on_chunk(pixels * pass_n)
-        return dropped
+        return dropped, traced
+
+
+TileWork = RenderJob   # the name benchmarks and tests use

@@ -3,10 +3,9 @@ the target, pure functions of a Camera, and the guard that keeps a session's cam
 the reduced-resolution camera of a quick frame, the image of a session's sums, its denoised
 image (the optional pyoidn), a frame's PNG bytes, the bounds on what a session may ask for
 (resolution, samples, the rays of one path), the kernel calls of a pass in blocks small enough
-that a closed page stops within one (Blocks), and the accelerators every session shares
-(Backends)."""
+that a closed page stops within one (Blocks), and the render jobs whose backends every session
+shares (Backends)."""
 import collections
-import copy
 import dataclasses
 import math
 import os
@@ -16,16 +15,12 @@ from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
-import accel
-
 from .budget import machine_memory as physical_memory  # (the name tests patch)
 from .camera import look_at
 from .errors import PtraceError
 from .features import denoise, denoised_path
 from .image import write_image
-from .integrator import camera_record
-from .jit import COLD_COMPILE_SECONDS, is_cold
-from .tiles import BLOCK_PATHS, TileWork
+from .tiles import BLOCK_PATHS, RenderJob
 
 ESTIMATORS = ("mis", "light", "hemisphere")
 MODES = ("image", "rate", "normals")
@@ -290,8 +285,8 @@ def png_bytes(pixels, directory):
 
 
 class Blocks:
-    """A session's kernel calls (TileWork.trace on a few pixels at a time, each call one of
-    TileWork's blocks, run on the session's own threads): a pass of some pixels is cut into
+    """A session's kernel calls (RenderJob.trace on a few pixels at a time, each call one of
+    the job's blocks, run on the session's own threads): a pass of some pixels is cut into
     calls of at most BLOCK_RAYS rays (paths x path_rays) and, once calls have been timed, of
     about BLOCK_SECONDS. check() runs before every call, in whichever thread makes it: whatever
     it raises (the session abandoning the work) ends the pass after the calls under way, so a
@@ -311,9 +306,9 @@ class Blocks:
             paths = min(paths, int(BLOCK_SECONDS / (self.seconds_per_ray * rays_per_path)))
         return max(1, min(BLOCK_PATHS, paths))
 
-    def trace(self, work, pixel_x, pixel_y, first, n, sums, rows, rays_per_path, check,
+    def trace(self, job, pixel_x, pixel_y, first, n, sums, rows, rays_per_path, check,
               on_pixels=None, features=None):
-        """TileWork.trace's samples first .. first + n - 1 of these pixels into sums (and
+        """RenderJob.trace's samples first .. first + n - 1 of these pixels into sums (and
         features) at rows, in calls as above; on_pixels(count, rays so far) after each run of
         pixels is done, in the order given. Returns the rays traced."""
         paths = self.paths_per_call(rays_per_path)
@@ -321,18 +316,17 @@ class Blocks:
         size = paths if split else max(1, paths // n)
 
         def run(start, end):
-            own = copy.copy(work)
-            own.rays_traced = 0
+            rays = 0
             for sample, count in ((s, 1) for s in range(first, first + n)) if split \
                     else ((first, n),):
                 check()
                 began = time.perf_counter()
-                own.trace(pixel_x[start:end], pixel_y[start:end], sample, count, sums,
-                          rows[start:end], None, features)
+                rays += job.trace(pixel_x[start:end], pixel_y[start:end], sample, count, sums,
+                                  rows[start:end], None, features)[1]
                 seconds = time.perf_counter() - began
                 if seconds > 1e-3:          # shorter calls time mostly their overhead
                     self.seconds_per_ray = seconds / ((end - start) * count * rays_per_path)
-            return end - start, own.rays_traced
+            return end - start, rays
 
         chunks = [(start, min(start + size, len(pixel_x)))
                   for start in range(0, len(pixel_x), size)]
@@ -357,25 +351,20 @@ class Blocks:
 
 
 class Backends:
-    """Accelerators built once per (kind, BVH split) and shared by every session."""
+    """Render jobs, one built per (kind, BVH split) on first use and shared by every session:
+    a session's job reuses that one's backend and scene records with its own settings and
+    camera (RenderJob.reused), so neither a camera move nor a setting rebuilds them."""
 
     def __init__(self, scene, notice):
         self.scene, self.notice = scene, notice
         self.lock = threading.Lock()
-        self.built, self.works = {}, {}
+        self.built = {}
 
-    def work(self, settings, camera):
-        """A TileWork for these settings and camera (the scene's records built once)."""
+    def job(self, settings, camera):
+        """A RenderJob for these settings and camera (the backend built once per kind)."""
         key = (settings.accel, settings.bvh_split)
         with self.lock:
             if key not in self.built:
-                if is_cold(accel.record_class(settings.accel)):
-                    self.notice(f"compiling kernels (first run only, about "
-                                f"{COLD_COMPILE_SECONDS} s)")
-                self.built[key] = accel.build(settings.accel, self.scene.geometry,
-                                              **settings.accel_options())
-                self.works[key] = TileWork(self.scene, self.built[key], settings, camera)
-            work = copy.copy(self.works[key])
-        work.settings, work.options = settings, settings.kernel_options()
-        work.camera, work.rays_traced = camera_record(camera), 0
-        return work
+                self.built[key] = RenderJob.build(self.scene, settings, camera, self.notice)
+            built = self.built[key]
+        return built.reused(settings, camera)

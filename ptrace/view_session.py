@@ -1,6 +1,6 @@
 """One `ptrace view` viewer's session (Preview): its own camera, settings and render thread
 over the shared scene and backends (ptrace.view_render). The render reuses ptrace.tiles: the
-pass schedule of ptrace.render (Passes) through TileWork.trace, in the short kernel calls of
+pass schedule of ptrace.render (Passes) through RenderJob.trace, in the short kernel calls of
 ptrace.view_render.Blocks, so N samples here are bit for bit ptrace.render's N samples. Each
 pass is traced into fresh sums and then added to the image's (0 + x is x, so the bits are the
 same), which lets a camera move, a setting or a closed page abort a pass at any call without
@@ -50,6 +50,7 @@ class _Job:
     passes: object
     schedule: object
     features: np.ndarray = None  # the AOVs' sums beside sums (ptrace.features), or None
+    render: object = None       # its RenderJob, made by the render thread for the first pass
     current: tuple = None
     started: float = 0.0
     seconds: float = 0.0        # tracing time so far
@@ -269,11 +270,11 @@ class Preview:
                                     / max(self.paths_per_second * QUICK_SECONDS, 1.0))))
         small = view_render.scaled(camera, max(1, scale))
         one = dataclasses.replace(settings, spp=1, adaptive=None)
-        work = self.backends.work(one, small)
+        render = self.backends.job(one, small)
         ys, xs = np.mgrid[0:small.height, 0:small.width]
         sums = new_sums(xs.size)
         start = time.perf_counter()
-        self.blocks.trace(work, xs.reshape(-1), ys.reshape(-1), 0, 1, sums, np.arange(xs.size),
+        self.blocks.trace(render, xs.reshape(-1), ys.reshape(-1), 0, 1, sums, np.arange(xs.size),
                           view_render.path_rays(self.scene, one), lambda: self._check(generation))
         self.paths_per_second = xs.size / max(time.perf_counter() - start, 1e-6)
         image = mean_image(sums, small.width, small.height)
@@ -295,7 +296,8 @@ class Preview:
                 self._show(generation, job, None, "done")
                 return
         first, n, active = job.current
-        work = self.backends.work(job.settings, job.camera)
+        if job.render is None:    # one for every pass of the job: nothing is built again
+            job.render = self.backends.job(job.settings, job.camera)
         rows = job.rows[active]
         temp = new_sums(active.shape[0])
         features = None if job.features is None else np.zeros((active.shape[0], FEATURES))
@@ -313,7 +315,7 @@ class Preview:
                 self.show_seconds = progress["last"] - now
 
         path = view_render.path_rays(self.scene, job.settings, features is not None)
-        rays = self.blocks.trace(work, rows % self.width, rows // self.width, first, n, temp,
+        rays = self.blocks.trace(job.render, rows % self.width, rows // self.width, first, n, temp,
                                  np.arange(active.shape[0]), path,
                                  lambda: self._check(generation), on_block, features)
         seconds = time.perf_counter() - start

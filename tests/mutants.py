@@ -115,8 +115,9 @@ MUTANTS = {
         ["tests/ptrace/test_estimators.py", "-k", "agree or analytic"]),
     "dask-forces-roulette": (
         "Dask workers render with roulette on whatever the settings say",
-        [("ptrace/distributed.py", 'settings = job["settings"]',
-          'settings = type(job["settings"])(**{**vars(job["settings"]), "roulette": True})')],
+        [("ptrace/distributed.py", 'settings = request["settings"]',
+          'settings = type(request["settings"])(**{**vars(request["settings"]), '
+          '"roulette": True})')],
         ["tests/ptrace/test_distributed.py", "-k", "option"]),
     "last-vertex-delta-only-under-mis": (
         "at the last vertex a mirror's or glass's ray is traced only under MIS, so under "

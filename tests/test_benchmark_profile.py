@@ -1,5 +1,5 @@
 """The render profile benchmark: the render's own phases that it reads (stats["phases"] and
-stats["counts"], ptrace.executors.Phases), its helpers on tiny renders (the wall-time phases add
+stats["counts"], ptrace.timing.Phases), its helpers on tiny renders (the wall-time phases add
 up, the wrapper is put back, the counting face counts every ray and changes no pixel, the
 differencing rows add up), and a tiny quick run's report, with a failing embree backend skipped.
 
@@ -15,8 +15,8 @@ import pytest
 
 import accel
 import ptrace
-import ptrace.executors
 import ptrace.tiles
+import ptrace.timing
 from benchmarks import profile_render as pr
 from benchmarks import report
 
@@ -37,7 +37,7 @@ def test_the_render_reports_its_phases(cow):
     ptrace.render(cow, threads=2, accel="bvh", stats=stats, **dict(TINY, spp=20))
     wall = time.perf_counter() - start
     phases = stats["phases"]
-    assert list(phases) == list(ptrace.executors.IN_PROCESS_PHASES)
+    assert list(phases) == list(ptrace.timing.IN_PROCESS_PHASES)
     assert min(phases.values()) >= 0 and phases["render"] > 0, phases
     assert sum(phases.values()) <= wall, (phases, wall)
     assert phases["build"] <= stats["build_seconds"] + 1e-3

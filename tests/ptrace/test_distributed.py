@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace import cli, distributed
+from ptrace import cli, distributed, tiles
 from ptrace.errors import PtraceError
 from ptrace.image import read_image
 
@@ -107,12 +107,12 @@ def break_builds_on_the_workers(client, error):
 
         def broken(kind, geometry, **options):
             raise error
-        distributed.accel = type("Broken", (), {"build": staticmethod(broken)})
+        tiles.accel = type("Broken", (), {"build": staticmethod(broken)})
         return accel is not None
 
     def repair():
         import accel
-        distributed.accel = accel
+        tiles.accel = accel
 
     client.run(break_builds)
     return lambda: client.run(repair)
@@ -180,8 +180,8 @@ def test_the_bvh_split_reaches_the_workers(client):
     np.testing.assert_array_equal(image, ptrace.render(scene, spp=1, resolution=(8, 6)))
 
     def splits():
-        return sorted({(key[1], key[2], backend.split) for key, backend in
-                       distributed._built.items() if key[1] == "bvh"})
+        return sorted({(key[1], key[2], job.backend.split) for key, (_, job) in
+                       distributed._jobs.items() if key[1] == "bvh"})
     built = set().union(*client.run(splits).values())
     assert ("bvh", "sah", "sah") in built
 
