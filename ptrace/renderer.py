@@ -55,9 +55,6 @@ def check_frame(width, height, crop=None, features=False, max_memory=None):
     return need
 
 
-_check_frame = check_frame   # the name ptrace.view imports
-
-
 def scene_warnings(scene, settings):
     """What a user should hear about this scene and these settings before a render."""
     out = []

@@ -65,21 +65,20 @@ class Settings:
 
     spp: samples per pixel (-s); accel: the backend (naive, bvh, embree); integrator: path or
     normals; seed; light_samples (-l): samples per area or ambient light per shading point;
-    max_depth (-m); hemisphere (-H): direct light by uniform hemisphere sampling; roulette:
-    Russian roulette (False runs every path to max_depth; the course has no such flag); rr_cap:
-    roulette continues with probability min(rr_cap, max throughput); rr_depth: the first vertex
-    at which it may end a path (default 5, as Mitsuba; 2: from the second bounce, ptrace's rule
-    before); adaptive (-a): None or (samples per
-    batch, tolerance); direct: "mis" (light samples and the BSDF's sample combined by multiple
-    importance sampling) or "light" (the course's light sampling alone); sampler: "sobol"
-    (Owen-scrambled Sobol', stratified) or "independent" (the course's uniform random numbers);
-    bvh_split: the BVH's split, "mean" (at the mean centroid, the course's suggestion) or "sah"
-    (binned surface area heuristic); only with accel="bvh". light_sampler: "all" (at each vertex -l samples of
-    every light, one of each point or directional light: the course's estimator), "power" (-l
-    samples at each vertex, each of one light chosen by its estimated power), "bvh" (-l samples
-    at each vertex, each of one light or emissive primitive chosen by a light BVH for that
-    vertex, ptrace.light_bvh) or "auto" (all while a scene has at most
-    ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives counting as one, else
+    max_depth (-m); hemisphere (-H): direct light by uniform hemisphere sampling; roulette: Russian
+    roulette (False runs every path to max_depth; the course has no such flag); rr_cap: roulette
+    continues with probability min(rr_cap, max throughput); rr_depth: the first vertex at which it
+    may end a path (default 5, as Mitsuba; 2: from the second bounce, ptrace's rule before);
+    adaptive (-a): None or (samples per batch, tolerance); direct: "mis" (light samples and the
+    BSDF's sample combined by multiple importance sampling) or "light" (the course's light sampling
+    alone); sampler: "sobol" (Owen-scrambled Sobol', stratified) or "independent" (the course's
+    uniform random numbers); bvh_split: the BVH's split, "mean" (at the mean centroid, the course's
+    suggestion) or "sah" (binned surface area heuristic); only with accel="bvh". light_sampler:
+    "all" (at each vertex -l samples of every light, one of each point or directional light: the
+    course's estimator), "power" (-l samples at each vertex, each of one light chosen by its
+    estimated power), "bvh" (-l samples at each vertex, each of one light or emissive primitive
+    chosen by a light BVH for that vertex, ptrace.light_bvh) or "auto" (all while a scene has at
+    most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives counting as one, else
     ptrace.integrator.AUTO_MANY).
     """
     spp: int = 1

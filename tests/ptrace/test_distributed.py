@@ -50,7 +50,8 @@ def both(scene, client, **options):
 
 
 def test_path_render_is_bit_identical(client, course_scene):
-    """The README's promise: a Dask render is bit-identical to an in-process one with the same seed."""
+    """The README's promise: a Dask render is bit-identical to an in-process one with the same
+    seed."""
     scene = ptrace.load(course_scene("sky/CBspheres_lambertian.dae"))
     alone, spread, stats = both(scene, client, spp=4, light_samples=2, max_depth=5,
                                 resolution=(48, 36), seed=7)
