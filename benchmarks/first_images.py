@@ -25,7 +25,7 @@ import time
 import numba
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 MESHES = ["meshedit/cow.dae", "meshedit/maxplanck.dae"]
 

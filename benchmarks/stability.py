@@ -41,6 +41,7 @@ from accel.embree import EmbreeAccelerator
 from ptrace.integrator import OFFSET
 
 from . import templating
+from .rays import scenes_dir
 from .templating import blocks, fill, join, pinned_ids, pins_by_file, plain
 
 REPRODUCE = "python -m benchmarks.stability"
@@ -83,11 +84,6 @@ PINS = pins_by_file({
 
 
 # -- shared helpers ----------------------------------------------------------------------------
-def scenes_dir():
-    here = Path(__file__).resolve().parent.parent
-    return Path(os.environ.get("PTRACE_SCENES", here.parent / "shared" / "scenes" / "cs184"))
-
-
 def warm_up():
     """Load every kernel from numba's cache (or compile it) so no timing includes the JIT."""
     tiny = accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])

@@ -31,7 +31,6 @@ tests/test_benchmark_stability_light.py pins the claims of the report with the h
 import dataclasses
 import json
 import math
-import os
 import time
 import warnings
 from pathlib import Path
@@ -59,6 +58,7 @@ from ptrace.settings import Settings
 from ptrace.tiles import TileWork, new_sums
 
 from . import templating
+from .rays import scenes_dir
 from .templating import blocks, fill, join, pinned_ids, plain
 
 REPRODUCE = "python -m benchmarks.stability_light"
@@ -100,11 +100,6 @@ QUADRATURE = 32           # points per side of the light in the quadrature refer
 
 
 # -- shared helpers ----------------------------------------------------------------------------
-def scenes_dir():
-    here = Path(__file__).resolve().parent.parent
-    return Path(os.environ.get("PTRACE_SCENES", here.parent / "shared" / "scenes" / "cs184"))
-
-
 def pyplot():
     import matplotlib
     matplotlib.use("Agg")
