@@ -31,16 +31,12 @@ BENCHMARKS = {
     "mitsuba_reference": Benchmark("renders course scenes with Mitsuba 3 as references for "
                                    "ptrace", quick=None, requires="mitsuba",
                                    quick_skip="it rewrites tests/references/"),
-    "stability": Benchmark("where methods fail: the inputs that defeat each method, and what "
-                           "ptrace does there"),
     "distributed": Benchmark("the price of a local Dask cluster and a model of scaling"),
     "error_vs_time": Benchmark("relative MSE against wall time per estimator and backend, and "
                                "Mitsuba 3's"),
     "paths_per_second": Benchmark("camera paths per second of ptrace's backends and Mitsuba 3"),
     "profile_render": Benchmark("where a render's wall time goes: phases, the path loop by "
                                 "differencing, the accelerator's share"),
-    "stability_light": Benchmark("the light-transport half of the stability report",
-                                 in_all=False),
     "view_latency": Benchmark("ptrace view: milliseconds from a camera drag to the first "
                               "refreshed image, pushed and drawn in headless chromium",
                               requires="selenium", in_all=False),

@@ -1,4 +1,4 @@
-"""Study reports written from data (benchmarks.stability, benchmarks.stability_light).
+"""Study reports written from data (studies.stability, studies.stability_light).
 
 A study measures into plain data (dicts with string keys, lists, numbers, strings, None:
 `plain` makes numpy values so and refuses anything JSON would not give back unchanged), saves

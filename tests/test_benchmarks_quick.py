@@ -155,9 +155,8 @@ def test_the_registry_names_every_module_and_its_quick_mode():
     registered otherwise does not."""
     modules = {m.name for m in pkgutil.iter_modules(benchmarks.__path__)}
     assert modules == set(benchmarks.BENCHMARKS) | set(benchmarks.HELPERS)
-    assert runner.names() == ["accel_rays", "first_images", "mitsuba_reference", "stability",
-                              "distributed", "error_vs_time", "paths_per_second",
-                              "profile_render"]
+    assert runner.names() == ["accel_rays", "first_images", "mitsuba_reference", "distributed",
+                              "error_vs_time", "paths_per_second", "profile_render"]
     for name in runner.names():
         entry = benchmarks.BENCHMARKS[name]
         assert entry.description and (entry.quick is not None or entry.quick_skip), name
