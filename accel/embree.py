@@ -21,7 +21,7 @@ share of the rays). So the triangles are re-centred in float64 before rounding, 
 median of the vertices, and each ray origin is moved by the same offset in float64 before
 rounding (t is unchanged by a translation). The median, not the bounding box's centre: a few far
 outliers move the box's centre away from where the triangles are, which made a dense cluster with
-far outliers disagree on a large share of the rays (benchmarks/stability.py measures all of this,
+far outliers disagree on a large share of the rays (studies/stability.py measures all of this,
 through the `centre` method). No translation helps a ray whose origin is far from the triangles
 (a camera far from the cow disagreed with bvh on many rays: benchmarks/results/stability.md):
 its float32 origin loses the ray. So each ray is first clipped, in float64, to the triangles' box in

@@ -23,46 +23,28 @@ class Benchmark:
     in_all: bool = True
 
 
-def _seed_commands_quick(module):
-    """seed_commands has no --quick: its first two commands, -s divided by 64, bvh and embree."""
-    return ["--spp-scale", "64", "--backends", "bvh", "embree",
-            "--only", *list(module.COMMANDS)[:2]]
-
-
 BENCHMARKS = {
     "accel_rays": Benchmark("rays per second of every backend on course meshes and a synthetic "
                             "series, BVH builds, compile times"),
     "first_images": Benchmark("normal-shading render time per backend and CLI start-up",
                               quick=("--repeats", "1")),
-    "seed_commands": Benchmark("wall time and rays per second of the seed's command lines per "
-                               "backend", quick=_seed_commands_quick),
     "mitsuba_reference": Benchmark("renders course scenes with Mitsuba 3 as references for "
                                    "ptrace", quick=None, requires="mitsuba",
-                                   quick_skip="it rewrites benchmarks/references/"),
-    "stability": Benchmark("where methods fail: the inputs that defeat each method, and what "
-                           "ptrace does there"),
-    "course_comparison": Benchmark("the course's headline comparisons: normal shading, the "
-                                   "seed's full commands, naive against BVH"),
+                                   quick_skip="it rewrites tests/references/"),
     "distributed": Benchmark("the price of a local Dask cluster and a model of scaling"),
     "error_vs_time": Benchmark("relative MSE against wall time per estimator and backend, and "
                                "Mitsuba 3's"),
     "paths_per_second": Benchmark("camera paths per second of ptrace's backends and Mitsuba 3"),
     "profile_render": Benchmark("where a render's wall time goes: phases, the path loop by "
                                 "differencing, the accelerator's share"),
-    "spheres_vs_meshes": Benchmark("an analytic sphere against tessellated ones"),
-    "stability_light": Benchmark("the light-transport half of the stability report",
-                                 in_all=False),
     "view_latency": Benchmark("ptrace view: milliseconds from a camera drag to the first "
                               "refreshed image, pushed and drawn in headless chromium",
                               requires="selenium", in_all=False),
-    "repeated_rays": Benchmark("bvh and Embree with each ray traced 1, 4 and 64 times in a row: "
-                               "what a repeat finds free (branch history, cache lines)",
-                               in_all=False),
     "many_lights": Benchmark("a room of 64 area lights and 1024 emissive tiles: MSE x seconds "
                              "of each light sampler against every light at every vertex",
                              in_all=False),
 }
 
 # modules of the package that are not benchmarks
-HELPERS = ("__main__", "report", "synthetic", "templating",
+HELPERS = ("__main__", "rays", "report", "synthetic", "templating",
            "sample_kernel")   # a profiling tool (needs perf), not a benchmark

@@ -9,9 +9,8 @@ skipped with a printed line, and a failing module is reported and the rest still
 code is 1 if any failed). Modules are imported lazily. `NAME` runs any registered benchmark.
 
 --quick makes every run short with the arguments the registry gives each module (--quick for
-those that take it; first_images gets --repeats 1, seed_commands runs its first two commands
-with -s divided by 64 on bvh and embree), and skips mitsuba_reference (it would overwrite the
-reference EXR that the tests compare against). Quick reports and charts go to --output-dir
+those that take it; first_images gets --repeats 1), and skips mitsuba_reference (it would
+overwrite the reference EXR that the tests compare against). Quick reports and charts go to --output-dir
 (default: a new temporary directory, printed), never over the full ones in benchmarks/results/;
 without --quick they go to benchmarks/results/ unless --output-dir is given. The directory is
 redirected by pointing benchmarks.report.RESULTS at it for the whole run, which every module

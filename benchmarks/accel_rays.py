@@ -42,7 +42,6 @@ thread halves the rates, so --threads 1 2 would take about 30 minutes: --threads
 only.
 """
 import argparse
-import math
 import os
 import statistics
 import time
@@ -55,10 +54,10 @@ from accel import raygen
 from accel.types import Rays
 
 from . import report, synthetic
+from .rays import RAY_KINDS, make_rays, scene_light, scenes_dir
 
 MESHES = ["meshedit/teapot.dae", "meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae",
           "meshedit/peter.dae", "meshedit/maxplanck.dae"]
-RAY_KINDS = ("random", "camera", "secondary", "shadow")
 ANY_HIT = ("shadow",)        # kinds timed with occluded(); the others with intersect()
 BACKENDS = ("naive", "bvh mean", "bvh sah", "bvh mean mt", "bvh sah mt", "embree")
 BUILD = {"naive": ("naive", {}),
@@ -81,11 +80,6 @@ TARGETS = [
     ("watertight / Möller–Trumbore", "secondary", TARGET_MESHES, "bvh {split}",
      "bvh {split} mt", 0.9),
 ]
-
-
-def scenes_dir():
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    return os.environ.get("PTRACE_SCENES", os.path.join(here, "..", "shared", "scenes", "cs184"))
 
 
 def timed(function, *args):
@@ -133,27 +127,6 @@ def cold_compile_seconds():
 def head(rays, k):
     """The first k rays of a batch (naive traces a prefix of the same rays)."""
     return Rays(rays.origins[:k], rays.directions[:k], rays.tmin[:k], rays.tmax[:k])
-
-
-def make_rays(kind, geometry, n, light=None):
-    if kind == "random":
-        return raygen.sphere_rays(geometry, n, seed=0)
-    if kind == "camera":
-        width = max(1, round(math.sqrt(n * 4 / 3)))
-        return raygen.camera_rays(geometry, width, max(1, n // width), seed=0)
-    if kind == "shadow":
-        return raygen.shadow_rays(geometry, n, seed=0, light=light)
-    return raygen.surface_rays(geometry, n, seed=0)
-
-
-def scene_light(scene):
-    """(centre, edge_x, edge_y) of the scene's first area light, or None."""
-    from ptrace.scene import AREA
-    lights = scene.lights
-    for i in range(len(lights)):
-        if lights.kind[i] == AREA:
-            return lights.position[i], lights.edge_x[i], lights.edge_y[i]
-    return None
 
 
 def load_meshes(args):

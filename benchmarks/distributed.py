@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 SCENE = "sky/CBspheres_lambertian.dae"
 OPTIONS = {"light_samples": 4, "max_depth": 5, "seed": 1}

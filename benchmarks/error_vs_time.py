@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 SCENES = {"CBspheres_lambertian": "sky/CBspheres_lambertian.dae",
           "CBbunny": "sky/CBbunny.dae",

@@ -25,9 +25,11 @@ import time
 import numba
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
+from .templating import blocks, fill
 
 MESHES = ["meshedit/cow.dae", "meshedit/maxplanck.dae"]
+TEMPLATE = "first_images.md"      # the prose, in benchmarks/templates/
 
 
 def info_seconds(scene, env):
@@ -57,23 +59,17 @@ def readme_render(env, output_dir):
 
 def start_up_lines():
     """Cold and warm runs of the README's render command, as report lines."""
+    text = blocks(TEMPLATE)
     rows = []
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache)
         for label in ("cold (empty numba cache)", "warm", "warm"):
             wall, build, render, stderr = readme_render(env, out)
             said = "yes" if "compiling kernels" in stderr else "no"
-            rows.append(f"| {label} | {wall:.2f} | {build:.3f} | {render:.2f} | "
-                        f"{wall - build - render:.2f} | {said} |")
+            rows.append(fill(text["readme_row"], run=label, wall=wall, build=build,
+                             render=render, before=wall - build - render, notice=said))
             print(label, f"{wall:.2f} s", flush=True)
-    return ["", "The README's render command, `ptrace " + " ".join(README_COMMAND) +
-            " -f cornell.png scenes/cornell.dae`, in a fresh process (2 cores, numba's default "
-            "thread count). *before first pass*: wall minus build and render seconds "
-            "(interpreter start, imports, scene loading, and compiling or loading the kernels). "
-            "*notice*: whether it printed `ptrace: compiling kernels ...` on stderr (no progress "
-            "bar: stderr is not a terminal here).", "",
-            "| run | wall s | build s | render s | before first pass s | notice |",
-            "|---|---:|---:|---:|---:|---|", *rows]
+    return [fill(text["readme"], command=" ".join(README_COMMAND)), *rows]
 
 
 def main(argv=None):
@@ -84,12 +80,9 @@ def main(argv=None):
     parser.add_argument("--output", default="first_images.md")
     args = parser.parse_args(argv)
     numba.set_num_threads(args.threads)
+    text = blocks(TEMPLATE)
     lines = [report.header("First images: normal shading per backend, and start-up"),
-             f"480x360, 1 spp, {args.threads} threads; bvh and embree: median of {args.repeats} "
-             "runs after one warm-up render; naive: one run. Render seconds exclude the "
-             "acceleration build, which is listed apart.", "",
-             "| scene | backend | build s | render s | rays/s | speedup over naive |",
-             "|---|---|---:|---:|---:|---:|"]
+             fill(text["intro"], threads=args.threads, repeats=args.repeats)]
     for relpath in MESHES:
         scene = ptrace.load(os.path.join(scenes_dir(), relpath))
         ptrace.render(scene, integrator="normals", resolution=(16, 12))   # compile / load cache
@@ -107,15 +100,13 @@ def main(argv=None):
             print(relpath, kind, f"{seconds:.3f} s", flush=True)
         for kind in ("naive", "bvh", "embree"):
             build, seconds, rate = results[kind]
-            lines.append(f"| {relpath} | {kind} | {build:.3f} | {seconds:.3f} | {rate:,.0f} | "
-                         f"{results['naive'][1] / seconds:.0f}x |")
+            lines.append(fill(text["row"], scene=relpath, backend=kind, build=build,
+                              seconds=seconds, rate=rate, speedup=results["naive"][1] / seconds))
     cow = os.path.join(scenes_dir(), MESHES[0])
     with tempfile.TemporaryDirectory() as prefix:
         cold = info_seconds(cow, dict(os.environ, PYTHONPYCACHEPREFIX=prefix))
     warm = statistics.median(info_seconds(cow, dict(os.environ)) for _ in range(5))
-    lines += ["", f"`ptrace --info meshedit/cow.dae` start-up: cold {cold:.2f} s (every module's "
-              f"bytecode recompiled), warm {warm:.2f} s (median of 5). `--info` compiles no "
-              "numba kernel."]
+    lines.append(fill(text["info"], cold=cold, warm=warm))
     lines += start_up_lines()
     path = report.write(args.output, "\n".join(lines) + "\n")
     print(f"wrote {path}")

@@ -27,10 +27,12 @@ import ptrace
 
 from . import report
 from .error_vs_time import relative_mse
+from .templating import blocks, fill
 
 ROOT = Path(__file__).resolve().parents[1]
 VIEW = dict(eye=(0.0, 1.6, 7.5), target=(0.0, 1.2, 0.0), fov=60.0)
 SAMPLERS = ("all", "power", "bvh")
+TEMPLATE = "many_lights.md"      # the prose, in benchmarks/templates/
 
 
 def room(folder, *flags):
@@ -81,14 +83,12 @@ def main(argv=None):
                     (relative_mse(image, reference), seconds, rays, float(image.mean())))
     yard = [render(brightest, width, height, args.spp[-1], r, "all", args.threads)[1]
             for r in range(args.repeats)]
+    text = blocks(TEMPLATE)
     lines = [report.header("Many lights: every light at every vertex, or -l chosen by power "
                            "or by the light BVH"),
-             f"{width}x{height}, `-m 5 -l 1`, {args.threads} threads, the room of "
-             f"scenes/make_many_lights.py (64 area lights, 1,024 emissive tiles) from inside; "
-             f"reference {args.reference_spp} spp by bvh ({reference_seconds:.1f} s, mean "
-             f"{reference.mean():.4f}). Medians of {args.repeats} seeds.", "",
-             "| light sampler | spp | rel. MSE | seconds | rel. MSE x s | rays/path | paths/s | "
-             "mean |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             fill(text["intro"], width=width, height=height, threads=args.threads,
+                  reference_spp=args.reference_spp, reference_seconds=reference_seconds,
+                  reference_mean=float(reference.mean()), repeats=args.repeats)]
     paths = width * height
     summary = {}
     for (sampler, spp), runs in sorted(rows.items(), key=lambda kv: (kv[0][1], kv[0][0])):
@@ -96,21 +96,22 @@ def main(argv=None):
         seconds = statistics.median(r[1] for r in runs)
         rays = statistics.median(r[2] for r in runs)
         summary[(sampler, spp)] = (mse, seconds)
-        lines.append(f"| {sampler} | {spp} | {mse:.4g} | {seconds:.2f} | {mse * seconds:.4g} | "
-                     f"{rays / (paths * spp):.2f} | {paths * spp / seconds:,.0f} | "
-                     f"{statistics.median(r[3] for r in runs):.4f} |")
-    lines += ["", "| spp | sampler | rel. MSE x s: all / it | paths/s: it, 1,000+ lights / "
-                  "the brightest light alone |", "|---:|---|---:|---:|"]
+        lines.append(fill(text["row"], sampler=sampler, spp=spp, mse=mse, seconds=seconds,
+                          cost=mse * seconds, rays_per_path=rays / (paths * spp),
+                          paths_per_second=paths * spp / seconds,
+                          mean=statistics.median(r[3] for r in runs)))
+    compare = [text["compare"]]
     yard_rate = paths * args.spp[-1] / statistics.median(yard)
     for spp in args.spp:
         mse_all, s_all = summary[("all", spp)]
         for sampler in SAMPLERS[1:]:
             mse, seconds = summary[(sampler, spp)]
-            lines.append(f"| {spp} | {sampler} | {mse_all * s_all / (mse * seconds):.1f}x | "
-                         f"{paths * spp / seconds / yard_rate:.2f}x (brightest alone "
-                         f"{yard_rate:,.0f} paths/s at {args.spp[-1]} spp) |")
-    path = report.write(args.output, "\n".join(lines) + "\n")
-    print("\n".join(lines[-(len(args.spp) * (len(SAMPLERS) - 1) + 3):]))
+            compare.append(fill(text["compare_row"], spp=spp, sampler=sampler,
+                                gain=mse_all * s_all / (mse * seconds),
+                                rate_ratio=paths * spp / seconds / yard_rate,
+                                yard_rate=yard_rate, yard_spp=args.spp[-1]))
+    path = report.write(args.output, "\n".join(lines + compare) + "\n")
+    print("\n".join(compare))
     print(f"wrote {path}")
 
 

@@ -35,7 +35,7 @@ The scene is mapped from ptrace's loaded Scene, so both renderers see the same n
   function mitsuba_scene keeps `path` by default for its other callers
   (benchmarks.paths_per_second); CBspheres_lambertian_m5_mitsuba.exr was made with `path`;
 - a box pixel filter, like ptrace's uniform jitter within the pixel.
-Writes benchmarks/references/<scene>_m<depth>_mitsuba.exr and a Markdown note beside it.
+Writes tests/references/<scene>_m<depth>_mitsuba.exr and a Markdown note beside it.
 
 --pixels CASE ... (or `all`) makes the small per-pixel references of PIXEL_CASES for
 tests/ptrace/test_per_pixel.py instead: the case's scene (pixel_case: built in memory from a
@@ -45,7 +45,7 @@ llvm_ad_rgb variant by default. Per pixel it stores the mean RGB over all sample
 variance of the mean luminance (0.2126, 0.7152, 0.0722), from the spread of the K batch means
 (var over batches, ddof 1, / K: the batch means are near Gaussian, so this needs no
 assumption about the heavy-tailed per-sample distribution), as float32 in
-benchmarks/references/<case>_m<depth>_pixels.npz (np.savez_compressed), with a note beside it.
+tests/references/<case>_m<depth>_pixels.npz (np.savez_compressed), with a note beside it.
 --glass schlick maps glass to register_schlick_glass's Python BSDF (ptrace's Schlick Fresnel)
 instead of `dielectric` and writes <case>_m<depth>_pixels_schlick.npz: the difference between
 the two is what the exact Fresnel equations change.
@@ -60,9 +60,9 @@ from pathlib import Path
 import numpy as np
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
-REFERENCES = Path(__file__).resolve().parent / "references"
+REFERENCES = Path(__file__).resolve().parents[1] / "tests" / "references"   # test fixtures
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_GAP = 1e-4     # world units between an emissive triangle and its reversed copy
 

@@ -55,7 +55,7 @@ import numpy as np
 from ptrace.integrator import RR_DEPTH
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 SCENES = {"sky/CBspheres_lambertian.dae": ("naive", "bvh", "embree"),
           "sky/CBbunny.dae": ("bvh", "embree")}

@@ -52,7 +52,7 @@ from numba import njit
 from accel.compiled import any_hit, closest_hit, new_scratch
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 # name: (scene, spp, light samples, max depth, integrator, backend); all at RESOLUTION
 COMMANDS = {

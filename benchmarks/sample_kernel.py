@@ -25,7 +25,7 @@ import tempfile
 from pathlib import Path
 
 from . import report
-from .accel_rays import scenes_dir
+from .rays import scenes_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,7 +34,7 @@ WORKER = r"""
 import ctypes, json, os, sys, time
 import numba
 import accel, ptrace
-from benchmarks.accel_rays import make_rays, scene_light
+from benchmarks.rays import make_rays, scene_light
 mesh, kind, backend, seconds, threads, folder = sys.argv[1:7]
 numba.set_num_threads(int(threads))
 scene = ptrace.load(mesh)

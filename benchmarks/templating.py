@@ -1,4 +1,6 @@
-"""Study reports written from data (benchmarks.stability, benchmarks.stability_light).
+"""Reports whose prose lives in templates (benchmarks/templates/), not in f-strings: the
+studies.stability and studies.stability_light reports, and the tools that fill a template
+(first_images).
 
 A study measures into plain data (dicts with string keys, lists, numbers, strings, None:
 `plain` makes numpy values so and refuses anything JSON would not give back unchanged), saves

@@ -24,15 +24,14 @@ import statistics
 import tempfile
 
 from . import report
+from .rays import scenes_dir
 
 HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORNELL = os.path.join(HERE, "scenes", "cornell.dae")
 
 
 def bunny():
-    root = os.environ.get("PTRACE_SCENES") or os.path.join(HERE, "..", "shared", "scenes",
-                                                           "cs184")
-    return os.path.join(root, "sky", "CBbunny.dae")
+    return os.path.join(scenes_dir(), "sky", "CBbunny.dae")
 
 
 def chromium(width=1000, height=1000):

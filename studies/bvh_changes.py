@@ -43,7 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks import report  # noqa: E402
-from benchmarks.accel_rays import scenes_dir  # noqa: E402
+from benchmarks.rays import scenes_dir  # noqa: E402
 
 # (commit, label); None is this tree
 REVISIONS = [

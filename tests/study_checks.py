@@ -1,5 +1,5 @@
-"""Checks shared by the tests of the study reports, benchmarks.stability
-(tests/test_benchmark_stability_geometry.py) and benchmarks.stability_light
+"""Checks shared by the tests of the study reports, studies.stability
+(tests/test_benchmark_stability_geometry.py) and studies.stability_light
 (tests/test_benchmark_stability_light.py), imported as `check`: a report written from data
 (`written`), what it says (`says`), its tables (`tables`), the tests it quotes (`quoted_tests`)
 and its charts (`charts`); a renamed pin (`renamed_pin_stops`); the quick run (`quick_run`);

@@ -1,5 +1,5 @@
 """Pins the claims of the geometry sections of benchmarks/results/stability.md
-(`python -m benchmarks.stability`): where the BVH, Möller–Trumbore and Embree's float32 fail, and
+(`python -m studies.stability`): where the BVH, Möller–Trumbore and Embree's float32 fail, and
 what ptrace does there. The measurements are the report's own helpers, at the --quick sizes.
 
 A test here that starts failing because a method got *better* (the BVH gains on overlapping
@@ -18,7 +18,8 @@ import pytest
 import accel
 from accel import raygen
 from accel.bvh import STACK_SIZE
-from benchmarks import report, stability, templating
+from benchmarks import report, templating
+from studies import stability
 
 import study_checks as check
 

@@ -1,11 +1,11 @@
 """Pins the claims of the light-transport sections of benchmarks/results/stability.md
-(`python -m benchmarks.stability_light`): where hemisphere sampling, adaptive sampling, fixed
+(`python -m studies.stability_light`): where hemisphere sampling, adaptive sampling, fixed
 depths and Russian roulette fail, and what ptrace does there. The measurements are the report's
 own helpers, at smaller sizes and with fixed seeds.
 
 A test here that starts failing because a method got *better* is asking for the report to be
 rerun and updated. The tests use the studies' own estimators (study.COURSE, study.RR,
-study.FIREFLY; see benchmarks/stability_light.py for why each).
+study.FIREFLY; see studies/stability_light.py for why each).
 
 The report is written from the measured data alone (study.write_sections): the last tests run the
 writer on made-up data and check that the text follows the numbers and that every test it names
@@ -20,9 +20,9 @@ import pytest
 
 import ptrace
 from benchmarks import report
-from benchmarks import stability_light as study
 from ptrace import integrator
 from ptrace.integrator import LUMINANCE
+from studies import stability_light as study
 
 import study_checks as check
 

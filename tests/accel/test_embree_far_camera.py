@@ -1,7 +1,7 @@
 """Embree with a far camera (accel/embree.py, the module docstring's Float32 paragraph): a ray
 origin far from the triangles is moved, in float64, to where the ray enters their box before it
 is rounded to float32, so Embree agrees with bvh (float64) wherever the camera is. The cow's
-figures are benchmarks/stability.py's section 3 ("camera" rows, the same rays:
+figures are studies/stability.py's section 3 ("camera" rows, the same rays:
 accel.raygen.distant_rays); `clip_to_bounds=False` is the
 backend as it was before, kept for these measurements."""
 import pickle

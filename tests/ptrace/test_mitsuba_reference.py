@@ -9,7 +9,7 @@ import pytest
 import ptrace
 from ptrace.image import read_image
 
-REFERENCE = (pathlib.Path(__file__).resolve().parents[2] / "benchmarks" / "references"
+REFERENCE = (pathlib.Path(__file__).resolve().parents[1] / "references"
              / "CBspheres_lambertian_m5_mitsuba.exr")
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 

@@ -2,7 +2,7 @@
 test_renders.py: a z-test per pixel of ptrace's pixel mean against the reference's, with a
 Šidák-corrected threshold over all the pixels tested.
 
-References: benchmarks/references/<case>_m5_pixels.npz, made by
+References: tests/references/<case>_m5_pixels.npz, made by
 `python -m benchmarks.mitsuba_reference --pixels all` (committed; Mitsuba is not needed here),
 except that CBspheres is compared with CBspheres_m5_pixels_schlick.npz (`--pixels CBspheres
 --glass schlick`: the glass sphere as a Python Mitsuba BSDF with ptrace's Schlick Fresnel

@@ -1,10 +1,10 @@
 """Where methods fail: light transport (the light-transport half of the stability report).
 
-    python -m benchmarks.stability_light [--quick] [--threads 2] [--output stability_light.md]
+    python -m studies.stability_light [--quick] [--threads 2] [--output stability_light.md]
 
 Writes benchmarks/results/stability_light.md (or --output, relative to benchmarks/results/),
 its PNG charts beside it and the measured data as stability_light.json beside it; a --quick run
-without --output goes to a new temporary directory (printed). benchmarks.stability includes the
+without --output goes to a new temporary directory (printed). studies.stability includes the
 same sections in benchmarks/results/stability.md (its "light" data). The studies:
 
 1. Hemisphere sampling (-H) against light sampling as an area light shrinks at constant power,
@@ -31,7 +31,6 @@ tests/test_benchmark_stability_light.py pins the claims of the report with the h
 import dataclasses
 import json
 import math
-import os
 import time
 import warnings
 from pathlib import Path
@@ -41,6 +40,9 @@ import numpy as np
 
 import accel
 import ptrace
+from benchmarks import templating
+from benchmarks.rays import scenes_dir
+from benchmarks.templating import blocks, fill, join, pinned_ids, plain
 from ptrace import integrator, tiles
 from ptrace.camera import Camera, course_camera
 from ptrace.integrator import LUMINANCE
@@ -58,11 +60,8 @@ from ptrace.scene import (
 from ptrace.settings import Settings
 from ptrace.tiles import TileWork, new_sums
 
-from . import templating
-from .templating import blocks, fill, join, pinned_ids, plain
-
-REPRODUCE = "python -m benchmarks.stability_light"
-REPRODUCE_ALL = "python -m benchmarks.stability"
+REPRODUCE = "python -m studies.stability_light"
+REPRODUCE_ALL = "python -m studies.stability"
 TEMPLATE = "stability_light.md"
 TEST = "tests/test_benchmark_stability_light.py"
 # claim -> test function of TEST: the tests the report quotes, by the field names of the
@@ -100,11 +99,6 @@ QUADRATURE = 32           # points per side of the light in the quadrature refer
 
 
 # -- shared helpers ----------------------------------------------------------------------------
-def scenes_dir():
-    here = Path(__file__).resolve().parent.parent
-    return Path(os.environ.get("PTRACE_SCENES", here.parent / "shared" / "scenes" / "cs184"))
-
-
 def pyplot():
     import matplotlib
     matplotlib.use("Agg")

@@ -1,11 +1,11 @@
 """Where methods fail: the inputs that defeat each method, measured, and what ptrace does there.
 
-    python -m benchmarks.stability [--quick] [--threads 2] [--output stability.md]
+    python -m studies.stability [--quick] [--threads 2] [--output stability.md]
 
 Writes benchmarks/results/stability.md (or --output, relative to benchmarks/results/), its PNG
 charts beside it and the measured data as stability.json beside it; a --quick run without
 --output goes to a new temporary directory (printed), never over the full report. The report
-has the geometry sections below, the light-transport sections of benchmarks/stability_light.py
+has the geometry sections below, the light-transport sections of studies/stability_light.py
 and the failure regimes studied in the tests themselves.
 
 Measuring and writing are apart. measure(quick) runs every study of SECTIONS and returns plain
@@ -38,12 +38,12 @@ import accel
 from accel import raygen
 from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, BVHAccelerator
 from accel.embree import EmbreeAccelerator
+from benchmarks import templating
+from benchmarks.rays import scenes_dir
+from benchmarks.templating import blocks, fill, join, pinned_ids, pins_by_file, plain
 from ptrace.integrator import OFFSET
 
-from . import templating
-from .templating import blocks, fill, join, pinned_ids, pins_by_file, plain
-
-REPRODUCE = "python -m benchmarks.stability"
+REPRODUCE = "python -m studies.stability"
 AXIS = np.array([1.0, 0.7, 0.3]) / np.linalg.norm([1.0, 0.7, 0.3])   # direction of every offset
 RAY_SEED = 1        # section 1's rays
 COW_SEED = 3        # section 3's rays
@@ -83,11 +83,6 @@ PINS = pins_by_file({
 
 
 # -- shared helpers ----------------------------------------------------------------------------
-def scenes_dir():
-    here = Path(__file__).resolve().parent.parent
-    return Path(os.environ.get("PTRACE_SCENES", here.parent / "shared" / "scenes" / "cs184"))
-
-
 def warm_up():
     """Load every kernel from numba's cache (or compile it) so no timing includes the JIT."""
     tiny = accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
@@ -728,14 +723,14 @@ def chart_far(chart_dir, data):
 
 # -- light transport; the studies in the tests -------------------------------------------------
 def measure_light(quick):
-    """The light-transport studies' data (benchmarks/stability_light.py)."""
-    from . import stability_light
+    """The light-transport studies' data (studies/stability_light.py)."""
+    from studies import stability_light
     return stability_light.measure(quick)
 
 
 def write_light(data, chart_dir):
     """The light-transport sections, their charts saved beside the report."""
-    from . import stability_light
+    from studies import stability_light
     return "\n\n".join(stability_light.write_sections(data, chart_dir))
 
 
