@@ -10,11 +10,11 @@ code is 1 if any failed). Modules are imported lazily. `NAME` runs any registere
 
 --quick makes every run short with the arguments the registry gives each module (--quick for
 those that take it; first_images gets --repeats 1), and skips mitsuba_reference (it would
-overwrite the reference EXR that the tests compare against). Quick reports and charts go to --output-dir
-(default: a new temporary directory, printed), never over the full ones in benchmarks/results/;
-without --quick they go to benchmarks/results/ unless --output-dir is given. The directory is
-redirected by pointing benchmarks.report.RESULTS at it for the whole run, which every module
-writes through.
+overwrite the reference EXR that the tests compare against). Quick reports and charts go to
+--output-dir (default: a new temporary directory, printed), never over the full ones in
+benchmarks/results/; without --quick they go to benchmarks/results/ unless --output-dir is
+given. The directory is redirected by pointing benchmarks.report.RESULTS at it for the whole
+run, which every module writes through.
 """
 import argparse
 import importlib
