@@ -80,7 +80,7 @@ MUTANTS = {
         ["tests/accel/test_bvh.py"]),
     "collapse-not-least-cost": (
         "the BVH's collapse opens a node into its children where keeping it costs less",
-        [(BVH, "if opened < value:", "if opened > value:")],
+        [("accel/bvh_build.py", "if opened < value:", "if opened > value:")],
         ["tests/accel/test_bvh.py", "-k", "least_cost"]),
     "block-swapped-barycentrics": (
         "the BVH's four-lane watertight test returns (v, u) for (u, v)",
