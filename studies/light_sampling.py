@@ -1,16 +1,17 @@
 """Study: area lights sampled by solid angle against by area, side by side with Mitsuba 3.
 
-    python studies/light_sampling.py --before CHECKOUT
+    python studies/light_sampling.py --before [LABEL=]CHECKOUT [--before ...] [--label LABEL]
         [--scenes CBspheres_lambertian CBbunny CBsphere_light]
         [--spp 16 64] [--seeds 3] [--depth 5] [--output light_sampling.md]
 
-CHECKOUT is a checkout of ptrace before the change (a git worktree of the commit before it);
-this tree is the after. Each ptrace render runs in a fresh process of its tree (so both trees'
-kernels are their own), at 480x360, -m 5 -l 1, 2 threads, the default estimator (MIS, Sobol'),
+Each CHECKOUT is a checkout of ptrace before a change (a git worktree of an earlier commit);
+this tree is the last. Each ptrace render runs in a fresh process of its tree (so every tree's
+kernels are its own), at 480x360, -m 5 -l 1, 2 threads, the default estimator (MIS, Sobol'),
 on the course scene without its emissive quad (benchmarks.error_vs_time.test_scene, as
-error_vs_time measures); Mitsuba 3 llvm_ad_rgb renders the same scene with its multijitter
-sampler. Error: benchmarks.error_vs_time.relative_mse against its cached 1024-spp Mitsuba
-reference. For every spp and seed the three renderers run in turns; a cell is the mean
+error_vs_time measures) or CBsphere_light (sphere_lit); Mitsuba 3 llvm_ad_rgb renders the same
+scene with its multijitter sampler. Error: benchmarks.error_vs_time.relative_mse against its
+cached 1024-spp Mitsuba reference. For every spp and seed the renderers run in turns; a cell is
+the mean
 relative MSE over the seeds and the median seconds of the render call (kernels compiled
 before; a ptrace process times only its render call). Writes benchmarks/results/OUTPUT.
 """
@@ -108,7 +109,10 @@ def ptrace_render(tree, name, spp, seed, folder, depth=evt.DEPTH):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--before", required=True)
+    parser.add_argument("--before", required=True,
+                        help="LABEL=CHECKOUT (or CHECKOUT: labelled 'before'), repeatable: "
+                             "earlier trees rendered in turns with this one", action="append")
+    parser.add_argument("--label", default="after", help="this tree's label")
     parser.add_argument("--scenes", nargs="+",
                         default=["CBspheres_lambertian", "CBbunny", SPHERE_LIT])
     parser.add_argument("--depth", type=int, default=evt.DEPTH,
@@ -118,7 +122,11 @@ def main(argv=None):
     parser.add_argument("--output", default="light_sampling.md")
     args = parser.parse_args(argv)
     evt.DEPTH = args.depth      # the references' and Mitsuba's depth (read at call time)
-    trees = {"area (before)": Path(args.before).resolve(), "solid angle (after)": ROOT}
+    trees = {}
+    for entry in args.before:
+        label, _, path = entry.rpartition("=")
+        trees[label or "before"] = Path(path).resolve()
+    trees[args.label] = ROOT
     mitsuba = evt.Mitsuba()
     rows = []
     with tempfile.TemporaryDirectory() as folder:
@@ -142,7 +150,8 @@ def main(argv=None):
                     rows.append((name, spp, label, mse, seconds))
                     print(name, spp, label, f"{mse:.5f}", f"{seconds:.2f}", flush=True)
     lines = [report.header("Area lights by solid angle against by area, beside Mitsuba 3"),
-             f"480x360, `-m {args.depth} -l 1`, 2 threads; before: `{args.before}`; mean "
+             f"480x360, `-m {args.depth} -l 1`, 2 threads; trees: "
+             + ", ".join(f"{label} `{tree}`" for label, tree in trees.items()) + "; mean "
              f"relative MSE over {args.seeds} seeds against the cached {evt.REFERENCE_SPP}-spp "
              "Mitsuba reference, median seconds of the render call.", "",
              "| scene | spp | renderer | rel. MSE | seconds | rel. MSE x s | rel. MSE / "
