@@ -35,9 +35,9 @@ OPTIONS = {"light_samples": 4, "max_depth": 5, "seed": 1}
 
 def main(argv=None):
     import ptrace
-    from ptrace import distributed
-    from ptrace.settings import Settings
-    from ptrace.tiles import PASS_SAMPLES
+    from ptrace.rendering import distributed
+    from ptrace.rendering.settings import Settings
+    from ptrace.rendering.tiles import PASS_SAMPLES
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="a smaller frame, one repeat")

@@ -182,7 +182,7 @@ class Run:
 def timed_render(scene, threads, **options):
     """ptrace.render(scene, threads=threads, **options) with render_pixels timed."""
     import ptrace
-    import ptrace.tiles
+    import ptrace.rendering.tiles
     clock, stats = KernelClock(), {}
     with patched(ptrace.tiles, "render_pixels", clock.wrap(ptrace.tiles.render_pixels)):
         start = time.perf_counter()
@@ -281,7 +281,7 @@ def planned_blocks(n_pixels, spp):
     """render_pixels calls a render of n_pixels pixels makes without -a: ptrace.tiles' pass
     schedule, blocks of max(1, BLOCK_PATHS // pass_n) pixels."""
     import ptrace
-    from ptrace import tiles
+    from ptrace.rendering import tiles
     passes = tiles.Passes(ptrace.Settings(spp=spp), tiles.new_sums(n_pixels)).fixed()
     return sum(-(-n_pixels // max(1, tiles.BLOCK_PATHS // pass_n)) for _, pass_n in passes)
 
@@ -357,7 +357,7 @@ def counted_render(scene, threads, counter, **options):
     """A render through the counting face: (Run, the backend it built). accel.build,
     ptrace.tiles.render_pixels and ptrace.tiles.new_scratch are replaced for its length."""
     import accel
-    import ptrace.tiles
+    import ptrace.rendering.tiles
     build, built = accel.build, []
 
     def counting_build(*args, **kwargs):

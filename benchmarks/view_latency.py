@@ -49,7 +49,7 @@ def chromium(width=1000, height=1000):
 
 def serve(scene, settings, camera):
     """A ViewServer in a background thread, writing its saves to a scratch directory."""
-    from ptrace.view import ViewServer
+    from ptrace.app.view import ViewServer
     directory = tempfile.mkdtemp(prefix="ptrace-view-bench-")
     return ViewServer(scene, settings, camera,
                       outputs=(os.path.join(directory, "v.png"),
@@ -109,9 +109,9 @@ def measure(driver, served, drags):
 
 def main(argv=None):
     import ptrace
+    from ptrace.app.view import VIEW_SPP
     from ptrace.camera import course_camera
-    from ptrace.settings import Settings
-    from ptrace.view import VIEW_SPP
+    from ptrace.rendering.settings import Settings
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="2 drags, 320x240")
     parser.add_argument("--drags", type=int, default=None)
@@ -172,7 +172,7 @@ def screenshot(path, spp_shown=24):
 
     import ptrace
     from ptrace.camera import course_camera
-    from ptrace.settings import Settings
+    from ptrace.rendering.settings import Settings
     scene = ptrace.load(CORNELL)
     driver = chromium(720, 800)
     served = serve(scene, Settings(spp=1024, max_depth=5), course_camera(scene, 320, 240))

@@ -1,6 +1,6 @@
 """The integrator's integer codes and defaults that the settings need, in a module without
-numba: ptrace.settings (read by both commands, pickled to Dask workers) imports them from here,
-and ptrace.integrator (the compiled loop, which compiles them in as constants) imports and
+numba: ptrace.rendering.settings (read by both commands, pickled to Dask workers) imports them from
+here, and ptrace.integrator (the compiled loop, which compiles them in as constants) imports and
 re-exports them, so `from ptrace.integrator import SOBOL` still names the same value."""
 from collections import namedtuple
 
@@ -22,7 +22,7 @@ LIGHTS_ALL, LIGHTS_POWER, LIGHTS_AUTO, LIGHTS_BVH = 0, 1, 2, 3
 AUTO_EVERY_LIGHT = 4
 AUTO_MANY = LIGHTS_BVH
 
-# The integrator's options record (ptrace.settings.Settings.kernel_options builds it).
+# The integrator's options record (ptrace.rendering.settings.Settings.kernel_options builds it).
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
                                  "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
                                  "sampler", "light_sampler"], defaults=[LIGHTS_AUTO])

@@ -2,7 +2,7 @@
 
 Anything else that escapes is a bug in ptrace (an internal error): the CLI prints
 `ptrace: internal error: ...` with the traceback and exits 1, and a Dask tile task re-raises
-it chained to its cause (ptrace.distributed.TileTaskError), never as a PtraceError.
+it chained to its cause (ptrace.rendering.distributed.TileTaskError), never as a PtraceError.
 """
 import os
 import stat

@@ -750,8 +750,9 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
     if it has rows ((n, 8), else (0, 8)), gets the same per-pixel sums of each kept sample's
     first_hit_features (ptrace.features: AOVs), from one more trace of its camera ray.
 
-    Serial and without the GIL: the caller (ptrace.tiles) runs many such calls on small blocks
-    of pixels at once, one per thread (see there for why not prange). scratch is the backend's
+    Serial and without the GIL: the caller (ptrace.rendering.tiles) runs many such calls on small
+    blocks of pixels at once, one per thread (see there for why not prange). scratch is the
+    backend's
     (accel.compiled.new_scratch), one per concurrent call. This function and every function it
     calls with arrays are compiled without NRT (`_nrt=False`, see accel.compiled): otherwise
     each call between them increfs and decrefs every array of the records, atomically, once

@@ -43,9 +43,12 @@ import ptrace
 from benchmarks import templating
 from benchmarks.rays import scenes_dir
 from benchmarks.templating import blocks, fill, join, pinned_ids, plain
-from ptrace import integrator, tiles
+from ptrace import integrator
 from ptrace.camera import Camera, course_camera
 from ptrace.integrator import LUMINANCE
+from ptrace.rendering import tiles
+from ptrace.rendering.settings import Settings
+from ptrace.rendering.tiles import TileWork, new_sums
 from ptrace.scene import (
     AREA,
     DIFFUSE,
@@ -57,8 +60,6 @@ from ptrace.scene import (
     Scene,
     area_weighted_normals,
 )
-from ptrace.settings import Settings
-from ptrace.tiles import TileWork, new_sums
 
 REPRODUCE = "python -m studies.stability_light"
 REPRODUCE_ALL = "python -m studies.stability"

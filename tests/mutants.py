@@ -102,11 +102,12 @@ MUTANTS = {
         ["tests/ptrace/test_sampler.py"]),
     "adaptive-batch-off-by-one": (
         "adaptive sampling's passes take one sample more than the batch",
-        [("ptrace/tiles.py", "self.batch = adaptive[0] if", "self.batch = adaptive[0] + 1 if")],
+        [("ptrace/rendering/tiles.py", "self.batch = adaptive[0] if",
+          "self.batch = adaptive[0] + 1 if")],
         ["tests/ptrace/test_passes.py"]),
     "adaptive-one-batch-of-zeros": (
         "a pixel of equal samples stops after one batch",
-        [("ptrace/tiles.py", "(n >= 2 * batch)", "(n >= batch)")],
+        [("ptrace/rendering/tiles.py", "(n >= 2 * batch)", "(n >= batch)")],
         ["tests/ptrace/test_passes.py"]),
     "spawn-on-the-wrong-side": (
         "spawned rays leave on the side opposite their direction (self-intersection)",
@@ -119,7 +120,7 @@ MUTANTS = {
         ["tests/ptrace/test_estimators.py", "-k", "agree or analytic"]),
     "dask-forces-roulette": (
         "Dask workers render with roulette on whatever the settings say",
-        [("ptrace/distributed.py", 'settings = request["settings"]',
+        [("ptrace/rendering/distributed.py", 'settings = request["settings"]',
           'settings = type(request["settings"])(**{**vars(request["settings"]), '
           '"roulette": True})')],
         ["tests/ptrace/test_distributed.py", "-k", "option"]),

@@ -15,8 +15,8 @@ import pytest
 
 import accel
 import ptrace
-import ptrace.tiles
-import ptrace.timing
+import ptrace.rendering.tiles
+import ptrace.rendering.timing
 from benchmarks import profile_render as pr
 from benchmarks import report
 
@@ -109,7 +109,7 @@ def test_wall_phases_add_up_to_the_wall_time(cow):
 def test_planned_blocks_match_the_calls_of_a_render(cow):
     options = dict(TINY, spp=20, max_depth=1, resolution=(40, 30))   # passes of 16 and 4
     run = pr.timed_render(cow, 2, accel="bvh", **options)
-    from ptrace.tiles import BLOCK_PATHS
+    from ptrace.rendering.tiles import BLOCK_PATHS
     by_hand = -(-1200 // (BLOCK_PATHS // 16)) + -(-1200 // (BLOCK_PATHS // 4))   # 5 + 2 today
     assert run.calls == pr.planned_blocks(1200, 20) == by_hand
     assert 0 < run.busy <= 1 + 1e-6

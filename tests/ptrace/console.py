@@ -20,7 +20,7 @@ import pytest
 
 import ptrace
 from ptrace.image import rate_colours, read_image
-from ptrace.tiles import PASS_SAMPLES
+from ptrace.rendering.tiles import PASS_SAMPLES
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 

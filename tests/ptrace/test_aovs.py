@@ -10,7 +10,7 @@ import OpenImageIO as oiio
 import pytest
 
 import ptrace
-from ptrace import cli
+from ptrace.app import cli
 
 from scenes_by_hand import floor_plane, looking_down, make_scene, pixel_hits_on_floor, point_light
 

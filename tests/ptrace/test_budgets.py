@@ -12,7 +12,8 @@ import pytest
 from hostile_files import dae_instancing, glb_instancing, obj_with_map, png
 
 import ptrace
-from ptrace import budget, cli
+from ptrace import budget
+from ptrace.app import cli
 from ptrace.budget import BudgetError, parse_size
 
 from console import SHIPPED
@@ -176,7 +177,7 @@ def test_the_issues_environment_under_ulimit(tmp_path):
     sky = tmp_path / "sky.png"
     sky.write_bytes(png(16384, 8192))
     code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (4096000000, "
-            "4096000000)); from ptrace.cli import main; sys.exit(main(sys.argv[1:]))")
+            "4096000000)); from ptrace.app.cli import main; sys.exit(main(sys.argv[1:]))")
     result = subprocess.run([sys.executable, "-c", code, "--info", "-e", str(sky),
                              str(SHIPPED)], capture_output=True, text=True, timeout=120)
     lines = result.stderr.strip().splitlines()
@@ -186,7 +187,7 @@ def test_the_issues_environment_under_ulimit(tmp_path):
 
 def test_ptrace_view_takes_the_flag(tmp_path):
     """`ptrace view` checks the same budget before it serves anything."""
-    from ptrace import view
+    from ptrace.app import view
     path = glb_instancing(tmp_path / "many.glb", instances=2000, quads=10)
     args = view.parse(["-r", "8", "6", "-f", str(tmp_path / "x.png"), "--max-memory", "8M",
                        str(path)])

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace.cli import main
+from ptrace.app.cli import main
 from ptrace.pointing import front_for
 
 from console import run
@@ -330,7 +330,7 @@ def test_info_reports_the_flags_camera(tmp_path, capsys):
 
 def test_the_viewer_takes_the_camera_flags(tmp_path):
     """ptrace view points the camera as ptrace does (it read the flags and ignored them)."""
-    from ptrace import view
+    from ptrace.app import view
     output = str(tmp_path / "v.png")
     scene, _, camera, _ = view.prepare(view.parse(
         [str(SHIPPED), "-r", "64", "48", "-f", output, "--eye", "0,1,-3", "--look-at", "0,1,0"]))

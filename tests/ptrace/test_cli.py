@@ -31,7 +31,7 @@ def test_help():
 
 def test_info_on_every_course_scene(scenes_dir, capsys):
     """In this process (the console script's own start-up is tested on the shipped scene)."""
-    from ptrace.cli import main
+    from ptrace.app.cli import main
     files = sorted(scenes_dir.rglob("*.dae"))
     assert len(files) == 25
     for path in files:

@@ -9,7 +9,7 @@ import pytest
 from files_by_hand import gltf
 
 import ptrace
-from ptrace.cli import main
+from ptrace.app.cli import main
 from ptrace.io.default_light import EMITTER_SHARE, NOTE, emitter_share
 from ptrace.scene import AMBIENT, ENVIRONMENT
 

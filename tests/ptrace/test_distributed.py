@@ -15,9 +15,10 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace import cli, distributed, tiles
+from ptrace.app import cli
 from ptrace.errors import PtraceError
 from ptrace.image import read_image
+from ptrace.rendering import distributed, tiles
 
 from console import (
     INTERRUPTED_SPP,
@@ -156,7 +157,7 @@ def test_a_bug_in_a_task_is_not_a_user_error_and_keeps_its_cause(client):
 
 def test_the_cli_reports_a_bug_in_a_task_as_an_internal_error(client, monkeypatch, capsys,
                                                                tmp_path):
-    """Through ptrace.cli.main, on this module's cluster (its connect patched to return it):
+    """Through ptrace.app.cli.main, on this module's cluster (its connect patched to return it):
     exit 1, the tile and pass in the first line, the worker's cause in the traceback."""
     monkeypatch.setattr(distributed, "connect", lambda address: client)
     monkeypatch.setattr(distributed, "shutdown", lambda client, cluster=None: None)
@@ -205,7 +206,7 @@ def test_a_killed_worker_still_gives_the_identical_image(course_scene, monkeypat
                    for address, pid in pids.items()}
 
         def hold_after_the_first_tile(go_name):
-            from ptrace import tiles
+            from ptrace.rendering import tiles
             trace = tiles.TileWork.trace
             state = {"finished": 0}
 
@@ -280,7 +281,7 @@ def test_cli_ctrl_c_cancels_and_writes_what_was_merged(tmp_path):
 
 def test_default_mode_never_imports_dask():
     """The README's promise: without the dask flags ptrace never imports dask."""
-    code = ("import sys, ptrace; from ptrace import cli; "
+    code = ("import sys, ptrace; from ptrace.app import cli; "
             f"ptrace.render(ptrace.load({str(SHIPPED)!r}), spp=1, resolution=(8, 6)); "
             f"cli.main(['--info', {str(SHIPPED)!r}]); "
             "loaded = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')]; "
@@ -292,7 +293,7 @@ def test_default_mode_never_imports_dask():
 
 def test_missing_dask_says_how_to_install(tmp_path):
     code = ("import sys; sys.modules['dask'] = None; sys.modules['dask.distributed'] = None; "
-            "from ptrace import cli; "
+            "from ptrace.app import cli; "
             f"sys.exit(cli.main(['--workers', '2', '-f', {str(tmp_path / 'x.png')!r}, "
             f"{str(SHIPPED)!r}]))")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -336,7 +337,7 @@ def test_only_the_sync_cancel_race_is_dropped_from_tornado_logs():
                             "with a value in enclosing scope"))
     other = record(NameError("name 'x' is not defined"))
     before = list(logger.filters)
-    assert logger.filter(race)   # importing ptrace.distributed installed nothing
+    assert logger.filter(race)   # importing ptrace.rendering.distributed installed nothing
     with distributed.dropping_the_sync_cancel_race():
         assert not logger.filter(race)
         assert logger.filter(other) and logger.filter(record(RuntimeError("boom")))

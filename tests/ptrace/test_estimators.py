@@ -173,7 +173,7 @@ def test_estimator_and_sampler_settings_are_checked():
 
 def test_bvh_split_setting():
     from accel.bvh import SPLITS
-    from ptrace.settings import BVH_SPLITS
+    from ptrace.rendering.settings import BVH_SPLITS
     assert BVH_SPLITS == SPLITS
     with pytest.raises(ptrace.PtraceError, match="BVH split"):
         ptrace.Settings(bvh_split="median")

@@ -13,8 +13,8 @@ import pytest
 import trimesh
 
 import ptrace
+from ptrace.app.cli import scene_info
 from ptrace.bsdf import conductor_fresnel
-from ptrace.cli import scene_info
 from ptrace.io.materials import conductor_from_colour, linear_rgb
 from ptrace.scene import (
     CLAMP,

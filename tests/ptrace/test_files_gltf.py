@@ -11,7 +11,7 @@ import pytest
 from files_by_hand import QUAD, QUAD_FACES, gltf, png_bytes, quad
 
 import ptrace
-from ptrace.cli import grouped_notes
+from ptrace.app.cli import grouped_notes
 from ptrace.io.materials import linear_rgb
 from ptrace.scene import AMBIENT, DIRECTIONAL, GLTF_PBR, SPOT
 

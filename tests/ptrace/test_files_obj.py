@@ -8,7 +8,7 @@ import pytest
 from files_by_hand import png_bytes, rgb16_png
 
 import ptrace
-from ptrace.cli import grouped_notes
+from ptrace.app.cli import grouped_notes
 from ptrace.io.materials import linear_rgb
 from ptrace.scene import DIFFUSE
 

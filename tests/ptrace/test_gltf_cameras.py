@@ -10,7 +10,7 @@ import pytest
 from files_by_hand import gltf
 
 import ptrace
-from ptrace.cli import main
+from ptrace.app.cli import main
 from ptrace.pointing import default_camera, file_camera, framing_camera
 
 TRIANGLE = dict(positions=[[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]],

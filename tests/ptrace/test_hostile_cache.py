@@ -11,7 +11,8 @@ import sys
 
 import pytest
 
-from ptrace import cli, jit
+from ptrace import jit
+from ptrace.app import cli
 
 from console import SHIPPED
 

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace import cli
+from ptrace.app import cli
 from ptrace.camera import load_camera_settings
-from ptrace.renderer import MAX_SIDE
-from ptrace.settings import RANGES, Settings
+from ptrace.rendering.renderer import MAX_SIDE
+from ptrace.rendering.settings import RANGES, Settings
 
 from console import SHIPPED, ptrace_command
 

@@ -11,7 +11,7 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from ptrace import cli
+from ptrace.app import cli
 from ptrace.errors import PtraceError
 from ptrace.image import write_image, write_images
 

@@ -134,7 +134,8 @@ def test_the_graph_sees_module_and_function_level_imports(tmp_path):
 
 def test_no_import_cycle_in_ptrace_or_accel():
     graph = import_graph()
-    assert {"ptrace.cli", "ptrace.view", "ptrace.settings", "accel.bvh"} <= set(graph)
+    assert {"ptrace.app.cli", "ptrace.app.view", "ptrace.rendering.settings",
+            "accel.bvh"} <= set(graph)
     found = cycles(graph)
     assert found == [], "\n".join(line for component in found
                                   for line in describe(graph, component) + [""])
@@ -148,11 +149,11 @@ def test_accel_never_imports_ptrace():
 
 
 def test_the_settings_import_no_kernel_module():
-    """ptrace.settings (pickled to every Dask worker, read by both commands) and the commands'
-    options import no numba code at module level: what they load is what they need."""
+    """ptrace.rendering.settings (pickled to every Dask worker, read by both commands) and the
+    commands' options import no numba code at module level: what they load is what they need."""
     kernels = {"ptrace.integrator", "ptrace.lights", "ptrace.light_bvh", "ptrace.bsdf",
                "ptrace.sampling", "ptrace.textures", "ptrace.environment"}
-    for name in ("ptrace.settings", "ptrace.codes", "ptrace.options"):
+    for name in ("ptrace.rendering.settings", "ptrace.codes", "ptrace.app.options"):
         path = modules()[name]
         tree = ast.parse(path.read_text(encoding="utf-8"))
         top = set()

@@ -9,8 +9,9 @@ import sys
 
 import pytest
 
-from ptrace import cli, tiles
+from ptrace.app import cli
 from ptrace.errors import PtraceError
+from ptrace.rendering import tiles
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 
@@ -29,7 +30,7 @@ def test_a_bug_in_the_render_is_an_internal_error_with_its_traceback(tmp_path, m
     lines = err.strip().splitlines()
     assert lines[0] == "ptrace: internal error: RuntimeError: planted bug in the tile work"
     assert "Traceback (most recent call last):" in err
-    assert "in planted_bug" in err and f'{os.path.join("ptrace", "cli.py")}", line' in err
+    assert "in planted_bug" in err and f'{os.path.join("ptrace", "app", "cli.py")}", line' in err
     assert "bug in ptrace" in lines[-1] and "report" in lines[-1]
     assert "ptrace: error:" not in err
     assert list(tmp_path.iterdir()) == []   # nothing written
@@ -62,7 +63,7 @@ def test_any_other_exception_is_internal(tmp_path, monkeypatch, capsys, error):
 def test_the_console_entry_exits_1_with_the_traceback(tmp_path):
     """The real entry point (python -m ptrace, as the console script calls cli.main) in a fresh
     process, with a bug planted before it runs."""
-    code = ("import runpy, sys; from ptrace import tiles\n"
+    code = ("import runpy, sys; from ptrace.rendering import tiles\n"
             "def planted_bug(*args, **kwargs):\n"
             "    raise RuntimeError('planted bug in the tile work')\n"
             "tiles.TileWork.trace = planted_bug\n"

@@ -1,5 +1,5 @@
-"""The render job (ptrace.tiles.RenderJob) that the in-process executor, a Dask worker and the
-viewer's sessions run: its backend built once, reused for other settings and another camera
+"""The render job (ptrace.rendering.tiles.RenderJob) that the in-process executor, a Dask worker and
+the viewer's sessions run: its backend built once, reused for other settings and another camera
 without building again (only the records that depend on the settings are made again), and
 tracing the same bits as a job built afresh."""
 import dataclasses
@@ -10,10 +10,10 @@ import pytest
 
 import accel
 import ptrace
-from ptrace import view_render
+from ptrace.app import view_render
 from ptrace.integrator import scene_records
-from ptrace.settings import Settings
-from ptrace.tiles import RenderJob, new_sums
+from ptrace.rendering.settings import Settings
+from ptrace.rendering.tiles import RenderJob, new_sums
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 

@@ -170,7 +170,7 @@ def test_records_without_the_tree_choose_by_power():
     """A kernel asked for bvh with records built without the tree (scene_records' default)
     chooses by power rather than finding no light."""
     from ptrace.integrator import light_mode
-    from ptrace.settings import Settings
+    from ptrace.rendering.settings import Settings
     scene = lit_floor()
     options = Settings(light_sampler="bvh").kernel_options()
     assert light_mode(options, scene_records(scene)[2]) == 1       # LIGHTS_POWER

@@ -180,7 +180,7 @@ def test_same_seed_same_image_whatever_threads_chunks_and_backend(monkeypatch):
     """The README's promise: the same seed gives the same image whatever the thread count or
     batch size, naive and bvh give bit-identical images, embree differs only where float32
     moves a hit, and another seed gives another image."""
-    from ptrace import tiles
+    from ptrace.rendering import tiles
     scene = ptrace.load(SHIPPED)
     kwargs = dict(resolution=(40, 30), spp=4, light_samples=2, max_depth=4, seed=7)
     reference = ptrace.render(scene, threads=1, **kwargs)

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 import ptrace
-from ptrace.cli import grouped_notes
+from ptrace.app.cli import grouped_notes
 
 from console import SHIPPED
 

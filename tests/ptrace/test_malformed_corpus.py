@@ -1,6 +1,6 @@
 """Over 200 generated malformed scene files: each ends in one line, exit code 2, with bounded
 memory and before any rendering starts (work counts, not wall-clock limits: speed lives in
-benchmarks/), and leaves no output file. In-process through ptrace.cli.main for the corpus, and
+benchmarks/), and leaves no output file. In-process through ptrace.app.cli.main for the corpus, and
 through the real console script for a sample of it."""
 import pathlib
 import subprocess
@@ -10,7 +10,7 @@ import tracemalloc
 import pytest
 
 import ptrace
-from ptrace.cli import main
+from ptrace.app.cli import main
 
 from malformed_corpus import corpus
 
@@ -39,7 +39,7 @@ def test_every_malformed_file_fails_cleanly(tmp_path, cases, capsys, monkeypatch
     def no_render(scene, **options):   # a malformed file must be refused before this
         renders.append(scene.path)
         raise RuntimeError("a malformed scene reached the renderer")
-    monkeypatch.setattr(ptrace, "load", counted_load)   # what ptrace.cli.run calls
+    monkeypatch.setattr(ptrace, "load", counted_load)   # what ptrace.app.cli.run calls
     monkeypatch.setattr(ptrace, "render", no_render)
     largest = (0, "")
     for name, text in cases:

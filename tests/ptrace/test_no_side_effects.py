@@ -2,7 +2,7 @@
 ptrace (with its CLI and distributed modules) and rendering in-process leaves the logging
 configuration, warning filters, signal handlers, numpy's error state, numba's thread count, the
 floating-point mode and the environment as they were. (malloc's settings cannot be read back;
-no module calls mallopt any more.) Only the CLI (ptrace.cli.main), which owns its process, may
+no module calls mallopt any more.) Only the CLI (ptrace.app.cli.main), which owns its process, may
 change them, and a distributed render scopes its one logging filter to itself (see
 test_distributed.py)."""
 import json
@@ -58,8 +58,8 @@ def state():
 ORIGINAL_SHOWWARNING = warnings.showwarning
 before = state()
 import ptrace
-import ptrace.cli
-import ptrace.distributed
+import ptrace.app.cli
+import ptrace.rendering.distributed
 rays, lit = [], []
 scene = ptrace.load(sys.argv[1])
 for backend in ("bvh", "embree"):   # the embree library is loaded and its device made

@@ -1,11 +1,11 @@
-"""ptrace and ptrace view read their flags through one module (ptrace.options): the same bad
+"""ptrace and ptrace view read their flags through one module (ptrace.app.options): the same bad
 flag gets the same one line and exit code 2 from both, before any scene is read, and a good set
 of flags gives both commands the same Settings."""
 import pathlib
 
 import pytest
 
-from ptrace import cli, options, view
+from ptrace.app import cli, options, view
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 

@@ -1,10 +1,11 @@
-"""The pass schedule and adaptive sampling's stopping rule (ptrace.tiles), on hand-made sums."""
+"""The pass schedule and adaptive sampling's stopping rule (ptrace.rendering.tiles), on hand-made
+sums."""
 import math
 
 import numpy as np
 
-from ptrace.settings import Settings
-from ptrace.tiles import Passes, converged
+from ptrace.rendering.settings import Settings
+from ptrace.rendering.tiles import Passes, converged
 
 
 def sums_for(n_pixels):

@@ -13,7 +13,7 @@ benchmarks.mitsuba_reference.pixel_case, the same function the references were m
 (quad dropped, or light dropped), at pixel_camera's 96x72 (the course's 480x360 view at 1/5).
 
 The statistic is on luminance (0.2126, 0.7152, 0.0722): ptrace keeps per pixel the sum and the
-sum of squares of its samples' luminance (ptrace.tiles), so one render gives each pixel's
+sum of squares of its samples' luminance (ptrace.rendering.tiles), so one render gives each pixel's
 sample variance with n - 1 degrees of freedom (per channel it would take K renders and a t-test
 with K - 1 degrees of freedom: far less power), and it is one test per pixel instead of three
 correlated ones. For pixel i, with n = SPP ptrace samples:
@@ -67,7 +67,7 @@ from scipy import ndimage
 from scipy.stats import norm
 
 import ptrace
-import ptrace.renderer
+import ptrace.rendering.renderer
 from benchmarks.mitsuba_reference import PIXEL_CASES, PIXEL_DEPTH, REFERENCES, pixel_case
 from ptrace.integrator import LUMINANCE
 
@@ -90,10 +90,10 @@ CASES = [(name, "_schlick" if name == "CBspheres" else "") for name in PIXEL_CAS
 
 def render_with_variance(scene, camera, spp, max_depth, seed, **settings):
     """ptrace.render plus, per pixel, the mean luminance of the samples and its sample
-    variance, from the render's own sums (ptrace.tiles: rgb, luminance, luminance^2, count;
-    rows bottom first). Returns (image, mean, sample variance, count, seconds)."""
+    variance, from the render's own sums (ptrace.rendering.tiles: rgb, luminance, luminance^2,
+    count; rows bottom first). Returns (image, mean, sample variance, count, seconds)."""
     captured = []
-    original = ptrace.renderer.new_sums
+    original = ptrace.rendering.renderer.new_sums
 
     def capturing(n_pixels):
         sums = original(n_pixels)
@@ -101,14 +101,14 @@ def render_with_variance(scene, camera, spp, max_depth, seed, **settings):
         return sums
 
     width, height = camera.width, camera.height
-    ptrace.renderer.new_sums = capturing
+    ptrace.rendering.renderer.new_sums = capturing
     try:
         start = time.perf_counter()
         image = ptrace.render(scene, spp=spp, resolution=(width, height), camera=camera,
                               max_depth=max_depth, light_samples=1, seed=seed, **settings)
         seconds = time.perf_counter() - start
     finally:
-        ptrace.renderer.new_sums = original
+        ptrace.rendering.renderer.new_sums = original
     assert len(captured) == 1, "ptrace.render no longer gathers its sums through new_sums"
     _, sum_l, sum_l2, count = captured[0]
     n = count.astype(np.float64)

@@ -19,7 +19,7 @@ import accel
 import ptrace
 from accel.compiled import new_scratch
 from ptrace.integrator import scene_records, trace_path
-from ptrace.settings import Settings
+from ptrace.rendering.settings import Settings
 
 from scenes_by_hand import furnace
 

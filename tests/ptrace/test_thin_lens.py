@@ -94,7 +94,7 @@ def test_the_lens_settings_are_checked(bad):
 def test_the_command_line_and_a_camera_file_set_the_lens(tmp_path):
     """-b and -d reach the camera (a focused render differs from the pinhole one, -b 0 equals
     it), and a course camera dump's trailing focalDistance lensRadius are read."""
-    from ptrace import cli
+    from ptrace.app import cli
     from ptrace.camera import load_camera_settings
     from ptrace.image import read_image
     shipped = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"

@@ -19,11 +19,11 @@ import tornado.httpclient
 import tornado.websocket
 
 import ptrace
-from ptrace import cli, view, view_render, view_session
+from ptrace.app import cli, view, view_render, view_session
 from ptrace.camera import course_camera
 from ptrace.features import denoise
 from ptrace.image import course_8bit, read_image
-from ptrace.settings import Settings
+from ptrace.rendering.settings import Settings
 
 from console import ptrace_command
 
@@ -327,7 +327,7 @@ def test_the_token_is_required_and_nothing_else_is_served(cornell):
         assert await status(url + "x") == 403
         assert await status(base + "?token=") == 403
         assert await status(base + "view_page.html?" + url.partition("?")[2]) == 404
-        assert await status(base + "../ptrace/view.py?" + url.partition("?")[2]) == 404
+        assert await status(base + "../app/view.py?" + url.partition("?")[2]) == 404
         assert await status(url, headers={"Host": f"evil.example:{server.port}"}) == 403
         for address in (socket_url(url, token=False), socket_url(url) + "x"):
             with pytest.raises(tornado.httpclient.HTTPClientError) as refused:

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace import view
+from ptrace.app import view
 from ptrace.camera import course_camera
 from ptrace.image import course_8bit, read_image
-from ptrace.settings import Settings
+from ptrace.rendering.settings import Settings
 
 SHIPPED = pathlib.Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae"
 W, H = 64, 48

@@ -15,10 +15,11 @@ import tornado.websocket
 from test_view import SHIPPED, Frames, H, W, next_frame, preview, socket_url
 
 import ptrace
-from ptrace import cli, tiles, view, view_messages, view_render
+from ptrace.app import cli, view, view_messages, view_render
 from ptrace.camera import course_camera
 from ptrace.image import read_image
-from ptrace.settings import Settings
+from ptrace.rendering import tiles
+from ptrace.rendering.settings import Settings
 
 EXPENSIVE = dict(light_samples=1024, max_depth=8)   # a few ms a path: a TileWork block of 4096
                                                     # paths would take seconds

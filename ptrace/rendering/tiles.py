@@ -17,8 +17,8 @@ import numpy as np
 import accel
 from accel.compiled import new_scratch
 
-from .integrator import camera_record, render_pixels, scene_records
-from .jit import COLD_COMPILE_SECONDS, is_cold
+from ..integrator import camera_record, render_pixels, scene_records
+from ..jit import COLD_COMPILE_SECONDS, is_cold
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
@@ -159,7 +159,7 @@ class RenderJob:
         """Build the backend (accel.build, of the settings' kind and options) and the job on it.
         notice(message), if given, hears that the kernels must be compiled first (a cold numba
         cache); lap(phase), if given, is called as the "compile" check, the "build" and the
-        "records" begin (ptrace.timing.Phases.enter). The job's build_seconds and
+        "records" begin (ptrace.rendering.timing.Phases.enter). The job's build_seconds and
         records_seconds are the wall time of the build and of the records."""
         lap = lap if lap is not None else (lambda phase: None)
         lap("compile")

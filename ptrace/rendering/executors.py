@@ -1,6 +1,6 @@
 """The in-process executor: every pass's blocks of pixels traced on this machine's numba threads,
-through one ptrace.tiles.RenderJob. (The Dask executor, ptrace.distributed, sends tiles of the
-same passes to workers that trace them through their own RenderJob.)"""
+through one ptrace.rendering.tiles.RenderJob. (The Dask executor, ptrace.rendering.distributed,
+sends tiles of the same passes to workers that trace them through their own RenderJob.)"""
 import time
 
 from .tiles import RenderJob
@@ -8,8 +8,8 @@ from .tiles import RenderJob
 
 def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases, notice=None,
                       features=None):
-    """Run the pass schedule over the pixels; Ctrl-C stops between kernel calls and keeps what
-    was summed. phases (a running ptrace.timing.Phases of IN_PROCESS_PHASES) gets the compile,
+    """Run the pass schedule over the pixels; Ctrl-C stops between kernel calls and keeps what was
+    summed. phases (a running ptrace.rendering.timing.Phases of IN_PROCESS_PHASES) gets the compile,
     build, records and render phases and the counts of passes and kernel calls. Returns the
     render's figures for stats. features: the AOVs' per-pixel sums, or None (RenderJob.trace)."""
     job = RenderJob.build(scene, settings, camera, notice, phases.enter)

@@ -15,12 +15,12 @@ from concurrent.futures import ThreadPoolExecutor, wait
 
 import numpy as np
 
-from .budget import machine_memory as physical_memory  # (the name tests patch)
-from .camera import look_at
-from .errors import PtraceError
-from .features import denoise, denoised_path
-from .image import write_image
-from .tiles import BLOCK_PATHS, RenderJob
+from ..budget import machine_memory as physical_memory  # (the name tests patch)
+from ..camera import look_at
+from ..errors import PtraceError
+from ..features import denoise, denoised_path
+from ..image import write_image
+from ..rendering.tiles import BLOCK_PATHS, RenderJob
 
 ESTIMATORS = ("mis", "light", "hemisphere")
 MODES = ("image", "rate", "normals")
@@ -137,7 +137,7 @@ def mean_image(sums, width, height):
 
 def denoiser_missing():
     """None when the denoised view can work, else its one-line reason (pyoidn is missing)."""
-    from .features import require_denoiser
+    from ..features import require_denoiser
     try:
         require_denoiser()
     except PtraceError:
@@ -152,7 +152,7 @@ FLAG_NAMES = {"spp": "-s", "seed": "--seed", "light_samples": "-l", "max_depth":
 
 
 def settings_of(scene, settings, mode, message):
-    """(settings, view) of a page's settings message (checked by ptrace.view_messages): the
+    """(settings, view) of a page's settings message (checked by ptrace.app.view_messages): the
     settings changed, validated as Settings and check_settings validate them, and the view
     (image, rate or normals; the normals view is the normals integrator)."""
     changes = {name: message[name] for name in ("spp", "max_depth", "light_samples")

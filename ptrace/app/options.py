@@ -51,14 +51,14 @@ def int_at_least(name, minimum, maximum=None):
 
 
 def int_range(name, setting):
-    """A parser of the integer setting `setting` in its ptrace.settings.RANGES range."""
-    from .settings import RANGES
+    """A parser of the integer setting `setting` in its ptrace.rendering.settings.RANGES range."""
+    from ..rendering.settings import RANGES
     return int_at_least(name, *RANGES[setting])
 
 
 def range_text(setting):
     """The range of the integer setting `setting`, as the help says it."""
-    from .settings import RANGES
+    from ..rendering.settings import RANGES
     low, high = RANGES[setting]
     return f"{low} to {high:,}".replace(",", "_") if high > 10 ** 6 else f"{low} to {high}"
 
@@ -85,8 +85,8 @@ def positive_float(name):
 
 def size(text):
     """A memory size such as 4G or 512M, in bytes (ptrace.budget.parse_size)."""
-    from .budget import parse_size
-    from .errors import PtraceError
+    from ..budget import parse_size
+    from ..errors import PtraceError
     try:
         return parse_size(text)
     except PtraceError as error:
@@ -103,10 +103,9 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     """The parser of `ptrace`'s flags (`ptrace view` adds its own to the same)."""
     import accel
 
-    from .cli_camera import add_camera_flags
-    from .codes import AUTO_EVERY_LIGHT, AUTO_MANY
-    from .renderer import MAX_SIDE, PIXEL_BYTES
-    from .settings import (
+    from ..codes import AUTO_EVERY_LIGHT, AUTO_MANY
+    from ..rendering.renderer import MAX_SIDE, PIXEL_BYTES
+    from ..rendering.settings import (
         BVH_SPLITS,
         DIRECT,
         INTEGRATORS,
@@ -114,6 +113,7 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
         LIGHT_SAMPLERS,
         SAMPLERS,
     )
+    from .cli_camera import add_camera_flags
     many = next(name for name, code in LIGHT_SAMPLER_CODES.items() if code == AUTO_MANY)
     parser = Parser(prog=prog, description=description)
     add = parser.add_argument
@@ -238,7 +238,7 @@ class Plan:
 
 def settings_of(args):
     """The Settings of the parsed flags."""
-    from .settings import Settings
+    from ..rendering.settings import Settings
     return Settings.from_options(
         spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
         light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
@@ -251,11 +251,11 @@ def plan(args, files_of):
     an .exr output), --denoise's library, every file files_of(output) says the command may
     write, the settings and the image buffers against --max-memory (with --denoise or --aov,
     the AOVs' buffers too); with --info only the output's format and --aov. Returns a Plan."""
-    from .budget import Budget
-    from .errors import PtraceError
-    from .features import require_denoiser
-    from .image import FORMATS, check_output_path
-    from .renderer import check_frame
+    from ..budget import Budget
+    from ..errors import PtraceError
+    from ..features import require_denoiser
+    from ..image import FORMATS, check_output_path
+    from ..rendering.renderer import check_frame
     budget = Budget.of(args.max_memory)     # one budget: the scene, -e and the render
     output = args.output
     if output is None:
@@ -264,7 +264,7 @@ def plan(args, files_of):
         raise PtraceError(f"{output}: output must end in {' or '.join(FORMATS)}")
     aov_names = ()
     if args.aov is not None:
-        from .features import parse_aovs
+        from ..features import parse_aovs
         try:
             aov_names = parse_aovs(args.aov)
         except ValueError as error:
@@ -287,13 +287,13 @@ def plan(args, files_of):
 
 def scene_and_camera(args, budget):
     """The scene of the flags (its file, -e's environment, a mesh file's default light unless
-    --no-default-light) and the camera they give at -r's size (ptrace.cli_camera)."""
-    from . import load
+    --no-default-light) and the camera they give at -r's size (ptrace.app.cli_camera)."""
+    from .. import load
     from .cli_camera import camera_from_flags, check_pointing
     check_pointing(args)
     scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget)
     if args.environment is not None:
-        from .environment import load_environment
+        from ..environment import load_environment
         scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
     width, height = args.resolution
     return scene, camera_from_flags(scene, args, width, height)
@@ -305,7 +305,7 @@ def guarded(command, interrupted="interrupted"):
     """command()'s exit code, or the one of what it raised: a user's error as one line and 2,
     Ctrl-C as `ptrace: <interrupted>` and 130, a reader that left (`ptrace --info X | head`)
     as 141, and anything else as a bug (internal_error) and 1."""
-    from .errors import PtraceError
+    from ..errors import PtraceError
     try:
         return command()
     except (UsageError, argparse.ArgumentTypeError, PtraceError) as error:

@@ -1,10 +1,11 @@
 """render(): validate the settings, pick an executor, assemble the image.
 
-The work itself is ptrace.tiles (the pass schedule and the render job, through the compiled path
-loop of ptrace.integrator); an executor runs it in this process (ptrace.executors) or on a Dask
-cluster (ptrace.distributed), and ptrace.timing clocks the phases. Random numbers are keyed by
-(seed, pixel, sample, dimension), and pass sizes depend only on -s and -a, so an image does not
-depend on threads, chunks, tiles or backend.
+The work itself is ptrace.rendering.tiles (the pass schedule and the render job, through the
+compiled path loop of ptrace.integrator); an executor runs it in this process
+(ptrace.rendering.executors) or on a Dask cluster (ptrace.rendering.distributed), and
+ptrace.rendering.timing clocks the phases. Random numbers are keyed by (seed, pixel, sample,
+dimension), and pass sizes depend only on -s and -a, so an image does not depend on threads, chunks,
+tiles or backend.
 """
 import sys
 import warnings
@@ -12,13 +13,13 @@ import warnings
 import numba
 import numpy as np
 
-from .budget import Budget, check_render
-from .camera import BASE_HEIGHT, BASE_WIDTH
-from .errors import PtraceError
+from ..budget import Budget, check_render
+from ..camera import BASE_HEIGHT, BASE_WIDTH
+from ..errors import PtraceError
+from ..features import FEATURES, aov_images
+from ..jit import cache_notes
+from ..pointing import default_camera
 from .executors import render_in_process
-from .features import FEATURES, aov_images
-from .jit import cache_notes
-from .pointing import default_camera
 from .settings import Settings
 from .tiles import Passes, new_sums
 from .timing import DASK_PHASES, IN_PROCESS_PHASES, Phases
@@ -81,14 +82,14 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     a size other than 800x600 being a crop of the same focal length, not a rescale; for a mesh
     file, one that frames the scene's bounds at that size), and a given resolution other than
     its own keeps its focal length in pixels; crop (x, y, dx, dy) renders only that cell (y
-    counted from the bottom, like the course) and returns it alone; options are the light
-    transport flags of ptrace.settings.Settings: light_samples (-l, default 1), max_depth (-m,
+    counted from the bottom, like the course) and returns it alone; options are the light transport
+    flags of ptrace.rendering.settings.Settings: light_samples (-l, default 1), max_depth (-m,
     default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
     (default True; False runs every path to max_depth, for comparisons: the course has no such
     flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
     if a dict, receives build and render seconds, rays traced, per-pixel sample counts
     ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C interrupted
-    the render, "phases" ({phase: wall seconds} of ptrace.timing.IN_PROCESS_PHASES, or
+    the render, "phases" ({phase: wall seconds} of ptrace.rendering.timing.IN_PROCESS_PHASES, or
     DASK_PHASES with a client: they cover this call without overlapping) and "counts" (passes
     and kernel calls in-process, functions numba compiled; tasks on Dask). client renders on a
     Dask cluster; notice, if given, is called with a one-line message when the kernels must be

@@ -3,10 +3,10 @@
 A tornado server (HTTP and WebSocket in one well-kept library, already in the tree through
 dask.distributed) bound to 127.0.0.1 on a free port serves one page (view_page.html) and one
 socket, both only with the unguessable token of the printed URL, which no log line shows
-(_Redact). Each socket is its own session (ptrace.view_session.Preview): its own camera,
-settings and render thread over the shared scene and backends (ptrace.view_render.Backends);
-every message is checked (ptrace.view_messages) and answered, an error with an error reply;
-closing the socket stops its render within one kernel call (ptrace.view_render.Blocks), and a
+(_Redact). Each socket is its own session (ptrace.app.view_session.Preview): its own camera,
+settings and render thread over the shared scene and backends (ptrace.app.view_render.Backends);
+every message is checked (ptrace.app.view_messages) and answered, an error with an error reply;
+closing the socket stops its render within one kernel call (ptrace.app.view_render.Blocks), and a
 session counts against the cap until its render thread has ended.
 """
 import asyncio
@@ -24,9 +24,9 @@ import numba
 
 import accel
 
+from ..errors import PtraceError
 from . import options, view_messages, view_render
 from .cli_camera import check_pointing
-from .errors import PtraceError
 from .view_render import Backends, denoiser_missing, page_settings
 from .view_session import Preview
 
@@ -70,7 +70,7 @@ _redact = _Redact()
 # --- the server -------------------------------------------------------------------------
 
 def page():
-    return resources.files("ptrace").joinpath("view_page.html").read_text(encoding="utf-8")
+    return resources.files("ptrace.app").joinpath("view_page.html").read_text(encoding="utf-8")
 
 
 class ViewServer:
@@ -237,7 +237,7 @@ def _open_browser(url):
 
 
 def parse(argv):
-    """The arguments of `ptrace view`: ptrace's flags (ptrace.options) and --no-browser, -s
+    """The arguments of `ptrace view`: ptrace's flags (ptrace.app.options) and --no-browser, -s
     defaulting to VIEW_SPP; the flags of what the viewer does not do are refused."""
     parser = options.build_parser(
         prog="ptrace view",
@@ -260,8 +260,8 @@ def parse(argv):
 
 def prepare(args):
     """(scene, settings, camera, outputs) of the view's flags, checked as ptrace checks them
-    (ptrace.options), and against what a viewer holds: its threads, its sessions' buffers."""
-    from .budget import check_render
+    (ptrace.app.options), and against what a viewer holds: its threads, its sessions' buffers."""
+    from ..budget import check_render
     job = options.plan(args, lambda output: [os.path.splitext(output)[0] + extension
                                              for extension in (".png", ".exr")])
     if args.threads is not None and args.threads > numba.config.NUMBA_NUM_THREADS:

@@ -1,4 +1,4 @@
-"""The camera flags of `ptrace` (and, through ptrace.options.build_parser, of `ptrace view`):
+"""The camera flags of `ptrace` (and, through ptrace.app.options.build_parser, of `ptrace view`):
 -c's course camera file, --eye/--look-at/--up/--fov's pointed camera (ptrace.pointing),
 --camera-index's file camera, -b/-d's thin lens, and the checks that refuse flags which do not
 go together in one line. camera_from_flags is the one step both commands take after loading
@@ -88,8 +88,8 @@ def check_pointing(args):
     """Refuse, before the scene is read, camera flags that do not go together: -c with
     --eye/--look-at/--up/--fov, --look-at without --eye, --up or --fov without --eye on a course
     scene (which keeps the course's camera), and an --eye, --look-at and --up that give no view."""
-    from .errors import PtraceError
-    from .pointing import is_course_path, view_axes
+    from ..errors import PtraceError
+    from ..pointing import is_course_path, view_axes
     given = [flag for flag, value in (("--eye", args.eye), ("--look-at", args.look_at),
                                       ("--up", args.up), ("--fov", args.fov)) if value is not None]
     if args.camera is not None and given:
@@ -118,9 +118,9 @@ def camera_from_flags(scene, args, width, height):
     width x height, or the scene's default camera (ptrace.pointing.default_camera). First, a
     mesh file's default light is dropped from the scene when -e gave it an environment or
     --no-default-light is given (its note says so)."""
-    from .camera import load_camera_settings
-    from .io.default_light import without_default_light
-    from .pointing import (
+    from ..camera import load_camera_settings
+    from ..io.default_light import without_default_light
+    from ..pointing import (
         default_camera,
         file_camera,
         file_camera_notes,
@@ -163,8 +163,8 @@ def camera_from_flags(scene, args, width, height):
 def up_note(scene, up):
     """The note that --up turns the camera and not the lights that are about world +Y (the
     ambient light's hemisphere, -e's sky), when up is not +Y and the scene has such a light."""
-    from .pointing import Y_UP, unit
-    from .scene import AMBIENT, ENVIRONMENT
+    from ..pointing import Y_UP, unit
+    from ..scene import AMBIENT, ENVIRONMENT
     if up is None or unit(up, "--up") @ np.array(Y_UP) > 1 - 1e-12:
         return None
     kinds = set(np.asarray(scene.lights.kind).tolist())

@@ -1,11 +1,11 @@
 """One `ptrace view` viewer's session (Preview): its own camera, settings and render thread
-over the shared scene and backends (ptrace.view_render). The render reuses ptrace.tiles: the
-pass schedule of ptrace.render (Passes) through RenderJob.trace, in the short kernel calls of
-ptrace.view_render.Blocks, so N samples here are bit for bit ptrace.render's N samples. Each
-pass is traced into fresh sums and then added to the image's (0 + x is x, so the bits are the
-same), which lets a camera move, a setting or a closed page abort a pass at any call without
-leaving half a pass behind. After a reset, and while the camera
-moves, a throwaway frame of 1 sample at reduced resolution is shown first.
+over the shared scene and backends (ptrace.app.view_render). The render reuses
+ptrace.rendering.tiles: the pass schedule of ptrace.render (Passes) through RenderJob.trace, in the
+short kernel calls of ptrace.app.view_render.Blocks, so N samples here are bit for bit
+ptrace.render's N samples. Each pass is traced into fresh sums and then added to the image's (0 + x
+is x, so the bits are the same), which lets a camera move, a setting or a closed page abort a pass
+at any call without leaving half a pass behind. After a reset, and while the camera moves, a
+throwaway frame of 1 sample at reduced resolution is shown first.
 
 The denoised toggle: while it is on, each full-resolution frame (not a quick one, not the rate
 view) is ptrace --denoise's image of the merged passes, guided by the AOVs' sums, which the
@@ -24,11 +24,11 @@ import time
 import numba
 import numpy as np
 
+from ..errors import PtraceError
+from ..features import FEATURES, aov_images, denoise
+from ..image import course_8bit, rate_colours
+from ..rendering.tiles import Passes, new_sums
 from . import view_messages, view_render
-from .errors import PtraceError
-from .features import FEATURES, aov_images, denoise
-from .image import course_8bit, rate_colours
-from .tiles import Passes, new_sums
 from .view_render import Blocks, Shown, denoiser_missing, mean_image, png_bytes, write_frame
 
 QUICK_SECONDS = 0.06            # the budget of a frame while the camera moves
@@ -100,7 +100,7 @@ class Preview:
     # --- requests (from the IOLoop's thread) -----------------------------------------------
 
     def handle(self, message):
-        """Act on one message of the page (checked by ptrace.view_messages.check first: a bad
+        """Act on one message of the page (checked by ptrace.app.view_messages.check first: a bad
         one raises PtraceError and changes nothing); returns the reply or None."""
         message = view_messages.check(message)
         kind = message["type"]

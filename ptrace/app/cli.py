@@ -29,8 +29,8 @@ from .options import (  # noqa: F401 - EXIT_* and build_parser: named here as be
 def scene_info(scene, camera=None):
     """--info's summary of the scene; its camera is `camera`, default the scene's default
     camera at 800x600."""
-    from .pointing import default_camera
-    from .scene import KIND_NAMES, PHYSICAL
+    from ..pointing import default_camera
+    from ..scene import KIND_NAMES, PHYSICAL
     lights = scene.lights
     entries = []
     for i in range(len(lights)):
@@ -114,10 +114,10 @@ def _notice(text):
 
 
 def run(argv):
-    from . import render
-    from .errors import PtraceError
-    from .features import denoise, denoised_path
-    from .image import rate_colours, rate_path, write_images
+    from .. import render
+    from ..errors import PtraceError
+    from ..features import denoise, denoised_path
+    from ..image import rate_colours, rate_path, write_images
     args = parse(build_parser(), argv)
     _one_line_warnings()
     job = plan(args, lambda output: [output, rate_path(output)] + (
@@ -136,7 +136,7 @@ def run(argv):
     with contextlib.ExitStack() as scope:   # left after the client's shutdown
         try:
             if args.workers is not None or args.scheduler is not None:
-                from . import distributed
+                from ..rendering import distributed
                 # the CLI owns the process: keep Dask's Ctrl-C race out of the user's terminal
                 # from here until the client is closed (a library render scopes it to itself)
                 scope.enter_context(distributed.dropping_the_sync_cancel_race())

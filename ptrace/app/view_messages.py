@@ -7,7 +7,7 @@ their kind. parse() (a socket's text) and check() (a dict, from any caller) retu
 message or raise MessageError (a PtraceError): the socket answers it with an error reply and the
 session goes on unchanged. Ranges that depend on the
 session (a pixel inside the image, the samples a kernel call may take) are checked where the
-message is acted on (ptrace.view_session, ptrace.view_render).
+message is acted on (ptrace.app.view_session, ptrace.app.view_render).
 """
 import json
 import math
@@ -15,7 +15,7 @@ import numbers
 
 import numpy as np
 
-from .errors import PtraceError
+from ..errors import PtraceError
 
 MAX_CHARS = 4096        # the page's messages are under 200 characters
 MAX_DEPTH = 1           # every message is one flat object of numbers, strings and booleans

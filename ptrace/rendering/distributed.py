@@ -5,7 +5,7 @@ default mode never imports dask. Install the extra with `pip install "ptrace[dis
 
 The unit of work is one tile (a contiguous run of the image's pixels, bottom row first) for one
 pass; a task returns per-pixel sums of radiance, of illuminance and of its square, and sample
-counts, traced by a ptrace.tiles.RenderJob as in-process. The client adds them into
+counts, traced by a ptrace.rendering.tiles.RenderJob as in-process. The client adds them into
 the image in a fixed (pass, tile) order, whatever order tasks finish in, and each pixel's
 arithmetic is then the in-process one: previous sum + this pass's sum. Adaptive sampling decides
 convergence after each pass's merge, exactly as in-process (so adaptive passes run one after
@@ -29,7 +29,7 @@ import warnings
 import numba
 import numpy as np
 
-from .errors import PtraceError
+from ..errors import PtraceError
 from .tiles import RenderJob, new_sums
 
 TASK_RAYS = 1 << 19       # rays per task: about 0.1-0.3 s of work at 2-5 M rays/s
@@ -191,8 +191,8 @@ def render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes, pha
                   worker_threads=None):
     """Run the pass schedule as tiles x passes on the cluster; the settings travel whole. Ctrl-C
     (KeyboardInterrupt) cancels the tasks and keeps what was merged. phases (a running
-    ptrace.timing.Phases of DASK_PHASES) gets the scatter and render phases and the count of
-    tasks. Returns the render's figures for stats."""
+    ptrace.rendering.timing.Phases of DASK_PHASES) gets the scatter and render phases and the count
+    of tasks. Returns the render's figures for stats."""
     phases.enter("render")
     with dropping_the_sync_cancel_race():
         outcome = _render_passes(client, scene, settings, camera, pixel_x, pixel_y, passes,

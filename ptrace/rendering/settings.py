@@ -6,7 +6,7 @@ import numpy as np
 
 import accel
 
-from .codes import (
+from ..codes import (
     AUTO_EVERY_LIGHT,
     AUTO_MANY,
     INDEPENDENT,
@@ -21,8 +21,8 @@ from .codes import (
     SOBOL,
     Options,
 )
-from .errors import PtraceError
-from .scene import DIRECTIONAL, POINT
+from ..errors import PtraceError
+from ..scene import DIRECTIONAL, POINT
 
 INTEGRATORS = ("path", "normals")
 DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
@@ -208,5 +208,5 @@ def _emissive_light(scene):
     """Whether the scene's emissive primitives make one more light (some are no file light's
     face): ptrace.lights.emitter_arrays decides, imported here when a render's work is sized
     rather than when the settings are read, since ptrace.lights is compiled code."""
-    from .lights import emitter_arrays
+    from ..lights import emitter_arrays
     return emitter_arrays(scene)[1].shape[0] > 0
