@@ -3,18 +3,19 @@
     python -m benchmarks.profile_render [--quick] [--repeats N] [--threads T]
                                         [--resolution WxH] [--only NAME ...] [--output NAME]
 
-A render is: settings, camera and pixel grid (ptrace.renderer), accel.build, then passes in
-which ptrace.tiles.TileWork.trace hands blocks of pixels to a pool of Python threads, each
-running ptrace.integrator.render_pixels (nogil) that carries every path from the camera to its
-end, calling the accelerator's compiled face per ray; no Python runs between bounces. So:
+A render is: settings, camera and pixel grid (ptrace.rendering.renderer), accel.build, then
+passes in which ptrace.rendering.tiles.TileWork.trace hands blocks of pixels to a pool of Python
+threads, each running ptrace.integrator.render_pixels (nogil) that carries every path from the
+camera to its end, calling the accelerator's compiled face per ray; no Python runs between
+bounces. So:
 
-1. Wall time (measured). The render's own phases (stats["phases"], ptrace.executors.Phases):
-   setup, compile, build, records, render (the passes) and image. ptrace.tiles.render_pixels is
-   replaced at Python level by a wrapper that records each call's start and end (put back in a
-   `finally`), which splits the passes further. The wall time splits, exactly, into the build,
-   compiling, the kernel records, setup and image assembly, the passes' time with no
-   render_pixels call running, the time inside the calls' span when a thread is idle, and the
-   calls' own seconds (thread-seconds / threads).
+1. Wall time (measured). The render's own phases (stats["phases"],
+   ptrace.rendering.timing.Phases): setup, compile, build, records, render (the passes) and
+   image. ptrace.rendering.tiles.render_pixels is replaced at Python level by a wrapper that
+   records each call's start and end (put back in a `finally`), which splits the passes further.
+   The wall time splits, exactly, into the build, compiling, the kernel records, setup and image
+   assembly, the passes' time with no render_pixels call running, the time inside the calls'
+   span when a thread is idle, and the calls' own seconds (thread-seconds / threads).
 2. Inside the loop (measured, by differencing): the same command rendered with less work, on
    the same pixels, samples and backend: normal shading (camera rays and closest hit only),
    -m 0 (plus the surface and its emission), -m 1 (plus direct light at the first vertex) and
@@ -70,7 +71,7 @@ BATCH_SECONDS, QUICK_BATCH_SECONDS = 0.3, 0.05   # least timing per replayed bat
 # wall-time phases (section 1), in the order of the table
 BUILD = "acceleration structure build (accel.build)"
 COMPILE = "numba compiling or loading kernels from its cache (0 after the warm-up)"
-RECORDS = "kernel records: scene, lights, camera, backend (ptrace.tiles.TileWork)"
+RECORDS = "kernel records: scene, lights, camera, backend (ptrace.rendering.tiles.TileWork)"
 SETUP = "render setup and image: settings, camera, pixel grid, sums, final image"
 OUTSIDE = "passes with no render_pixels call running: pool hand-out, pass ends"
 IDLE = "threads idle inside the calls' span: per-block Python, last blocks of a pass"
@@ -184,7 +185,8 @@ def timed_render(scene, threads, **options):
     import ptrace
     import ptrace.rendering.tiles
     clock, stats = KernelClock(), {}
-    with patched(ptrace.tiles, "render_pixels", clock.wrap(ptrace.tiles.render_pixels)):
+    tiles = ptrace.rendering.tiles
+    with patched(tiles, "render_pixels", clock.wrap(tiles.render_pixels)):
         start = time.perf_counter()
         image = ptrace.render(scene, threads=threads, stats=stats, **options)
         wall = time.perf_counter() - start
@@ -278,8 +280,8 @@ def counting_loop():
 
 
 def planned_blocks(n_pixels, spp):
-    """render_pixels calls a render of n_pixels pixels makes without -a: ptrace.tiles' pass
-    schedule, blocks of max(1, BLOCK_PATHS // pass_n) pixels."""
+    """render_pixels calls a render of n_pixels pixels makes without -a: ptrace.rendering.tiles'
+    pass schedule, blocks of max(1, BLOCK_PATHS // pass_n) pixels."""
     import ptrace
     from ptrace.rendering import tiles
     passes = tiles.Passes(ptrace.Settings(spp=spp), tiles.new_sums(n_pixels)).fixed()
@@ -294,7 +296,7 @@ class RayCounter:
     def __init__(self, eye, blocks, capacity, target=CAPTURE_RAYS):
         self.eye = np.ascontiguousarray(eye, dtype=np.float64)
         self.blocks = blocks
-        rows = 2 * blocks + 64                    # room if ptrace.tiles splits finer than planned
+        rows = 2 * blocks + 64            # room if ptrace.rendering.tiles splits finer than planned
         self._lock, self.used = threading.Lock(), 0   # rows handed out
         self.counts = np.zeros((rows + 1, 3), dtype=np.int64)
         self.offsets = np.full((rows + 1, 3), -1, dtype=np.int64)
@@ -315,8 +317,8 @@ class RayCounter:
                               self.rays)
 
     def new_scratch(self, record):
-        """What ptrace.tiles calls once per block: the backend's scratch and the block's row
-        (the last row takes any overflow; check() then refuses the run)."""
+        """What ptrace.rendering.tiles calls once per block: the backend's scratch and the block's
+        row (the last row takes any overflow; check() then refuses the run)."""
         with self._lock:
             row, self.used = self.used, self.used + 1
         return new_scratch(record.inner), np.int64(min(row, self.counts.shape[0] - 1))
@@ -355,7 +357,8 @@ class _Counted:
 
 def counted_render(scene, threads, counter, **options):
     """A render through the counting face: (Run, the backend it built). accel.build,
-    ptrace.tiles.render_pixels and ptrace.tiles.new_scratch are replaced for its length."""
+    ptrace.rendering.tiles.render_pixels and ptrace.rendering.tiles.new_scratch are replaced for
+    its length."""
     import accel
     import ptrace.rendering.tiles
     build, built = accel.build, []
@@ -367,8 +370,8 @@ def counted_render(scene, threads, counter, **options):
 
     loop = counting_loop()
     with patched(accel, "build", counting_build), \
-            patched(ptrace.tiles, "new_scratch", counter.new_scratch), \
-            patched(ptrace.tiles, "render_pixels", loop):
+            patched(ptrace.rendering.tiles, "new_scratch", counter.new_scratch), \
+            patched(ptrace.rendering.tiles, "render_pixels", loop):
         run = timed_render(scene, threads, **options)
     counter.check()
     return run, built[0]
@@ -423,8 +426,8 @@ def _repeat(run, min_seconds):
 
 def replay_seconds(record, rays, kind, threads, min_seconds):
     """Thread-seconds per ray of the compiled face on these rays ((n, 8) array), run the way
-    ptrace.tiles runs render_pixels: blocks of REPLAY_BLOCK rays in order, a fresh scratch per
-    block, on a pool of `threads` Python threads; each block's call is timed."""
+    ptrace.rendering.tiles runs render_pixels: blocks of REPLAY_BLOCK rays in order, a fresh
+    scratch per block, on a pool of `threads` Python threads; each block's call is timed."""
     n = rays.shape[0]
     blocks = [(start, min(start + REPLAY_BLOCK, n)) for start in range(0, n, REPLAY_BLOCK)]
     shadow = kind == SHADOW
@@ -709,10 +712,10 @@ def summary_table(results):
 METHOD = (
     "Method. Measured: the wall time of ptrace.render; its phases (stats['phases']: setup, "
     "compile, build, records, render, image); the start and end of every "
-    "ptrace.tiles.render_pixels call, from a Python-level wrapper that is put back afterwards "
-    "(library code is unchanged). The calls run on {threads} Python threads at once, so the "
-    "wall time splits exactly into: build; compiling; kernel records; setup and image assembly; "
-    "passes with no call running; the calls' span minus their thread-seconds / threads "
+    "ptrace.rendering.tiles.render_pixels call, from a Python-level wrapper that is put back "
+    "afterwards (library code is unchanged). The calls run on {threads} Python threads at once, "
+    "so the wall time splits exactly into: build; compiling; kernel records; setup and image "
+    "assembly; passes with no call running; the calls' span minus their thread-seconds / threads "
     "(threads idle); and the calls' thread-seconds / threads (the loop). Measured by "
     "differencing: the same command as normal shading, -m 0, -m 1 and in full, on the same "
     "pixels, samples and backend (a path's first vertices do not depend on -m, so each "

@@ -3,7 +3,7 @@
     python -m benchmarks.view_latency [--quick] [--drags N] [--screenshot docs/view.png]
     python -m benchmarks.view_latency --only-screenshot docs/view.png
 
-Serves each scene with ptrace.view.ViewServer (in this process, on its own loop), opens the
+Serves each scene with ptrace.app.view.ViewServer (in this process, on its own loop), opens the
 page in headless chromium (Debian's chromium and chromedriver, through Selenium), lets the
 render start, and then, N times, while a pass is under way: sends the page's own drag message
 (an orbit step, `moving`, through the page's socket, as its mouse handler does once per frame)

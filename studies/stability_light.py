@@ -569,8 +569,8 @@ def roulette_options(rule):
     """render() options of a roulette rule. None: ptrace as is (the default cap,
     ptrace.integrator.RR_CAP); "off": no Russian roulette at all (`roulette=False`: paths run to
     max_depth); a float: continue with min(cap, max throughput) (`rr_cap=cap`). The cap is a
-    setting (ptrace.settings.Settings.rr_cap), passed to the compiled path loop with the other
-    options, so every rule runs the same kernel."""
+    setting (ptrace.rendering.settings.Settings.rr_cap), passed to the compiled path loop with the
+    other options, so every rule runs the same kernel."""
     if rule is None:
         return {}
     if isinstance(rule, str):

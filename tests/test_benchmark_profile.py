@@ -1,6 +1,6 @@
 """The render profile benchmark: the render's own phases that it reads (stats["phases"] and
-stats["counts"], ptrace.timing.Phases), its helpers on tiny renders (the wall-time phases add
-up, the wrapper is put back, the counting face counts every ray and changes no pixel, the
+stats["counts"], ptrace.rendering.timing.Phases), its helpers on tiny renders (the wall-time
+phases add up, the wrapper is put back, the counting face counts every ray and changes no pixel, the
 differencing rows add up), and a tiny quick run's report, with a failing embree backend skipped.
 
 Reports go to a temporary directory, never into benchmarks/results/.
@@ -37,7 +37,7 @@ def test_the_render_reports_its_phases(cow):
     ptrace.render(cow, threads=2, accel="bvh", stats=stats, **dict(TINY, spp=20))
     wall = time.perf_counter() - start
     phases = stats["phases"]
-    assert list(phases) == list(ptrace.timing.IN_PROCESS_PHASES)
+    assert list(phases) == list(ptrace.rendering.timing.IN_PROCESS_PHASES)
     assert min(phases.values()) >= 0 and phases["render"] > 0, phases
     assert sum(phases.values()) <= wall, (phases, wall)
     assert phases["build"] <= stats["build_seconds"] + 1e-3
@@ -91,10 +91,10 @@ def test_union_seconds():
 
 
 def test_wall_phases_add_up_to_the_wall_time(cow):
-    original = ptrace.tiles.render_pixels
+    original = ptrace.rendering.tiles.render_pixels
     plain = ptrace.render(cow, threads=2, accel="bvh", **TINY)
     run = pr.timed_render(cow, 2, accel="bvh", **TINY)
-    assert ptrace.tiles.render_pixels is original
+    assert ptrace.rendering.tiles.render_pixels is original
     assert np.array_equal(run.image, plain)
     phases = run.phases()
     assert list(phases) == list(pr.WALL_PHASES)
@@ -119,10 +119,10 @@ def test_the_wrapper_is_put_back_when_the_render_fails(cow, monkeypatch):
     def failing(*args):
         raise RuntimeError("kernel failed")
 
-    monkeypatch.setattr(ptrace.tiles, "render_pixels", failing)
+    monkeypatch.setattr(ptrace.rendering.tiles, "render_pixels", failing)
     with pytest.raises(RuntimeError, match="kernel failed"):
         pr.timed_render(cow, 2, accel="bvh", **TINY)
-    assert ptrace.tiles.render_pixels is failing
+    assert ptrace.rendering.tiles.render_pixels is failing
 
 
 def cache_indexes():
@@ -137,9 +137,10 @@ def test_the_counting_face_counts_every_ray_and_changes_no_pixel(cow):
     options = dict(TINY, accel="bvh")
     plain = ptrace.render(cow, threads=2, stats=stats, **options)
     counter = pr.counting_plan(cow, options, stats["rays"])
-    saved = accel.build, ptrace.tiles.render_pixels, ptrace.tiles.new_scratch
+    tiles = ptrace.rendering.tiles
+    saved = accel.build, tiles.render_pixels, tiles.new_scratch
     run, backend = pr.counted_render(cow, 2, counter, **options)
-    assert (accel.build, ptrace.tiles.render_pixels, ptrace.tiles.new_scratch) == saved
+    assert (accel.build, tiles.render_pixels, tiles.new_scratch) == saved
     assert np.array_equal(run.image, plain)
     camera, bounce, shadow = counter.totals()
     assert camera + bounce + shadow == stats["rays"] == run.rays
@@ -232,9 +233,9 @@ def test_quick_report(tmp_path, monkeypatch, scenes_dir):
     names = ["cow -s 64 -l 16 -m 6 (bvh)", "cow -s 64 -l 16 -m 6 (embree)",
              "cow normals -s 1 (bvh)"]
     threads = numba.get_num_threads()
-    original = ptrace.tiles.render_pixels
+    original = ptrace.rendering.tiles.render_pixels
     path = pr.main(["--quick", "--resolution", "32x24", "--only", *names, "--output", "p.md"])
-    assert numba.get_num_threads() == threads and ptrace.tiles.render_pixels is original
+    assert numba.get_num_threads() == threads and ptrace.rendering.tiles.render_pixels is original
     assert accel.build is embree_fails
     assert path == tmp_path / "p.md"
     text = path.read_text()
