@@ -409,7 +409,7 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                 dist = math.inf
             else:
                 lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(lights, light, px, py, pz, u1,
-                                                                 u2, nx, ny, nz)
+                                                                 u2)
             j += 1
             if pdf < 1e-11:
                 continue

@@ -19,7 +19,7 @@ from numba import njit
 from .scene import AMBIENT, AREA, DIRECTIONAL, PHYSICAL, POINT, SPOT
 from .solid_angle import (
     rectangle_pdf,
-    rectangle_sample_cosine,
+    rectangle_sample,
     sphere_pdf,
     sphere_sample,
     triangle_pdf,
@@ -51,18 +51,13 @@ def spot_falloff(cos_inner, cos_outer, cos_axis):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def sample_light(lights, i, px, py, pz, u1, u2, nx, ny, nz):
-    """Sample light i (of the integrator's LightArrays) as seen from point p, whose shading
-    normal is n (zero: none).
+def sample_light(lights, i, px, py, pz, u1, u2):
+    """Sample light i (of the integrator's LightArrays) as seen from point p.
 
     Returns (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf): wi is the unit direction toward the
     light sample, distance is inf for lights at infinity, pdf is per unit solid angle (1 for
     delta lights), and pdf 0 means "no contribution" (the course's spot lights, the back of an
-    area light, a point outside a spot's cone). An area light's samples follow the cosine to n
-    too (solid_angle.rectangle_sample_cosine): their density is pdf times a warp, and L comes
-    divided by that warp, so that L / pdf is still the sample's weight and pdf is still what
-    area_light_pdf gives for the direction (multiple importance sampling weighs both sides by
-    it).
+    area light, a point outside a spot's cone).
     """
     kind, radiance, position, direction = lights.kind[i], lights.radiance, lights.position, \
         lights.direction
@@ -94,18 +89,16 @@ def sample_light(lights, i, px, py, pz, u1, u2, nx, ny, nz):
                               + (position[i, 1] - py) * direction[i, 1]
                               + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
             return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        qx, qy, qz, pdf, warp = rectangle_sample_cosine(
-            px, py, pz, position[i, 0], position[i, 1], position[i, 2], edge_x[i, 0],
-            edge_x[i, 1], edge_x[i, 2], edge_y[i, 0], edge_y[i, 1], edge_y[i, 2], u1, u2, nx, ny,
-            nz)
+        qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
+                                           position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                           edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                           edge_y[i, 2], u1, u2)
         dx, dy, dz = qx - px, qy - py, qz - pz
         dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         if dist == 0.0 or not pdf > 0.0:
             return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
         wx, wy, wz = dx / dist, dy / dist, dz / dist
-        scale = 1.0 / warp
-        return radiance[i, 0] * scale, radiance[i, 1] * scale, radiance[i, 2] * scale, wx, wy, \
-            wz, dist, pdf
+        return radiance[i, 0], radiance[i, 1], radiance[i, 2], wx, wy, wz, dist, pdf
     if kind == AMBIENT:
         # uniform over the hemisphere about world +Y, pdf 1 / (2 pi)
         y = u1

@@ -8,10 +8,7 @@ multiple importance sampling weighs a BSDF-sampled ray that finds the shape by t
 light sampler would have given it.
 
 - Rectangles: Urena, Fajardo and King 2013, "An Area-Preserving Parametrization for Spherical
-  Rectangles"; for a receiver with a normal, its unit square first warped bilinearly toward the
-  corners seen under a larger cosine (pbrt-v4's warp, rectangle_sample_cosine), whose density the
-  caller divides out of the light's radiance so that both sides of multiple importance sampling
-  keep weighing by the solid-angle pdf.
+  Rectangles".
 - Triangles: Arvo 1995, "Stratified Sampling of Spherical Triangles", with his q rewritten so
   that 1 - q, and the arcs from A and from B, come without cancelling.
 - Spheres: uniform over the cone of directions the sphere subtends (as pbrt-v4's Sphere::Sample);
@@ -43,10 +40,6 @@ TRIANGLE_MIN_SOLID_ANGLE = 1e-18
 # parallelogram whose edges' cosine exceeds RIGHT_ANGLE_TOLERANCE (the map needs a right angle).
 RECTANGLE_MAX_GRAZING = 1e8
 RIGHT_ANGLE_TOLERANCE = 1e-7
-# the least weight of a corner in rectangle_sample_cosine's warp (pbrt-v4's): a corner p sees
-# edge-on still draws samples, so the warp's density stays positive wherever the shape's does
-CORNER_COSINE_FLOOR = 0.01
-ONE_BELOW_ONE = 1.0 - 2.0 ** -53
 TWO_PI = 2.0 * math.pi
 
 
@@ -154,27 +147,6 @@ def _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2):
     return xu, yv
 
 
-@njit(cache=True, inline="always")
-def _sample_linear(u, a, b):
-    """x in [0, 1) with density proportional to (1 - x) a + x b (a, b >= 0, not both 0), by
-    inverting its distribution (pbrt-v4's SampleLinear)."""
-    if u == 0.0 and a == 0.0:
-        return 0.0
-    x = u * (a + b) / (a + math.sqrt((1.0 - u) * a * a + u * b * b))
-    return min(x, ONE_BELOW_ONE)
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def bilinear_warp(u1, u2, w00, w10, w01, w11):
-    """(u1, u2) moved to (s, t) in the unit square with density proportional to the bilinear
-    interpolation of the corner weights w_st (all > 0): (s, t, that density)."""
-    t = _sample_linear(u2, w00 + w10, w01 + w11)
-    s = _sample_linear(u1, (1.0 - t) * w00 + t * w01, (1.0 - t) * w10 + t * w11)
-    density = 4.0 * ((1.0 - s) * (1.0 - t) * w00 + s * (1.0 - t) * w10 + (1.0 - s) * t * w01
-                     + s * t * w11) / (w00 + w10 + w01 + w11)
-    return s, t, density
-
-
 @njit(cache=True, _nrt=False, forceinline=True)
 def rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, u1, u2):
     """A point q of the rectangle c + s e_x + t e_y (|s|, |t| <= 1/2: ptrace's area lights, c
@@ -182,51 +154,21 @@ def rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, u1, u
     from p to q. Uniform in solid angle (pdf 1 / solid angle) unless the thresholds above say
     otherwise; then uniform by area, as lights.sample_light's (pdf distance^2 / (area cos)).
     pdf 0: no sample."""
-    qx, qy, qz, pdf, warp = rectangle_sample_cosine(px, py, pz, cx, cy, cz, exx, exy, exz, eyx,
-                                                    eyy, eyz, u1, u2, 0.0, 0.0, 0.0)
-    return qx, qy, qz, pdf
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def rectangle_sample_cosine(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, u1, u2, nx,
-                            ny, nz):
-    """rectangle_sample for a receiver at p with normal n: (qx, qy, qz, pdf, warp). Where the
-    rectangle is sampled by solid angle and n is not zero, (u1, u2) are first warped toward the
-    corners that p sees under a larger |cos| to n (bilinear_warp of those cosines, at least
-    CORNER_COSINE_FLOOR: pbrt-v4's warp), so that the samples follow the cosine of an integrand
-    f cos as well as the solid angle; the density of q's direction is then pdf * warp, where pdf
-    is still rectangle_pdf's (the one multiple importance sampling weighs by, on both sides).
-    Elsewhere warp is 1."""
     (xx, xy, xz, yx, yy, yz, zx, zy, zz, x0, y0, z0, exl, eyx_, eyl, area, omega, l00,
      spherical) = _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
     if spherical:
-        warp = 1.0
-        if nx != 0.0 or ny != 0.0 or nz != 0.0:
-            fx = nx * xx + ny * xy + nz * xz       # n in the frame
-            fy = nx * yx + ny * yy + nz * yz
-            fz = nx * zx + ny * zy + nz * zz
-            x1, y1, w = x0 + exl, y0 + eyl, z0 * z0
-            fzz = fz * z0
-            w00 = max(CORNER_COSINE_FLOOR, abs(fx * x0 + fy * y0 + fzz) / l00)
-            w10 = max(CORNER_COSINE_FLOOR,
-                      abs(fx * x1 + fy * y0 + fzz) / math.sqrt(x1 * x1 + y0 * y0 + w))
-            w01 = max(CORNER_COSINE_FLOOR,
-                      abs(fx * x0 + fy * y1 + fzz) / math.sqrt(x0 * x0 + y1 * y1 + w))
-            w11 = max(CORNER_COSINE_FLOOR,
-                      abs(fx * x1 + fy * y1 + fzz) / math.sqrt(x1 * x1 + y1 * y1 + w))
-            u1, u2, warp = bilinear_warp(u1, u2, w00, w10, w01, w11)
         xu, yv = _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2)
         a, b = xu - x0, yv - y0
         return (cx - 0.5 * (exx + eyx) + a * xx + b * yx, cy - 0.5 * (exy + eyy) + a * xy + b * yy,
-                cz - 0.5 * (exz + eyz) + a * xz + b * yz, 1.0 / omega, warp)
+                cz - 0.5 * (exz + eyz) + a * xz + b * yz, 1.0 / omega)
     s, t = u1 - 0.5, u2 - 0.5
     qx, qy, qz = cx + s * exx + t * eyx, cy + s * exy + t * eyy, cz + s * exz + t * eyz
     dx, dy, dz = qx - px, qy - py, qz - pz
     dist2 = dx * dx + dy * dy + dz * dz
     cos_dist = abs(dx * zx + dy * zy + dz * zz)     # cos at q times the distance
     if cos_dist == 0.0 or area == 0.0:
-        return qx, qy, qz, 0.0, 1.0
-    return qx, qy, qz, dist2 * math.sqrt(dist2) / (area * cos_dist), 1.0
+        return qx, qy, qz, 0.0
+    return qx, qy, qz, dist2 * math.sqrt(dist2) / (area * cos_dist)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

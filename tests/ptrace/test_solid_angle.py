@@ -11,10 +11,8 @@ from ptrace.solid_angle import (
     RECTANGLE_MAX_GRAZING,
     RECTANGLE_MIN_SOLID_ANGLE,
     TRIANGLE_MIN_SOLID_ANGLE,
-    bilinear_warp,
     rectangle_pdf,
     rectangle_sample,
-    rectangle_sample_cosine,
     rectangle_solid_angle,
     sphere_pdf,
     sphere_sample,
@@ -489,75 +487,3 @@ def test_sphere_fallbacks():
     assert sphere_sample(0, 0, 0, 1.0, 0, 0, 0.0, 0.5, 0.5)[3] == 0
     assert sphere_pdf(0, 0, 0, 0, 0, 2.0, 0.5, 0, 1.0, 0) == 0
     assert sphere_pdf(0, 0, 0, 0, 0, 2.0, 0.5, 0, 0, -1.0) == 0
-
-
-# -- the cosine warp ------------------------------------------------------------------------------
-
-def test_bilinear_warp_matches_its_density():
-    """bilinear_warp's points against its density (chi-square on a 12 x 12 grid), and the
-    density integrates to 1 over the square."""
-    weights = (0.05, 0.9, 0.3, 0.01)
-    us = np.random.default_rng(11).random((30000, 2))
-    out = np.array([bilinear_warp(u1, u2, *weights) for u1, u2 in us.tolist()])
-    s, t, density = out.T
-    w00, w10, w01, w11 = weights
-    exact = 4 * ((1 - s) * (1 - t) * w00 + s * (1 - t) * w10 + (1 - s) * t * w01
-                 + s * t * w11) / sum(weights)
-    np.testing.assert_allclose(density, exact, rtol=1e-12)
-    n = 12
-    counts, _, _ = np.histogram2d(s, t, bins=n, range=((0, 1), (0, 1)))
-    edges = np.arange(n + 1) / n
-    # the bilinear density's integral over a cell: its value at the cell's centre times its size
-    centres = (edges[:-1] + edges[1:]) / 2
-    cs, ct = np.meshgrid(centres, centres, indexing="ij")
-    cell = 4 * ((1 - cs) * (1 - ct) * w00 + cs * (1 - ct) * w10 + (1 - cs) * ct * w01
-                + cs * ct * w11) / sum(weights) / n ** 2
-    assert cell.sum() == pytest.approx(1.0, rel=1e-12)
-    assert stats.chisquare(counts.ravel(), cell.ravel() * len(us)).pvalue > 1e-3
-
-
-def cosine_integral(p, normal, centre=CENTRE, ex=EX, ey=EY, n=600):
-    """Integral of |cos| to normal over the directions from p to the rectangle, by the midpoint
-    rule over its area."""
-    s = (np.arange(n) + 0.5) / n - 0.5
-    sx, sy = np.meshgrid(s, s)
-    q = centre + sx[..., None] * ex + sy[..., None] * ey
-    d = q - p
-    dist = np.linalg.norm(d, axis=-1)
-    light_normal = unit(np.cross(ex, ey))
-    area = np.linalg.norm(np.cross(ex, ey))
-    return np.sum(np.abs(d @ normal) * np.abs(d @ light_normal) / dist ** 4) * area / n ** 2
-
-
-@pytest.mark.parametrize("p, normal, gain", [
-    # gains: about half what this seed measures
-    (np.array([0.1, 0.0, 0.05]), np.array([0.0, 1.0, 0.0]), 1.3),     # the floor
-    (np.array([0.45, 1.44, 0.0]), np.array([0.0, 1.0, 0.0]), 1.6),    # beside the light, close
-    (np.array([-0.6, 1.2, 0.1]), np.array([1.0, 0.0, 0.0]), 3.5),     # a wall below the light
-])
-def test_cosine_warp_is_unbiased_and_follows_the_cosine(p, normal, gain):
-    """E[|cos| warp^-1 / pdf] over rectangle_sample_cosine's samples is the integral of |cos|
-    over the light's directions (within 4 standard errors), and its variance is at most 1 /
-    gain times that of the unwarped solid-angle samples from the same numbers."""
-    exact = cosine_integral(p, normal)
-    us = np.random.default_rng(12).random((20000, 2))
-    args = tuple(float(v) for v in (*p, *CENTRE, *EX, *EY))
-    estimates = {}
-    for name, n in (("warped", normal), ("unwarped", np.zeros(3))):
-        out = np.array([rectangle_sample_cosine(*args, u1, u2, *(float(v) for v in n))
-                        for u1, u2 in us.tolist()])
-        q, pdf, warp = out[:, :3], out[:, 3], out[:, 4]
-        if name == "unwarped":
-            assert (warp == 1.0).all()
-        # the pdf is rectangle_pdf's for the direction, warped or not
-        np.testing.assert_allclose(densities(RECTANGLE, args, unit(q[:50] - p)), pdf[:50],
-                                   rtol=1e-9)
-        values = np.abs(unit(q - p) @ normal) / (pdf * warp)
-        se = values.std() / math.sqrt(values.size)
-        print(f"{name}: {values.mean():.6f} +- {se:.6f} (exact {exact:.6f}), "
-              f"var {values.var():.3g}")
-        assert abs(values.mean() - exact) < 4 * se + 1e-12
-        estimates[name] = values
-    ratio = estimates["unwarped"].var() / estimates["warped"].var()
-    print(f"variance ratio unwarped / warped: {ratio:.3g}")
-    assert ratio >= gain
