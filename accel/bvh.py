@@ -44,7 +44,6 @@ from .kernels import (
     triangle_test,
 )
 from .simd import BLOCK, make_slab_test, moller_trumbore_block, watertight_block
-from .types import Hits
 
 RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
@@ -346,7 +345,7 @@ def _mean(values):
     return float(values.mean()) if values.size else 0.0
 
 
-class BVHAccelerator:
+class BVHAccelerator(compiled.CompiledFace):
     kind = "bvh"
     record_class = BVHRecord
 
@@ -397,12 +396,6 @@ class BVHAccelerator:
         planes = self._nodes[:, :6 * WIDTH].astype(np.float64).reshape(-1, 6, WIDTH)
         return planes[:, :3], planes[:, 3:], self.compiled.payloads[:, PAYLOAD:].copy()
 
-    def intersect(self, rays):
-        """The batch closest hit through the compiled face, as every backend's (and as the path
-        loop calls it): nothing counted, so its rays per second compare with Embree's."""
-        rays.validate()
-        return compiled.run_intersect(self.compiled, rays, Hits)
-
     def traversal_work(self, rays):
         """(wide nodes visited, primitive tests) per ray, averaged over a closest-hit trace of
         `rays`, for benchmarks and tests: interior wide nodes only (leaves are counted by their
@@ -416,16 +409,10 @@ class BVHAccelerator:
                     tests)
         return _mean(visits), _mean(tests)
 
-    def occluded(self, rays):
-        rays.validate()
-        return compiled.run_occluded(self.compiled, rays)
-
     def stats(self):
         nodes = int(self.lower.shape[0])
         arrays = (self._nodes, self._blocks, self._prims)   # what traversal reads
-        return {"kind": self.kind, "primitives": self.geometry.primitive_count,
-                "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
-                "build_seconds": self._build_seconds, "split": self.split,
+        return {**self.geometry_stats(), "split": self.split,
                 "triangle": self.triangle, "width": WIDTH,
                 "nodes": nodes, "wide_nodes": int(self._nodes.shape[0]),
                 "leaves": int((self.count > 0).sum()),

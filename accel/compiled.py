@@ -127,3 +127,25 @@ def run_occluded(record, rays):
     out = np.empty(len(rays), dtype=np.bool_)
     occluded_batch(record, rays.origins, rays.directions, rays.tmin, rays.tmax, out)
     return out
+
+
+class CompiledFace:
+    """What every backend's Python face shares: batch queries through its compiled record
+    (`self.compiled`, the same functions the path loop calls) and the geometry's counts in
+    stats(). A backend sets compiled, geometry, kind and _build_seconds."""
+
+    def intersect(self, rays):
+        """The batch closest hit through the compiled face, as the path loop calls it."""
+        from .types import Hits
+        rays.validate()
+        return run_intersect(self.compiled, rays, Hits)
+
+    def occluded(self, rays):
+        rays.validate()
+        return run_occluded(self.compiled, rays)
+
+    def geometry_stats(self):
+        """stats()'s common part: kind, primitive counts and the build's seconds."""
+        return {"kind": self.kind, "primitives": self.geometry.primitive_count,
+                "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
+                "build_seconds": self._build_seconds}

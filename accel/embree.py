@@ -69,7 +69,6 @@ from numba import njit, types
 
 from . import compiled
 from .kernels import NO_HIT, spheres_any, spheres_closest, triangle_hit
-from .types import Hits
 
 # -- the library ---------------------------------------------------------------------------------
 
@@ -381,7 +380,7 @@ def _build_scene(vertices, indices):
     return device, scene
 
 
-class EmbreeAccelerator:
+class EmbreeAccelerator(compiled.CompiledFace):
     kind = "embree"
     record_class = EmbreeRecord
 
@@ -439,15 +438,5 @@ class EmbreeAccelerator:
         # Embree handles mean nothing in another process: a copy is rebuilt from the geometry
         return type(self), (self.geometry, self.clip_to_bounds)
 
-    def intersect(self, rays):
-        rays.validate()
-        return compiled.run_intersect(self.compiled, rays, Hits)
-
-    def occluded(self, rays):
-        rays.validate()
-        return compiled.run_occluded(self.compiled, rays)
-
     def stats(self):
-        return {"kind": self.kind, "primitives": self.geometry.primitive_count,
-                "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
-                "build_seconds": self._build_seconds}
+        return self.geometry_stats()

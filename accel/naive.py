@@ -19,7 +19,6 @@ from .kernels import (
     spheres_closest,
     triangle_test,
 )
-from .types import Hits
 
 NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii", "triangle"])
 
@@ -64,7 +63,7 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 compiled.register(NaiveRecord, new_scratch, closest_hit, any_hit)
 
 
-class NaiveAccelerator:
+class NaiveAccelerator(compiled.CompiledFace):
     kind = "naive"
     record_class = NaiveRecord
 
@@ -76,15 +75,5 @@ class NaiveAccelerator:
                                     geometry.radii, triangle_test(triangle))
         self._build_seconds = time.perf_counter() - start
 
-    def intersect(self, rays):
-        rays.validate()
-        return compiled.run_intersect(self.compiled, rays, Hits)
-
-    def occluded(self, rays):
-        rays.validate()
-        return compiled.run_occluded(self.compiled, rays)
-
     def stats(self):
-        return {"kind": self.kind, "primitives": self.geometry.primitive_count,
-                "triangles": self.geometry.triangle_count, "spheres": self.geometry.sphere_count,
-                "triangle": self.triangle, "build_seconds": self._build_seconds}
+        return {**self.geometry_stats(), "triangle": self.triangle}
