@@ -104,24 +104,16 @@ class Settings:
             raise PtraceError(f"samples per pixel (-s) times light samples (-l) must be at most "
                               f"{RANGES['spp'][1]} (the sampler's 32-bit point index), got "
                               f"{self.spp} x {self.light_samples}")
-        if self.accel not in accel.KINDS:
-            raise PtraceError(f"unknown accelerator {self.accel!r}; choose one of "
-                              f"{', '.join(accel.KINDS)}")
-        if self.integrator not in INTEGRATORS:
-            raise PtraceError(f"unknown integrator {self.integrator!r}; choose one of "
-                              f"{', '.join(INTEGRATORS)}")
-        if self.direct not in DIRECT:
-            raise PtraceError(f"unknown direct-light estimator {self.direct!r}; choose one of "
-                              f"{', '.join(DIRECT)}")
-        if self.sampler not in SAMPLERS:
-            raise PtraceError(f"unknown sampler {self.sampler!r}; choose one of "
-                              f"{', '.join(SAMPLERS)}")
-        if self.light_sampler not in LIGHT_SAMPLERS:
-            raise PtraceError(f"unknown light sampler {self.light_sampler!r}; choose one of "
-                              f"{', '.join(LIGHT_SAMPLERS)}")
-        if self.bvh_split not in BVH_SPLITS:
-            raise PtraceError(f"unknown BVH split {self.bvh_split!r}; choose one of "
-                              f"{', '.join(BVH_SPLITS)}")
+        for name, what, choices in (("accel", "accelerator", accel.KINDS),
+                                    ("integrator", "integrator", INTEGRATORS),
+                                    ("direct", "direct-light estimator", DIRECT),
+                                    ("sampler", "sampler", SAMPLERS),
+                                    ("light_sampler", "light sampler", LIGHT_SAMPLERS),
+                                    ("bvh_split", "BVH split", BVH_SPLITS)):
+            value = getattr(self, name)
+            if value not in choices:
+                raise PtraceError(f"unknown {what} {value!r}; choose one of "
+                                  f"{', '.join(choices)}")
         if self.bvh_split != "mean" and self.accel != "bvh":
             raise PtraceError(f"a BVH split applies only to the bvh accelerator, not "
                               f"{self.accel}")
