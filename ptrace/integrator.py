@@ -29,8 +29,6 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from accel.compiled import any_hit, closest_hit
-
 from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, conductor_fresnel, is_delta, uniform_hemisphere
 from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
     AUTO_EVERY_LIGHT,
@@ -47,6 +45,7 @@ from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here
     SOBOL,
     Options,
 )
+from .cutouts import shadowed, visible_hit
 from .environment import (
     LUMINANCE,
     environment_arrays,
@@ -82,7 +81,7 @@ from .scene import (
     MICROFACET,
     REFRACTION,
 )
-from .textures import surface_albedo, surface_emission
+from .textures import mapped_normal, surface_albedo, surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
@@ -92,6 +91,9 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
+RAY_KEYS = 1 << 8       # a vertex's rays' keys for ptrace.cutouts: the bounce ray 0, light or
+#                         hemisphere sample j (from 0) RAY_KEYS * (1 + j), each followed by the
+#                         keys of the cut surfaces it passes
 
 SceneArrays = namedtuple("SceneArrays", ["vertices", "faces", "centers", "radii",
                                          "vertex_normals", "material_index", "scale", "uv",
@@ -101,7 +103,9 @@ MaterialArrays = namedtuple("MaterialArrays", ["kind", "albedo", "transmittance"
                                                "albedo_texture",
                                                "emission_texture", "roughness_texture",
                                                "texels", "tex_offset", "tex_width",
-                                               "tex_height", "tex_wrap", "metallic"])
+                                               "tex_height", "tex_wrap", "metallic",
+                                               "opacity", "alpha_texture", "cutoff",
+                                               "normal_texture", "normal_scale"])
 LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direction", "edge_x",
                                          "edge_y", "area", "model", "cos_inner",
                                          "cos_outer", "faced", "emitter_prims",
@@ -146,7 +150,10 @@ def scene_records(scene, light_tree=False):
                                index(m.roughness_texture),
                                np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),
                                index(tex.offset), index(tex.width), index(tex.height),
-                               index(tex.wrap).reshape(-1, 2), _f64(m.metallic))
+                               index(tex.wrap).reshape(-1, 2), _f64(m.metallic),
+                               _f64(m.opacity), index(m.alpha_texture),
+                               _f64(m.cutoff if np.any(m.cutoff != 0.0) else m.cutoff[:0]),
+                               index(m.normal_texture), _f64(m.normal_scale))
     faced, prims, cdf, prim_pdf, prim_power = emitter_arrays(scene, power=True)
     extra = 1 if prims.shape[0] else 0     # one more light: the emissive primitives
     pad = lambda array: np.concatenate([_f64(array, array.shape[1:]),
@@ -339,7 +346,9 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
             wz = lx * xz + ly * yz + lz * nz
             ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
             rays += 1
-            t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, wx, wy, wz, 0.0, math.inf)
+            t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel,
+                                        sample, base + RAY_KEYS * (1 + j), ox, oy, oz, wx, wy,
+                                        wz, 0.0, math.inf)
             if prim < 0:
                 if lights.env_image.shape[0] > 0:
                     er, eg, eb = environment_radiance(lights.env_image, wx, wy, wz)
@@ -443,7 +452,8 @@ def direct_light(shapes, materials, lights, options, record, scratch, pixel, sam
                     sdx, sdy, sdz = ax / length, ay / length, az / length
                 tmax = length * (1.0 - SHADOW_SHORTEN)
             rays += 1
-            if any_hit(record, scratch, ox, oy, oz, sdx, sdy, sdz, 0.0, tmax):
+            if shadowed(shapes, materials, options, record, scratch, pixel, sample,
+                        base + RAY_KEYS * j, ox, oy, oz, sdx, sdy, sdz, tmax):
                 continue
             r += tr * (lr * fr * scale)
             g += tg * (lg * fg * scale)
@@ -546,7 +556,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
     """Radiance of one camera path and the number of rays it traced."""
     kinds = materials.kind
     rays = 1
-    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
+                                ox, oy, oz, dx, dy, dz, tmin, tmax)
     m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx, dy, dz,
                                                             t, prim, u, v)
     r = g = b = 0.0
@@ -571,6 +582,14 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         woz = -dx * nx - dy * ny - dz * nz
         kind = kinds[m]
         delta = is_delta(kind)
+        sx, sy, sz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
+        if (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
+            # a bent normal that keeps wo on its side (else the unbent one shades)
+            nx, ny, nz = sx, sy, sz
+            xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
+            wox = -dx * xx - dy * xy - dz * xz
+            woy = -dx * yx - dy * yy - dz * yz
+            woz = -dx * nx - dy * ny - dz * nz
         ar, ag, ab, alpha, metallic = surface_albedo(shapes, materials, m, prim, u, v)
         if lit and kind != EMISSION and not delta:
             lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
@@ -616,7 +635,8 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         qx, qy, qz, qnx, qny, qnz = px, py, pz, nx, ny, nz
         ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
         rays += 1
-        t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
+        t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample,
+                                    base, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
         m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
                                                                 dy, dz, t, prim, u, v)
         if delta or mis:
@@ -632,10 +652,13 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+def normal_colour(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz, dx, dy,
+                  dz, tmin, tmax):
     """The course's normal shading, 0.5 n + 0.5 (black on a miss): n is the barycentric blend of
-    the vertex normals, not renormalised, like the course, or a sphere's unit outward normal."""
-    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    the vertex normals, not renormalised, like the course, or a sphere's unit outward normal (a
+    cut-out surface is seen through, as in the image)."""
+    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
+                                ox, oy, oz, dx, dy, dz, tmin, tmax)
     if prim < 0:
         return 0.0, 0.0, 0.0
     faces, normals = shapes.faces, shapes.vertex_normals
@@ -655,17 +678,21 @@ def normal_colour(shapes, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def first_hit_features(shapes, materials, record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+def first_hit_features(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz,
+                       dx, dy, dz, tmin, tmax):
     """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's first hit: the
     surface's albedo at the hit as a denoiser wants it (diffuse: its albedo; mirror: its
     reflectance; glass and refraction: their transmittance; a conductor: its reflectance at
     normal incidence; an emitter: its emission clamped to 1), the shading normal turned toward
-    the camera, world space, and the distance along the ray; zeros and hit 0 on a miss."""
-    t, prim, u, v = closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    the camera, world space (bent by a normal texture), and the distance along the ray; zeros and
+    hit 0 on a miss. The hit is the camera ray's, past the surfaces it passes through."""
+    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
+                                ox, oy, oz, dx, dy, dz, tmin, tmax)
     m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, materials.kind, ox, oy, oz,
                                                             dx, dy, dz, t, prim, u, v)
     if m < 0:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    nx, ny, nz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
     kind = materials.kind[m]
     ar, ag, ab, alpha, _ = surface_albedo(shapes, materials, m, prim, u, v)
     if kind == EMISSION:
@@ -771,8 +798,9 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
             cx, cy, cz, dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel,
                                                 sample)
             if options.mode == NORMALS:
-                x, y, z = normal_colour(shapes, record, scratch, cx, cy, cz, dx, dy, dz,
-                                        camera.znear, camera.zfar)
+                x, y, z = normal_colour(shapes, materials, options, record, scratch, pixel,
+                                        sample, cx, cy, cz, dx, dy, dz, camera.znear,
+                                        camera.zfar)
                 rays += 1
             else:
                 x, y, z, traced = trace_path(shapes, materials, lights, options, record, scratch,
@@ -784,8 +812,8 @@ def render_pixels(shapes, materials, lights, camera, options, record, scratch, p
                 continue
             if aovs:
                 a0, a1, a2, a3, a4, a5, a6, a7 = first_hit_features(
-                    shapes, materials, record, scratch, cx, cy, cz, dx, dy, dz, camera.znear,
-                    camera.zfar)
+                    shapes, materials, options, record, scratch, pixel, sample, cx, cy, cz, dx,
+                    dy, dz, camera.znear, camera.zfar)
                 rays += 1
                 f0 += a0
                 f1 += a1

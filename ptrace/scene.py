@@ -10,6 +10,9 @@ DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR = ran
 BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy",
               "gltf_pbr")
 
+# Materials.cutoff of a glTF BLEND material (ptrace.cutouts): rays pass with probability 1 - alpha
+BLEND_CUT = -1.0
+
 # Light kinds (Lights.kind). The codes index KIND_NAMES; LIGHT_NAMES are those a scene file
 # may name. ENVIRONMENT is added by Scene.with_environment (the course's -e), never by a file.
 AMBIENT, DIRECTIONAL, POINT, AREA, SPOT, ENVIRONMENT = range(6)
@@ -38,6 +41,12 @@ class Materials:
     texture multiplies alpha by its green channel squared and metallic by its blue channel
     (glTF's metallicRoughness texture: roughness is G, alpha = roughness^2, metallic is B).
     File materials (mesh files) use them; the course's scenes have none.
+
+    opacity, alpha_texture and cutoff are glTF's alpha (ptrace.cutouts): the alpha is opacity
+    times alpha_texture's value (-1: none), and cutoff says what it does: 0 nothing (opaque),
+    c in (0, 1] cuts the surface out where alpha < c (MASK), -1 makes it pass rays with
+    probability 1 - alpha (BLEND). normal_texture (-1: none) is a tangent-space normal texture,
+    its x and y scaled by normal_scale (ptrace.textures.mapped_normal).
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
@@ -54,13 +63,21 @@ class Materials:
     emission_texture: np.ndarray = None    # (M,) int32
     roughness_texture: np.ndarray = None   # (M,) int32
     metallic: np.ndarray = None            # (M,), gltf_pbr only
+    opacity: np.ndarray = None             # (M,), 1 for none
+    alpha_texture: np.ndarray = None       # (M,) int32
+    cutoff: np.ndarray = None              # (M,), 0 for opaque
+    normal_texture: np.ndarray = None      # (M,) int32
+    normal_scale: np.ndarray = None        # (M,)
 
     def __post_init__(self):
         if self.specular is None:
             self.specular = np.zeros((len(self.kind), 3))
-        if self.metallic is None:
-            self.metallic = np.zeros(len(self.kind))
-        for name in ("albedo_texture", "emission_texture", "roughness_texture"):
+        for name, value in (("metallic", 0.0), ("opacity", 1.0), ("cutoff", 0.0),
+                            ("normal_scale", 1.0)):
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(len(self.kind), value))
+        for name in ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
+                     "normal_texture"):
             if getattr(self, name) is None:
                 setattr(self, name, np.full(len(self.kind), -1, dtype=np.int32))
 
@@ -93,13 +110,13 @@ class Materials:
             k=rgb("k", (0.0, 0.0, 0.0)),
             specular=rgb("specular", (0.0, 0.0, 0.0)),
             metallic=one("metallic", 0.0),
+            opacity=one("opacity", 1.0),
+            cutoff=one("cutoff", 0.0),
+            normal_scale=one("normal_scale", 1.0),
             names=tuple(r.get("name", "") for r in records),
-            albedo_texture=np.array([r.get("albedo_texture", -1) for r in records],
-                                    dtype=np.int32).reshape(m),
-            emission_texture=np.array([r.get("emission_texture", -1) for r in records],
-                                      dtype=np.int32).reshape(m),
-            roughness_texture=np.array([r.get("roughness_texture", -1) for r in records],
-                                       dtype=np.int32).reshape(m),
+            **{name: np.array([r.get(name, -1) for r in records], dtype=np.int32).reshape(m)
+               for name in ("albedo_texture", "emission_texture", "roughness_texture",
+                            "alpha_texture", "normal_texture")},
         )
 
 

@@ -14,7 +14,8 @@ share of it that lands is measured by tracing RAYS rays from the emitters, cosin
 about either face's normal: a ray lands if it hits a triangle whose material does not emit, at
 least NEAR times the box's largest side away. (Light that lands nearer lights the surface just
 behind its emitter, which the emitter hides: a lamp under a ceiling, a label on a board; light
-that lands on emitters lights the inside of an emissive object, which nothing sees.) The
+that lands on emitters lights the inside of an emissive object, which nothing sees; glTF's
+emitters reflect too, but what lands on them is still mostly their own insides.) The
 default light's power onto the box is pi x AMBIENT_RADIANCE x the box's surface area. Emitters
 whose landed power is at least EMITTER_SHARE of that light the file alone; weaker ones get the
 default light beside them. The share does not depend on the file's units or tessellation.

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..budget import BudgetError
 from ..errors import SceneError
-from ..scene import CLAMP, EMISSION, GLASS, GLTF_PBR, MIRROR_REPEAT, REPEAT
+from ..scene import BLEND_CUT, CLAMP, EMISSION, GLASS, GLTF_PBR, MIRROR_REPEAT, REPEAT
 from .materials import check_numbers
 
 SPEC_IOR = 1.5    # the index of refraction the core specification's BRDF fixes (f0 = 0.04)
@@ -43,16 +43,17 @@ def material_record(index, material, document, missing, pool, notes, path):
     transmission, ior = values["transmission"], values["ior"]
     for extension in sorted(set(extensions) - HANDLED):
         notes.append(f"<{where}>: extension {extension} ignored")
-    for field in ("normalTexture", "occlusionTexture"):
-        if field in spec:
-            notes.append(f"<{where}>: {field} ignored")
-    if spec.get("alphaMode", "OPAQUE") != "OPAQUE":
-        notes.append(f"<{where}>: alphaMode {str(spec['alphaMode'])[:20]} ignored (rendered "
-                     f"opaque)")
+    if "occlusionTexture" in spec:
+        notes.append(f"<{where}>: occlusionTexture ignored (a path tracer finds the occlusion)")
+    mode = spec.get("alphaMode", "OPAQUE")
+    if mode not in ("OPAQUE", "MASK", "BLEND"):
+        raise SceneError(path, f"{where}: alphaMode {str(mode)[:20]!r} is none of OPAQUE, MASK "
+                               f"and BLEND")
     transforms = {}
 
-    def texture(field, ref, image, srgb):
-        """The pool index of a referenced texture, or None (noted) if it cannot be used."""
+    def texture(field, ref, image, srgb, channel="rgb"):
+        """The pool index of a referenced texture (its image's channel "rgb" or "alpha"), or
+        None (noted) if it cannot be used."""
         if not isinstance(ref, dict):
             return None
         source = _source(document, ref)
@@ -74,7 +75,7 @@ def material_record(index, material, document, missing, pool, notes, path):
             return None
         try:
             index = pool.add(image, srgb=srgb, wrap=_wrap(document, ref),
-                             name=f"{name} {field}", key=("gltf image", source))
+                             name=f"{name} {field}", key=("gltf image", source, channel))
         except BudgetError:
             raise
         except Exception as error:      # Pillow decodes lazily: any decoder error lands here
@@ -110,6 +111,27 @@ def material_record(index, material, document, missing, pool, notes, path):
         t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
         if t is not None:
             record["roughness_texture"] = t
+    if record["kind"] != EMISSION:
+        normal_ref = spec.get("normalTexture")
+        t = texture("normalTexture", normal_ref, getattr(material, "normalTexture", None), False)
+        if t is not None:
+            record.update(normal_texture=t, normal_scale=values["normal_scale"])
+            notes.append(f"<{where}>: normalTexture applied with tangents from the texture "
+                         f"coordinates (the file's TANGENT not read)")
+    if mode != "OPAQUE" and glows:
+        notes.append(f"<{where}>: alphaMode {mode} ignored on an emitting material (rendered "
+                     f"opaque: its light is sampled over its whole surface)")
+    elif mode != "OPAQUE":
+        record.update(opacity=values["opacity"],
+                      cutoff=values["cutoff"] if mode == "MASK" else BLEND_CUT)
+        alpha = _alpha_image(base_image) if "albedo_texture" in record else None
+        if alpha is not None:
+            t = texture("baseColorTexture", pbr.get("baseColorTexture"), alpha, False, "alpha")
+            if t is not None:
+                record["alpha_texture"] = t
+        if mode == "BLEND":
+            notes.append(f"<{where}>: alphaMode BLEND rendered as stochastic transparency (a "
+                         f"ray passes with probability 1 - alpha: the mean is the blend)")
         if ior != SPEC_IOR:
             notes.append(f"<{where} (ior {ior:g})>: KHR_materials_ior on an opaque material "
                          f"ignored: its dielectric reflects as ior 1.5 does (f0 0.04)")
@@ -144,6 +166,10 @@ def material_values(path, document, index):
 
     return spec, name, {
         "base": numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)[:3],
+        "opacity": numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)[3],
+        "cutoff": numbers(spec.get("alphaCutoff"), 0.5, "alphaCutoff", high=None),
+        "normal_scale": numbers(_dict(spec.get("normalTexture")).get("scale"), 1.0,
+                                "normalTexture scale", high=None),
         "metallic": numbers(pbr.get("metallicFactor"), 1.0, "metallicFactor"),
         "roughness": numbers(pbr.get("roughnessFactor"), 1.0, "roughnessFactor"),
         "emissive": numbers(spec.get("emissiveFactor"), [0.0] * 3, "emissiveFactor", 3),
@@ -153,6 +179,17 @@ def material_values(path, document, index):
                                 .get("transmissionFactor"), 0.0, "transmissionFactor"),
         "ior": numbers(_dict(extensions.get("KHR_materials_ior")).get("ior"), 1.5, "ior",
                        high=None)}
+
+
+def _alpha_image(image):
+    """The alpha channel of a decoded base colour image, as a grey PIL image, or None if it has
+    none (or it is opaque everywhere)."""
+    if image is None or not hasattr(image, "mode"):
+        return None
+    if image.mode not in ("RGBA", "LA", "PA", "RGBa", "La") and "transparency" not in image.info:
+        return None
+    alpha = image.convert("RGBA").getchannel("A")
+    return None if alpha.getextrema()[0] == 255 else alpha
 
 
 def _source(document, ref):

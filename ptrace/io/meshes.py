@@ -34,7 +34,8 @@ from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl")
 FORMAT_NAMES = {".ply": "PLY", ".glb": "binary glTF", ".gltf": "glTF", ".stl": "STL"}
-TEXTURES = ("albedo_texture", "emission_texture", "roughness_texture")
+TEXTURES = ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
+            "normal_texture")
 # The course's CB camera: 49.13434 degrees across a 4:3 frame.
 DEFAULT_HFOV = 49.13434
 DEFAULT_VFOV = math.degrees(2 * math.atan(math.tan(math.radians(DEFAULT_HFOV) / 2) * 3 / 4))
@@ -251,6 +252,10 @@ def _assemble(path, scene, document, missing, notes, untextured):
                                         srgb=document is None)[0]
         elif material is not None and "color" in getattr(visual, "vertex_attributes", {}):
             vertex_colours = _attribute_colours(visual.vertex_attributes["color"], len(v))
+            if record.get("cutoff", 0.0) != 0.0 and \
+                    np.shape(visual.vertex_attributes["color"])[-1:] == (4,):
+                notes.append(f"<{where}>: COLOR_0's alpha not read (its alphaMode takes the "
+                             f"base colour's alpha alone)")
         elif material is None and kind == "face":
             notes.append(f"<{where}>: per-face colours ignored")
         corner_uv = np.zeros((len(f), 3, 2))
