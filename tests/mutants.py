@@ -28,6 +28,7 @@ INTEGRATOR, KERNELS, BVH = "ptrace/integrator.py", "accel/kernels.py", "accel/bv
 SIMD = "accel/simd.py"
 RR_TEST = "tests/ptrace/test_roulette_rule.py"
 PROMISES = "tests/ptrace/test_hostile_promises.py"
+ALPHA_TEST = "tests/ptrace/test_gltf_alpha_normals.py"
 
 # name -> (what the bug is, [(file, text, replacement)], [pytest arguments])
 MUTANTS = {
@@ -154,6 +155,19 @@ MUTANTS = {
         [("ptrace/io/gltf.py", "            triangles += per_mesh[mesh]\n",
           "            triangles += 0 if mesh in used else per_mesh[mesh]\n")],
         ["tests/ptrace/test_budgets.py", "-k", "instancing"]),
+    "blend-passes-with-alpha": (
+        "a BLEND surface passes rays with probability alpha instead of 1 - alpha",
+        [("ptrace/cutouts.py", "return alpha <= uniform(", "return alpha > uniform(")],
+        [ALPHA_TEST, "-k", "blend"]),
+    "shadow-ignores-cutouts": (
+        "shadow rays stop at cut-out surfaces",
+        [("ptrace/cutouts.py", "    if materials.cutoff.shape[0] == 0:\n        return True\n",
+          "    return True\n")],
+        [ALPHA_TEST, "-k", "occluder"]),
+    "bitangent-keeps-handedness": (
+        "the normal texture's bitangent is n x t whatever side dP/dv is on (mirrored UVs)",
+        [("ptrace/textures.py", "        cx, cy, cz = -cx, -cy, -cz\n", "        pass\n")],
+        [ALPHA_TEST, "-k", "mirrored"]),
 }
 
 

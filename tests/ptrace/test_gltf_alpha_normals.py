@@ -206,6 +206,29 @@ def test_a_normal_texture_bends_the_shading_normal(tmp_path, tilt, sun):
     assert any("normalTexture applied" in line for line in grouped_notes(scene.notes))
 
 
+@pytest.mark.parametrize("tilt, sun, brighter", [((0.6, 0.0), (0.5, 0.0), False),
+                                               ((0.0, 0.6), (0.0, 0.5), True)])
+def test_mirrored_texture_coordinates_turn_the_tangent_not_the_bitangent(tmp_path, tilt, sun,
+                                                                         brighter):
+    """The quad's u mirrored (u = 1 at x = -1): the texture's +u is now -x, so a normal bent
+    along +u turns away from a sun on the +x side, while +v is still +y (the bitangent keeps
+    dP/dv's side, not the tangent frame's handedness)."""
+    mirrored = dict(positions=QUAD, indices=QUAD_FACES.reshape(-1),
+                    uv=QUAD_UV_GLTF * [-1.0, 1.0] + [1.0, 0.0], material=1)
+    images = {}
+    for name, front, pictures in (("plain", white(), []), ("bent", white(
+            normalTexture={"index": 0}), [normal_png(*tilt, math.sqrt(1 - tilt[0] ** 2 -
+                                                                      tilt[1] ** 2))])):
+        path = tmp_path / f"{name}.gltf"
+        gltf(path, [FLOOR, mirrored], materials=[RED, front], images=pictures,
+             nodes=[{"mesh": 0}, {"mesh": 1}, sun_from(*sun)], extensions=SUN)
+        images[name] = render(path)[0]
+    inside = quad_pixels()[0]
+    block = np.ix_(inside, inside)
+    ratio = images["bent"][block].mean() / images["plain"][block].mean()
+    assert (ratio > 1.05) if brighter else (ratio < 0.6), ratio
+
+
 def test_a_normal_texture_scale_bends_less(tmp_path):
     """normalTexture.scale multiplies the texel's x and y: at scale 0 the texture does
     nothing."""
