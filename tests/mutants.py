@@ -71,7 +71,7 @@ MUTANTS = {
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
     "slab-inverses-not-scaled": (
         "the float32 slab test's inverses are not scaled outward",
-        [(BVH, "SLAB_SCALE = 4.0 * 2.0 ** -24", "SLAB_SCALE = 0.0")],
+        [("accel/bvh_slab.py", "SLAB_SCALE = 4.0 * 2.0 ** -24", "SLAB_SCALE = 0.0")],
         ["tests/accel/test_simd.py", "-k", "slab"]),
     "one-child-shortcut-for-several": (
         "BVH closest hit enters the first child hit and drops the others whenever any is hit",
@@ -80,7 +80,7 @@ MUTANTS = {
         ["tests/accel/test_bvh.py"]),
     "collapse-not-least-cost": (
         "the BVH's collapse opens a node into its children where keeping it costs less",
-        [("accel/bvh_build.py", "if opened < value:", "if opened > value:")],
+        [("accel/bvh_wide.py", "if opened < value:", "if opened > value:")],
         ["tests/accel/test_bvh.py", "-k", "least_cost"]),
     "block-swapped-barycentrics": (
         "the BVH's four-lane watertight test returns (v, u) for (u, v)",
