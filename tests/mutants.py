@@ -129,8 +129,8 @@ MUTANTS = {
     "face-anywhere-in-the-plane": (
         "an emissive panel anywhere in a light's plane is taken for the light's face (the "
         "light's centre need not lie on it)",
-        [("ptrace/lights.py", "if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):",
-          "if False:")],
+        [("ptrace/emitters.py",
+          "if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):", "if False:")],
         [PROMISES, "-k", "sideways"]),
     "gltf-wrap-t-for-s": (
         "a glTF sampler's wrapT is read for the texture's u wrap as well as its v wrap",
