@@ -63,24 +63,25 @@ def _new_scratch(record):
     return None
 
 
-@overload(closest_hit, jit_options={"cache": True, "_nrt": False, "forceinline": True})
-def _closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+def _ray_query(record, which):
+    """The implementation of a one-ray query (which: 1 closest hit, 2 any hit) for `record`'s
+    type: a call of the function its backend registered, or None for an unregistered type."""
     face = _face(record)
     if face is not None:
-        function = face[1]
+        function = face[which]
         return lambda record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax: function(
             record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
     return None
+
+
+@overload(closest_hit, jit_options={"cache": True, "_nrt": False, "forceinline": True})
+def _closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    return _ray_query(record, 1)
 
 
 @overload(any_hit, jit_options={"cache": True, "_nrt": False, "forceinline": True})
 def _any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    face = _face(record)
-    if face is not None:
-        function = face[2]
-        return lambda record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax: function(
-            record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
-    return None
+    return _ray_query(record, 2)
 
 
 # -- the batch face on top of the compiled one (for backends without a batch kernel of their own)

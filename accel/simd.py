@@ -15,7 +15,7 @@ for primitive and t for t. A missed lane is t = NaN (u = v = 0), as the scalar k
 The slab test need not match anything bit for bit, only never miss a box the ray meets: it
 computes in float32 on the float32 box planes (rounded outward when the BVH is built, so a box
 can only grow), from ray origins moved outward by more than float32's rounding can move a t
-(accel.bvh._ray_planes), which tests/accel/test_simd.py checks against exact rational
+(accel.bvh_slab._ray_planes), which tests/accel/test_simd.py checks against exact rational
 arithmetic on grazing rays.
 
 LLVM lowers an 8-lane float32 vector to one AVX2 register and a 4-lane float64 one to another

@@ -9,14 +9,22 @@ import numpy as np
 from numba import njit
 
 
-def _float_array(name, value, shape_tail):
-    array = np.ascontiguousarray(value, dtype=np.float64)
+def _checked_array(name, value, shape_tail, dtype=np.float64, rows="N"):
+    """`value` as a C-contiguous array of `dtype` and shape (rows, *shape_tail) (an empty one
+    reshaped to that), or ValueError naming `name` and the shape it has."""
+    array = np.ascontiguousarray(value, dtype=dtype)
     if array.size == 0:
         array = array.reshape((0,) + shape_tail)
     if array.shape[1:] != shape_tail or array.ndim != 1 + len(shape_tail):
-        raise ValueError(f"{name} must have shape (N, {', '.join(map(str, shape_tail))})"
+        raise ValueError(f"{name} must have shape ({rows}, {', '.join(map(str, shape_tail))})"
                          f" but has shape {array.shape}")
     return array
+
+
+def _store(instance, **arrays):
+    """Set a frozen dataclass's fields to their checked arrays (its __post_init__'s last step)."""
+    for name, array in arrays.items():
+        object.__setattr__(instance, name, array)
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,15 +39,10 @@ class Geometry:
     radii: np.ndarray = None
 
     def __post_init__(self):
-        set_ = object.__setattr__
-        vertices = _float_array("vertices", self.vertices, (3,))
-        faces = np.ascontiguousarray(self.faces, dtype=np.int64)
-        if faces.size == 0:
-            faces = faces.reshape(0, 3)
-        if faces.ndim != 2 or faces.shape[1] != 3:
-            raise ValueError(f"faces must have shape (F, 3) but has shape {faces.shape}")
-        centers = _float_array("centers",
-                               np.empty((0, 3)) if self.centers is None else self.centers, (3,))
+        vertices = _checked_array("vertices", self.vertices, (3,))
+        faces = _checked_array("faces", self.faces, (3,), dtype=np.int64, rows="F")
+        centers = _checked_array("centers",
+                                 np.empty((0, 3)) if self.centers is None else self.centers, (3,))
         radii = np.ascontiguousarray(np.empty(0) if self.radii is None else self.radii,
                                      dtype=np.float64).reshape(-1)
         if radii.shape[0] != centers.shape[0]:
@@ -52,10 +55,7 @@ class Geometry:
             raise ValueError("sphere radii must not be negative")
         if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
             raise ValueError(f"faces index vertices outside 0..{len(vertices) - 1}")
-        set_(self, "vertices", vertices)
-        set_(self, "faces", faces)
-        set_(self, "centers", centers)
-        set_(self, "radii", radii)
+        _store(self, vertices=vertices, faces=faces, centers=centers, radii=radii)
 
     @property
     def triangle_count(self):
@@ -101,9 +101,8 @@ class Rays:
     tmax: np.ndarray = None
 
     def __post_init__(self):
-        set_ = object.__setattr__
-        origins = _float_array("origins", self.origins, (3,))
-        directions = _float_array("directions", self.directions, (3,))
+        origins = _checked_array("origins", self.origins, (3,))
+        directions = _checked_array("directions", self.directions, (3,))
         n = origins.shape[0]
         if directions.shape[0] != n:
             raise ValueError(f"{n} origins but {directions.shape[0]} directions")
@@ -111,10 +110,8 @@ class Rays:
             np.asarray(self.tmin, dtype=np.float64), (n,))
         tmax = np.full(n, np.inf) if self.tmax is None else np.broadcast_to(
             np.asarray(self.tmax, dtype=np.float64), (n,))
-        set_(self, "origins", origins)
-        set_(self, "directions", directions)
-        set_(self, "tmin", np.ascontiguousarray(tmin))
-        set_(self, "tmax", np.ascontiguousarray(tmax))
+        _store(self, origins=origins, directions=directions, tmin=np.ascontiguousarray(tmin),
+               tmax=np.ascontiguousarray(tmax))
 
     def __len__(self):
         return self.origins.shape[0]

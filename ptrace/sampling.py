@@ -45,10 +45,8 @@ _K_SEED = np.uint64(0x9E3779B97F4A7C15)
 _K_PIXEL = np.uint64(0xD1B54A32D192ED03)
 _K_SAMPLE = np.uint64(0xABC98388FB8FAC03)
 _K_DIM = np.uint64(0x8CB92BA72F3D8DD7)
-_S30 = np.uint64(30)
-_S27 = np.uint64(27)
-_S31 = np.uint64(31)
-_S11 = np.uint64(11)
+# shift amounts as uint64 too, so that every operand of the bit arithmetic is uint64
+_S30, _S27, _S31, _S11 = map(np.uint64, (30, 27, 31, 11))
 _INV_2_53 = 1.0 / 9007199254740992.0
 
 
@@ -81,17 +79,10 @@ def uniform_array(seed, pixels, samples, dimension):
 # -- Sobol' (0,2)-sequence, Owen-scrambled and index-shuffled --------------------------------------
 _MASK32 = np.uint64(0xFFFFFFFF)
 _ONE = np.uint64(1)
-_S1 = np.uint64(1)
-_S2 = np.uint64(2)
-_S4 = np.uint64(4)
-_S8 = np.uint64(8)
-_S16 = np.uint64(16)
-_S32 = np.uint64(32)
-_B1 = np.uint64(0x55555555)
-_B2 = np.uint64(0x33333333)
-_B4 = np.uint64(0x0F0F0F0F)
-_B8 = np.uint64(0x00FF00FF)
-_B16 = np.uint64(0x0000FFFF)
+_S1, _S2, _S4, _S8, _S16, _S32 = map(np.uint64, (1, 2, 4, 8, 16, 32))
+# the 32-bit masks of alternating runs of 1, 2, 4, 8 and 16 bits (_reverse_bits32's swaps)
+_B1, _B2, _B4, _B8, _B16 = map(np.uint64, (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF,
+                                           0x0000FFFF))
 # Vegdahl's multipliers for the Laine-Karras-style hash (all even: see _owen_reversed)
 _LK1 = np.uint64(0x3D20ADEA)
 _LK2 = np.uint64(0x05526C56)

@@ -72,7 +72,7 @@ MUTANTS = {
         ["tests/accel/test_bvh.py", "-k", "nearest"]),
     "slab-inverses-not-scaled": (
         "the float32 slab test's inverses are not scaled outward",
-        [(BVH, "SLAB_SCALE = 4.0 * 2.0 ** -24", "SLAB_SCALE = 0.0")],
+        [("accel/bvh_slab.py", "SLAB_SCALE = 4.0 * 2.0 ** -24", "SLAB_SCALE = 0.0")],
         ["tests/accel/test_simd.py", "-k", "slab"]),
     "one-child-shortcut-for-several": (
         "BVH closest hit enters the first child hit and drops the others whenever any is hit",
@@ -81,7 +81,7 @@ MUTANTS = {
         ["tests/accel/test_bvh.py"]),
     "collapse-not-least-cost": (
         "the BVH's collapse opens a node into its children where keeping it costs less",
-        [("accel/bvh_build.py", "if opened < value:", "if opened > value:")],
+        [("accel/bvh_wide.py", "if opened < value:", "if opened > value:")],
         ["tests/accel/test_bvh.py", "-k", "least_cost"]),
     "block-swapped-barycentrics": (
         "the BVH's four-lane watertight test returns (v, u) for (u, v)",
@@ -130,8 +130,8 @@ MUTANTS = {
     "face-anywhere-in-the-plane": (
         "an emissive panel anywhere in a light's plane is taken for the light's face (the "
         "light's centre need not lie on it)",
-        [("ptrace/lights.py", "if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):",
-          "if False:")],
+        [("ptrace/emitters.py",
+          "if np.any(p < lower - tolerance) or np.any(p > upper + tolerance):", "if False:")],
         [PROMISES, "-k", "sideways"]),
     "gltf-wrap-t-for-s": (
         "a glTF sampler's wrapT is read for the texture's u wrap as well as its v wrap",

@@ -25,10 +25,9 @@ import numba
 import numpy as np
 
 from ..errors import PtraceError
-from ..features import FEATURES, aov_images, denoise
-from ..image import course_8bit, rate_colours
+from ..features import FEATURES, denoise
 from ..rendering.tiles import Passes, new_sums
-from . import view_messages, view_render
+from . import view_frame, view_messages, view_render
 from .view_render import Blocks, Shown, denoiser_missing, mean_image, png_bytes, write_frame
 
 QUICK_SECONDS = 0.06            # the budget of a frame while the camera moves
@@ -338,7 +337,8 @@ class Preview:
 
     def _show(self, generation, job, partial, kind, override=None, rays=0, seconds=0.0):
         """Build the frame (the summed image, with the finished blocks of the pass under way if
-        partial), encode it as a PNG (_png) and publish it with its stats."""
+        partial; ptrace.app.view_frame draws it and writes its stats), encode it as a PNG and
+        publish it with its stats."""
         with self.cond:
             self._check(generation)
             rgb, counts = self.sums[0].copy(), self.sums[3].copy()
@@ -360,46 +360,23 @@ class Preview:
             if kind in ("quick", "pass"):
                 self.request_at = None
         w, h = self.width, self.height
-        gain = np.float32(2.0 ** exposure)
-        spp, rate, scale, aovs, denoised = job.settings.spp, None, 1, None, None
-        if features is not None:
-            aovs = aov_images(features, counts, (h, w))
-        if override is not None:      # a quick frame: sent small, scaled up by the page
-            small, scale, radiance = override
-            encoded = course_8bit(small * gain)
-            counts = counts.reshape(h, w)[::-1]
-        else:
-            radiance = mean_image((rgb, None, None, counts), w, h)
-            counts = counts.reshape(h, w)[::-1]
-            if fallback is not None:
-                radiance = np.where(counts[..., None] > 0, radiance, fallback)
-            if mode == "rate":
-                encoded = rate = rate_colours(counts / spp)
-            elif denoise and aovs is not None:
-                denoised = self._denoised(radiance, aovs, merged)
-                encoded = course_8bit(denoised * gain)
-            else:
-                encoded = course_8bit(radiance * gain)
+        spp = job.settings.spp
+        radiance, counts, encoded, rate, scale, aovs, denoised = view_frame.draw(
+            rgb, counts, features, w, h, spp, exposure, mode, fallback, override,
+            denoise, lambda radiance, aovs: self._denoised(radiance, aovs, merged))
         png = png_bytes(encoded, self.temporary)
         seconds, rays = job.seconds + seconds, job.rays + rays
-        remaining = job.rows.size * spp - done_samples
         self.seq += 1
         self.shown = Shown(radiance, counts, spp, rate, exposure, aovs, denoised)
         if override is None:
             self.accumulated = self.shown
         state = "paused" if paused else "moving" if moving else \
             "done" if job.done else "rendering"
-        stats = {"type": "frame", "seq": self.seq, "kind": kind, "width": w, "height": h,
-                 "scale": scale,
-                 "spp": 1.0 if override is not None else done_samples / job.rows.size,
-                 "target": spp, "mode": mode, "denoised": denoised is not None,
-                 "exposure": exposure, "seconds": seconds,
-                 "rays_per_second": rays / seconds if seconds else 0.0,
-                 "eta_seconds": seconds / done_samples * remaining
-                 if done_samples and state == "rendering" else None,
-                 "state": state, "request": request, "cell": job.rows.size != w * h,
-                 "latency_ms": None if request_at is None or kind not in ("quick", "pass")
-                 else 1000 * (time.perf_counter() - request_at)}
+        stats = view_frame.stats(
+            seq=self.seq, kind=kind, width=w, height=h, scale=scale, quick=override is not None,
+            pixels=job.rows.size, done_samples=done_samples, spp=spp, mode=mode,
+            denoised=denoised is not None, exposure=exposure, seconds=seconds, rays=rays,
+            state=state, request=request, request_at=request_at)
         self.publish(stats, png)
 
     def _denoised(self, radiance, aovs, merged):

@@ -6,21 +6,7 @@ import numpy as np
 
 import accel
 
-from ..codes import (
-    AUTO_EVERY_LIGHT,
-    AUTO_MANY,
-    INDEPENDENT,
-    LIGHTS_ALL,
-    LIGHTS_AUTO,
-    LIGHTS_BVH,
-    LIGHTS_POWER,
-    NORMALS,
-    PATH,
-    RR_CAP,
-    RR_DEPTH,
-    SOBOL,
-    Options,
-)
+from .. import codes
 from ..errors import PtraceError
 from ..scene import DIRECTIONAL, POINT
 
@@ -28,8 +14,8 @@ INTEGRATORS = ("path", "normals")
 DIRECT = ("mis", "light")             # --direct; -H replaces both by hemisphere sampling
 SAMPLERS = ("sobol", "independent")   # --sampler
 LIGHT_SAMPLERS = ("auto", "all", "power", "bvh")   # --light-sampler
-LIGHT_SAMPLER_CODES = {"auto": LIGHTS_AUTO, "all": LIGHTS_ALL, "power": LIGHTS_POWER,
-                       "bvh": LIGHTS_BVH}
+LIGHT_SAMPLER_CODES = {"auto": codes.LIGHTS_AUTO, "all": codes.LIGHTS_ALL,
+                       "power": codes.LIGHTS_POWER, "bvh": codes.LIGHTS_BVH}
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
@@ -89,8 +75,8 @@ class Settings:
     max_depth: int = 1
     hemisphere: bool = False
     roulette: bool = True
-    rr_cap: float = RR_CAP
-    rr_depth: int = RR_DEPTH
+    rr_cap: float = codes.RR_CAP
+    rr_depth: int = codes.RR_DEPTH
     adaptive: tuple = None
     direct: str = "mis"
     sampler: str = "sobol"
@@ -158,12 +144,12 @@ class Settings:
         return {"split": self.bvh_split} if self.accel == "bvh" else {}
 
     def kernel_options(self):
-        """The integrator's Options record."""
-        mode = NORMALS if self.integrator == "normals" else PATH
-        return Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
-                       self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
-                       self.direct == "mis", SOBOL if self.sampler == "sobol" else INDEPENDENT,
-                       LIGHT_SAMPLER_CODES[self.light_sampler])
+        """The integrator's Options record (ptrace.codes.Options)."""
+        mode = codes.NORMALS if self.integrator == "normals" else codes.PATH
+        sampler = codes.SOBOL if self.sampler == "sobol" else codes.INDEPENDENT
+        return codes.Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
+                             self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
+                             self.direct == "mis", sampler, LIGHT_SAMPLER_CODES[self.light_sampler])
 
     def rays_per_path(self, scene):
         """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the
@@ -176,7 +162,7 @@ class Settings:
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
         emitters = int(_emissive_light(scene))
         bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
-        if self.light_mode(scene) != LIGHTS_ALL:
+        if self.light_mode(scene) != codes.LIGHTS_ALL:
             return 1 + self.light_samples + bsdf_ray
         return 1 + delta + self.light_samples * (len(lights) - delta + emitters) + bsdf_ray
 
@@ -185,15 +171,15 @@ class Settings:
         LIGHTS_BVH): auto resolved as the integrator resolves it (ptrace.integrator.light_mode),
         by the file's lights and the emissive primitives counting as one."""
         code = LIGHT_SAMPLER_CODES[self.light_sampler]
-        if code != LIGHTS_AUTO:
+        if code != codes.LIGHTS_AUTO:
             return code
         count = len(scene.lights) + int(_emissive_light(scene))
-        return LIGHTS_ALL if count <= AUTO_EVERY_LIGHT else AUTO_MANY
+        return codes.LIGHTS_ALL if count <= codes.AUTO_EVERY_LIGHT else codes.AUTO_MANY
 
     def uses_light_tree(self, scene):
         """Whether a render of this scene chooses lights by the light BVH (its records then
         need the tree: ptrace.integrator.scene_records)."""
-        return self.integrator == "path" and self.light_mode(scene) == LIGHTS_BVH
+        return self.integrator == "path" and self.light_mode(scene) == codes.LIGHTS_BVH
 
 
 def _emissive_light(scene):
