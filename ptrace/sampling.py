@@ -39,12 +39,10 @@ elementary interval of the 2**k-net.
 import numpy as np
 from numba import njit
 
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-_K_SEED = np.uint64(0x9E3779B97F4A7C15)
-_K_PIXEL = np.uint64(0xD1B54A32D192ED03)
-_K_SAMPLE = np.uint64(0xABC98388FB8FAC03)
-_K_DIM = np.uint64(0x8CB92BA72F3D8DD7)
+# SplitMix64's finaliser multipliers, and the key's odd multiplier of each counter
+_M1, _M2 = map(np.uint64, (0xBF58476D1CE4E5B9, 0x94D049BB133111EB))
+_K_SEED, _K_PIXEL, _K_SAMPLE, _K_DIM = map(np.uint64, (
+    0x9E3779B97F4A7C15, 0xD1B54A32D192ED03, 0xABC98388FB8FAC03, 0x8CB92BA72F3D8DD7))
 # shift amounts as uint64 too, so that every operand of the bit arithmetic is uint64
 _S30, _S27, _S31, _S11 = map(np.uint64, (30, 27, 31, 11))
 _INV_2_53 = 1.0 / 9007199254740992.0
@@ -67,15 +65,6 @@ def uniform(seed, pixel, sample, dimension):
     return np.float64(key >> _S11) * _INV_2_53
 
 
-@njit(cache=True)
-def uniform_array(seed, pixels, samples, dimension):
-    """uniform() for arrays of pixels and samples (for tests and vectorised callers)."""
-    out = np.empty(pixels.shape[0])
-    for i in range(pixels.shape[0]):
-        out[i] = uniform(seed, pixels[i], samples[i], dimension)
-    return out
-
-
 # -- Sobol' (0,2)-sequence, Owen-scrambled and index-shuffled --------------------------------------
 _MASK32 = np.uint64(0xFFFFFFFF)
 _ONE = np.uint64(1)
@@ -84,16 +73,12 @@ _S1, _S2, _S4, _S8, _S16, _S32 = map(np.uint64, (1, 2, 4, 8, 16, 32))
 _B1, _B2, _B4, _B8, _B16 = map(np.uint64, (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF,
                                            0x0000FFFF))
 # Vegdahl's multipliers for the Laine-Karras-style hash (all even: see _owen_reversed)
-_LK1 = np.uint64(0x3D20ADEA)
-_LK2 = np.uint64(0x05526C56)
-_LK3 = np.uint64(0x53A22864)
+_LK1, _LK2, _LK3 = map(np.uint64, (0x3D20ADEA, 0x05526C56, 0x53A22864))
 # one constant per use, so that the shuffle and each scramble get an independent seed, and 1D and
 # 2D keys with the same dim are independent
-_SALT_2D = np.uint64(0x632BE59BD9B4E019)
-_SALT_1D = np.uint64(0x85EBCA77C2B2AE63)
-_SALT_SHUFFLE = np.uint64(0xC2B2AE3D27D4EB4F)
-_SALT_X = np.uint64(0x27D4EB2F165667C5)
-_SALT_Y = np.uint64(0x165667B19E3779F9)
+_SALT_2D, _SALT_1D, _SALT_SHUFFLE, _SALT_X, _SALT_Y = map(np.uint64, (
+    0x632BE59BD9B4E019, 0x85EBCA77C2B2AE63, 0xC2B2AE3D27D4EB4F, 0x27D4EB2F165667C5,
+    0x165667B19E3779F9))
 _INV_2_32 = 1.0 / 4294967296.0
 
 
@@ -186,19 +171,27 @@ def sobol_1d(seed, pixel, index, dim):
 
 
 @njit(cache=True)
-def sobol_2d_array(seed, pixels, indices, dim):
-    """sobol_2d() for arrays of pixels and indices: an (N, 2) array (for tests and vectorised
-    callers)."""
-    out = np.empty((pixels.shape[0], 2))
+def _numbers(seed, pixels, counters, dim):
+    """(N, 4): for each (pixel, counter) pair, uniform(seed, pixel, counter, dim),
+    sobol_1d(seed, pixel, counter, dim) and sobol_2d's (x, y)."""
+    out = np.empty((pixels.shape[0], 4))
     for n in range(pixels.shape[0]):
-        out[n, 0], out[n, 1] = sobol_2d(seed, pixels[n], indices[n], dim)
+        out[n, 0] = uniform(seed, pixels[n], counters[n], dim)
+        out[n, 1] = sobol_1d(seed, pixels[n], counters[n], dim)
+        out[n, 2], out[n, 3] = sobol_2d(seed, pixels[n], counters[n], dim)
     return out
 
 
-@njit(cache=True)
+def uniform_array(seed, pixels, samples, dimension):
+    """uniform() for arrays of pixels and samples (for tests)."""
+    return _numbers(seed, np.asarray(pixels), np.asarray(samples), dimension)[:, 0]
+
+
 def sobol_1d_array(seed, pixels, indices, dim):
-    """sobol_1d() for arrays of pixels and indices."""
-    out = np.empty(pixels.shape[0])
-    for n in range(pixels.shape[0]):
-        out[n] = sobol_1d(seed, pixels[n], indices[n], dim)
-    return out
+    """sobol_1d() for arrays of pixels and indices (for tests)."""
+    return _numbers(seed, np.asarray(pixels), np.asarray(indices), dim)[:, 1]
+
+
+def sobol_2d_array(seed, pixels, indices, dim):
+    """sobol_2d() for arrays of pixels and indices: an (N, 2) array (for tests)."""
+    return _numbers(seed, np.asarray(pixels), np.asarray(indices), dim)[:, 2:]

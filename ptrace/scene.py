@@ -70,16 +70,12 @@ class Materials:
     normal_scale: np.ndarray = None        # (M,)
 
     def __post_init__(self):
-        if self.specular is None:
-            self.specular = np.zeros((len(self.kind), 3))
-        for name, value in (("metallic", 0.0), ("opacity", 1.0), ("cutoff", 0.0),
-                            ("normal_scale", 1.0)):
+        m = len(self.kind)
+        for name, default in OPTIONAL_FIELDS.items():
             if getattr(self, name) is None:
-                setattr(self, name, np.full(len(self.kind), value))
-        for name in ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
-                     "normal_texture"):
-            if getattr(self, name) is None:
-                setattr(self, name, np.full(len(self.kind), -1, dtype=np.int32))
+                shape = (m, 3) if name in RGB_FIELDS else m
+                setattr(self, name, np.full(shape, default,
+                                            dtype=np.int32 if name in TEXTURE_FIELDS else None))
 
     def __len__(self):
         return self.kind.shape[0]
@@ -92,32 +88,31 @@ class Materials:
 
     @classmethod
     def from_records(cls, records):
-        """Build from a list of dicts with a 'kind' and any of the fields above."""
+        """Build from a list of dicts with a 'kind' and any of the fields above (a field a
+        record leaves out takes its default in RGB_FIELDS, NUMBER_FIELDS or TEXTURE_FIELDS)."""
         m = len(records)
-        rgb = lambda key, default: np.array(
-            [r.get(key, default) for r in records], dtype=np.float64).reshape(m, 3)
-        one = lambda key, default: np.array(
-            [r.get(key, default) for r in records], dtype=np.float64).reshape(m)
+        column = lambda key, default, dtype, shape: np.array(
+            [r.get(key, default) for r in records], dtype=dtype).reshape(shape)
         return cls(
             kind=np.array([r["kind"] for r in records], dtype=np.int32).reshape(m),
-            albedo=rgb("albedo", (0.5, 0.5, 0.5)),
-            transmittance=rgb("transmittance", (0.0, 0.0, 0.0)),
-            emission=rgb("emission", (0.0, 0.0, 0.0)),
-            ior=one("ior", 1.0),
-            roughness=one("roughness", 0.0),
-            alpha=one("alpha", 0.0),
-            eta=rgb("eta", (0.0, 0.0, 0.0)),
-            k=rgb("k", (0.0, 0.0, 0.0)),
-            specular=rgb("specular", (0.0, 0.0, 0.0)),
-            metallic=one("metallic", 0.0),
-            opacity=one("opacity", 1.0),
-            cutoff=one("cutoff", 0.0),
-            normal_scale=one("normal_scale", 1.0),
             names=tuple(r.get("name", "") for r in records),
-            **{name: np.array([r.get(name, -1) for r in records], dtype=np.int32).reshape(m)
-               for name in ("albedo_texture", "emission_texture", "roughness_texture",
-                            "alpha_texture", "normal_texture")},
+            **{key: column(key, value, np.float64, (m, 3)) for key, value in RGB_FIELDS.items()},
+            **{key: column(key, value, np.float64, m) for key, value in NUMBER_FIELDS.items()},
+            **{key: column(key, -1, np.int32, m) for key in TEXTURE_FIELDS},
         )
+
+
+# Materials' fields and their defaults: per channel, numbers, and texture indices (-1: none)
+RGB_FIELDS = {"albedo": (0.5, 0.5, 0.5), "transmittance": (0.0, 0.0, 0.0),
+              "emission": (0.0, 0.0, 0.0), "eta": (0.0, 0.0, 0.0), "k": (0.0, 0.0, 0.0),
+              "specular": (0.0, 0.0, 0.0)}
+NUMBER_FIELDS = {"ior": 1.0, "roughness": 0.0, "alpha": 0.0, "metallic": 0.0, "opacity": 1.0,
+                 "cutoff": 0.0, "normal_scale": 1.0}
+TEXTURE_FIELDS = ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
+                  "normal_texture")
+# the fields Materials may be built without, and what they then hold (per material)
+OPTIONAL_FIELDS = {"specular": 0.0, "metallic": 0.0, "opacity": 1.0, "cutoff": 0.0,
+                   "normal_scale": 1.0, **{key: -1 for key in TEXTURE_FIELDS}}
 
 
 # Texture wrap modes (Textures.wrap), glTF's three: repeat, clamp to edge, mirrored repeat.

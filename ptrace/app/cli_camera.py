@@ -52,25 +52,32 @@ def attach_negative_vectors(argv):
     return [token for token in out if token is not None]
 
 
+# the camera flags, in --help's order: (flag, metavar, help)
+CAMERA_FLAGS = (
+    ("--eye", "X,Y,Z",
+     "point a camera: stand it here (a pinhole on every scene kind; for -b and -d too)"),
+    ("--look-at", "X,Y,Z",
+     "with --eye: the point at the image's centre (default: the centre of the scene's bounds)"),
+    ("--up", "X,Y,Z",
+     "the world's up, above the image's centre (default 0,1,0); without --eye, a mesh file's "
+     "default camera takes it as the file's up (a Z-up file: 0,0,1, seen from -Y)"),
+    ("--fov", "DEGREES",
+     "the vertical field of view of --eye's camera (without --eye, of a mesh file's default "
+     "camera), from the image's bottom edge to its top edge, 0 < DEGREES < 180 (default: the "
+     "longer image side spans the scene camera's horizontal view at 800x600, 49.13434 degrees "
+     "for a mesh file)"),
+    ("--camera-index", "N",
+     "render the file's own camera N (glTF cameras, counted from 0 in the file's node order; "
+     "default: its first perspective camera, if it has one)"),
+)
+
+
 def add_camera_flags(parser):
-    """--eye, --look-at, --up and --fov on `parser`."""
-    add = parser.add_argument
-    add("--eye", type=_vector("--eye"), default=None, metavar="X,Y,Z",
-        help="point a camera: stand it here (a pinhole on every scene kind; for -b and -d too)")
-    add("--look-at", type=_vector("--look-at"), default=None, metavar="X,Y,Z",
-        help="with --eye: the point at the image's centre (default: the centre of the scene's "
-             "bounds)")
-    add("--up", type=_vector("--up"), default=None, metavar="X,Y,Z",
-        help="the world's up, above the image's centre (default 0,1,0); without --eye, a mesh "
-             "file's default camera takes it as the file's up (a Z-up file: 0,0,1, seen from -Y)")
-    add("--fov", type=_fov, default=None, metavar="DEGREES",
-        help="the vertical field of view of --eye's camera (without --eye, of a mesh file's "
-             "default camera), from the image's bottom edge to its top edge, 0 < DEGREES < 180 "
-             "(default: the longer image side spans the scene camera's horizontal view at "
-             "800x600, 49.13434 degrees for a mesh file)")
-    add("--camera-index", type=_index, default=None, metavar="N",
-        help="render the file's own camera N (glTF cameras, counted from 0 in the file's node "
-             "order; default: its first perspective camera, if it has one)")
+    """--eye, --look-at, --up, --fov and --camera-index on `parser`."""
+    kinds = {"--fov": _fov, "--camera-index": _index}
+    for flag, metavar, text in CAMERA_FLAGS:
+        kind = kinds[flag] if flag in kinds else _vector(flag)
+        parser.add_argument(flag, type=kind, default=None, metavar=metavar, help=text)
 
 
 def _index(text):
