@@ -93,12 +93,13 @@ class Geometry:
 class Rays:
     """A batch of N rays: points origin + t * direction with tmin <= t <= tmax.
 
-    Directions need not be unit length; t is measured in units of the direction.
+    Directions need not be unit length; t is measured in units of the direction. tmin and tmax
+    are per ray, or one number for every ray (None: the default).
     """
     origins: np.ndarray
     directions: np.ndarray
-    tmin: np.ndarray = None
-    tmax: np.ndarray = None
+    tmin: np.ndarray = 0.0
+    tmax: np.ndarray = np.inf
 
     def __post_init__(self):
         origins = _checked_array("origins", self.origins, (3,))
@@ -106,12 +107,10 @@ class Rays:
         n = origins.shape[0]
         if directions.shape[0] != n:
             raise ValueError(f"{n} origins but {directions.shape[0]} directions")
-        tmin = np.zeros(n) if self.tmin is None else np.broadcast_to(
-            np.asarray(self.tmin, dtype=np.float64), (n,))
-        tmax = np.full(n, np.inf) if self.tmax is None else np.broadcast_to(
-            np.asarray(self.tmax, dtype=np.float64), (n,))
-        _store(self, origins=origins, directions=directions, tmin=np.ascontiguousarray(tmin),
-               tmax=np.ascontiguousarray(tmax))
+        tmin, tmax = (np.ascontiguousarray(np.broadcast_to(np.asarray(
+            default if value is None else value, dtype=np.float64), (n,)))
+            for value, default in ((self.tmin, 0.0), (self.tmax, np.inf)))
+        _store(self, origins=origins, directions=directions, tmin=tmin, tmax=tmax)
 
     def __len__(self):
         return self.origins.shape[0]

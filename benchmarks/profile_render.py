@@ -241,11 +241,11 @@ def _counting_any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return any_hit(record.inner, scratch[0], ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
-def loop_functions(module):
-    """Names of the module's compiled functions that reach a ray query: those whose code names
-    closest_hit, any_hit or another such function."""
+def loop_functions(namespace):
+    """Names of a namespace's (a module's vars) compiled functions that reach a ray query:
+    those whose code names closest_hit, any_hit or another such function."""
     from numba.core.dispatcher import Dispatcher
-    functions = {name: value for name, value in vars(module).items()
+    functions = {name: value for name, value in namespace.items()
                  if isinstance(value, Dispatcher)}
     reach, found = {"closest_hit", "any_hit"}, set()
     while True:
@@ -263,14 +263,18 @@ def counting_loop():
     face (compiled on first call, once per backend and process)."""
     import types
 
+    import ptrace.cutouts as cutouts
     import ptrace.integrator as integrator
-    names = loop_functions(integrator)
+    # the loop's module and the one its ray queries go through (cut-out surfaces), as one
+    # namespace: the copies call each other by name
+    namespace = dict(vars(cutouts), **vars(integrator))
+    names = loop_functions(namespace)
     if "render_pixels" not in names:
         raise RuntimeError("ptrace.integrator.render_pixels no longer reaches closest_hit")
-    namespace = dict(vars(integrator), closest_hit=_counting_closest_hit,
-                     any_hit=_counting_any_hit)
+    functions = dict(namespace)
+    namespace.update(closest_hit=_counting_closest_hit, any_hit=_counting_any_hit)
     for name in names:
-        f = getattr(integrator, name)
+        f = functions[name]
         code = f.py_func
         copy = types.FunctionType(code.__code__, namespace, code.__name__, code.__defaults__,
                                   code.__closure__)
