@@ -309,6 +309,14 @@ def light_mode(options, lights):
     return mode
 
 
+# Inlining, for compile time: render_pixels' per-sample callees (trace_path, emission_found,
+# normal_colour, first_hit_features) are inlined by numba itself (inline="always"), so none is
+# ever compiled on its own; with forceinline each was also compiled alone (optimised and turned
+# into machine code) before LLVM inlined it into its caller, once per backend. direct_light stays
+# forceinline: numba cannot inline a call of more than 30 arguments (Python passes them as *args).
+# The smaller kernel functions stay forceinline too: inlined by numba at every call site, their
+# type inference made render_pixels' compile several times longer; and calling the BSDFs or
+# direct_light instead of inlining them did not make the cold compile shorter.
 @njit(cache=True, _nrt=False, forceinline=True)
 def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
                  ar, ag, ab, alpha, metallic, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy,
@@ -472,7 +480,7 @@ def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
     return float(options.light_samples)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, _nrt=False, inline="always")
 def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny,
                    qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
     """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit
@@ -550,7 +558,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     return r, g, b
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, _nrt=False, inline="always")
 def trace_path(shapes, materials, lights, options, record, scratch, pixel, sample, ox, oy, oz,
                dx, dy, dz, tmin, tmax):
     """Radiance of one camera path and the number of rays it traced."""
@@ -651,7 +659,7 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
     return r, g, b, rays
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, _nrt=False, inline="always")
 def normal_colour(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz, dx, dy,
                   dz, tmin, tmax):
     """The course's normal shading, 0.5 n + 0.5 (black on a miss): n is the barycentric blend of
@@ -677,7 +685,7 @@ def normal_colour(shapes, materials, options, record, scratch, pixel, sample, ox
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, _nrt=False, inline="always")
 def first_hit_features(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz,
                        dx, dy, dz, tmin, tmax):
     """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's first hit: the
