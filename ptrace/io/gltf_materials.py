@@ -111,6 +111,9 @@ def material_record(index, material, document, missing, pool, notes, path):
         t = texture("metallicRoughnessTexture", rough_ref, rough_image, False)
         if t is not None:
             record["roughness_texture"] = t
+        if ior != SPEC_IOR:
+            notes.append(f"<{where} (ior {ior:g})>: KHR_materials_ior on an opaque material "
+                         f"ignored: its dielectric reflects as ior 1.5 does (f0 0.04)")
     if record["kind"] != EMISSION:
         normal_ref = spec.get("normalTexture")
         t = texture("normalTexture", normal_ref, getattr(material, "normalTexture", None), False)
@@ -132,9 +135,6 @@ def material_record(index, material, document, missing, pool, notes, path):
         if mode == "BLEND":
             notes.append(f"<{where}>: alphaMode BLEND rendered as stochastic transparency (a "
                          f"ray passes with probability 1 - alpha: the mean is the blend)")
-        if ior != SPEC_IOR:
-            notes.append(f"<{where} (ior {ior:g})>: KHR_materials_ior on an opaque material "
-                         f"ignored: its dielectric reflects as ior 1.5 does (f0 0.04)")
     if record["kind"] != GLASS and glows:
         t = texture("emissiveTexture", spec.get("emissiveTexture"), emissive_image, True)
         if t is not None:
@@ -164,9 +164,9 @@ def material_values(path, document, index):
             raise SceneError(path, f"{where}: {field} has {len(checked)} numbers, not {count}")
         return checked[:count] if count > 1 else checked[0]
 
+    base = numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)
     return spec, name, {
-        "base": numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)[:3],
-        "opacity": numbers(pbr.get("baseColorFactor"), [1.0] * 4, "baseColorFactor", 4)[3],
+        "base": base[:3], "opacity": base[3],
         "cutoff": numbers(spec.get("alphaCutoff"), 0.5, "alphaCutoff", high=None),
         "normal_scale": numbers(_dict(spec.get("normalTexture")).get("scale"), 1.0,
                                 "normalTexture scale", high=None),

@@ -253,3 +253,16 @@ def test_normalized_integer_texture_coordinates_drop_the_texture_with_a_note(tmp
     scene = ptrace.load(path)
     assert scene.materials.albedo_texture[0] == -1
     assert any("normalized integers" in n for n in scene.notes), scene.notes
+
+
+@pytest.mark.parametrize("alpha_mode", ["OPAQUE", "MASK"])
+def test_an_opaque_materials_ior_is_noted_as_ignored_whatever_its_alpha_mode(tmp_path,
+                                                                            alpha_mode):
+    """KHR_materials_ior on an opaque (not transmissive) material: its f0 stays 0.04, said
+    once, with or without an alphaMode."""
+    material = {"name": "water", "alphaMode": alpha_mode,
+                "extensions": {"KHR_materials_ior": {"ior": 1.33}}}
+    path = tmp_path / "ior.gltf"
+    gltf(path, [quad(material=0)], materials=[material])
+    notes = ptrace.load(path).notes
+    assert sum("KHR_materials_ior on an opaque material ignored" in n for n in notes) == 1, notes
