@@ -591,8 +591,10 @@ def trace_path(shapes, materials, lights, options, record, scratch, pixel, sampl
         kind = kinds[m]
         delta = is_delta(kind)
         sx, sy, sz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
-        if (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
-            # a bent normal that keeps wo on its side (else the unbent one shades)
+        if (sx != nx or sy != ny or sz != nz) and \
+                (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
+            # a bent normal that keeps wo on its side (else the unbent one shades); the frame
+            # is made again only for a normal the texture bent
             nx, ny, nz = sx, sy, sz
             xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
             wox = -dx * xx - dy * xy - dz * xz
