@@ -54,6 +54,7 @@ from .environment import (
     environment_sample,
 )
 from .light_bvh import bvh_arrays, bvh_choose, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
+from .light_hits import box_crossed, build_light_hits, no_light_hits
 from .lights import (
     EMITTER,
     area_light_hit,
@@ -113,7 +114,9 @@ LightArrays = namedtuple("LightArrays", ["kind", "radiance", "position", "direct
                                          "env_marginal", "env_conditional", "env_table",
                                          "select_cdf", "select_pmf", "tree", "entry_light",
                                          "entry_prim", "light_entry", "prim_entry", "bvh_cdf",
-                                         "bvh_pmf"], defaults=no_bvh_arrays())
+                                         "bvh_pmf", "sky", "hit_lower", "hit_upper",
+                                         "hit_skip", "hit_light"],
+                         defaults=no_bvh_arrays() + no_light_hits())
 CameraArrays = namedtuple("CameraArrays", ["position", "to_world", "half_width", "half_height",
                                            "screen_dist", "znear", "zfar", "width",
                                            "lens_radius", "focal_distance"])
@@ -170,7 +173,9 @@ def scene_records(scene, light_tree=False):
         bool(extra or np.isin(lights.kind, [AREA, AMBIENT, ENVIRONMENT]).any()),
         *environment_arrays(scene.environment), *light_selection(scene),
         *(bvh_arrays(scene, prims, prim_power, selection_weights(scene)) if light_tree
-          else no_bvh_arrays()))
+          else no_bvh_arrays()),
+        np.nonzero(np.isin(lights.kind, [AMBIENT, ENVIRONMENT]))[0].astype(np.int64),
+        *build_light_hits(lights.kind, lights.position, lights.edge_x, lights.edge_y))
     return shapes, materials, light_arrays
 
 
@@ -498,24 +503,34 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     r = g = b = 0.0
     kinds = lights.kind
     mode = light_mode(options, lights)
-    for light in range(kinds.shape[0]):
+    # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
+    k = 0
+    t_max = t / (1.0 - SHADOW_SHORTEN)
+    while k < lights.hit_skip.shape[0]:
+        if not box_crossed(lights.hit_lower, lights.hit_upper, k, ox, oy, oz, dx, dy, dz,
+                           t_max):
+            k = lights.hit_skip[k]
+            continue
+        light = lights.hit_light[k]
+        k += 1
+        if light < 0 or (delta and lights.faced[light]):
+            continue
+        t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
+                                 lights.edge_y, light, ox, oy, oz, dx, dy, dz)
+        if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
+            continue
+        weight = 1.0
+        if not delta:   # the light's density for this direction from q, as direct_light
+            n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
+            weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
+                                                                   dx, dy, dz))
+        r += weight * lights.radiance[light, 0]
+        g += weight * lights.radiance[light, 1]
+        b += weight * lights.radiance[light, 2]
+    for j in range(lights.sky.shape[0]):     # the lights at infinity
+        light = lights.sky[j]
         kind = kinds[light]
-        if kind == AREA:
-            if delta and lights.faced[light]:
-                continue
-            t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
-                                     lights.edge_y, light, ox, oy, oz, dx, dy, dz)
-            if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
-                continue
-            weight = 1.0
-            if not delta:   # the light's density for this direction from q, as direct_light
-                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
-                weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
-                                                                       dx, dy, dz))
-            r += weight * lights.radiance[light, 0]
-            g += weight * lights.radiance[light, 1]
-            b += weight * lights.radiance[light, 2]
-        elif kind == ENVIRONMENT and prim < 0:
+        if kind == ENVIRONMENT and prim < 0:
             weight = 1.0
             if not delta:
                 n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
