@@ -22,12 +22,24 @@ LightTree = namedtuple("LightTree", [
                              # next node), -1 for a leaf
     "entry",                 # (M,) int64: a leaf's entry index, -1 for an interior node
     "entry_node",            # (L,) int64: each entry's leaf, -1 for an entry left out
+    # the same tree three levels at a time, as the walk reads it (_wide): W nodes of LANES
+    # lanes, each lane one of the binary tree's nodes
+    "lanes",                 # (W, FIELDS, LANES) float64: each lane's node, field by field
+    "kid",                   # (W, LANES) int64: a lane's wide node, or -1 - its binary leaf
+    "span",                  # (W, LANES, 2) int64: the binary nodes [first, end) of its subtree
 ])
 
 BUCKETS = 12
 SAMPLE = 1024
 ONE_MINUS_EPSILON = 1.0 - 2.0 ** -53
 
+
+LANES = 8         # a wide node's lanes: the binary tree's nodes three levels down
+LEVELS = 3
+# a lane's fields in LightTree.lanes: box, bounding sphere, power, emission cone, and flags
+F_LO, F_HI, F_CENTER, F_R2, F_POWER, F_AXIS = 0, 3, 6, 9, 10, 11
+F_COS_O, F_SIN_O, F_COS_E, F_TWO, F_FLAT = 14, 15, 16, 17, 18
+FIELDS = 19
 
 # -- building ----------------------------------------------------------------------------------
 
@@ -281,7 +293,49 @@ def build_light_tree(bounds_lower, bounds_upper, power, axis, cos_theta_o, cos_t
     half = 0.5 * (nodes[:, HI:HI + 3] - nodes[:, LO:LO + 3])
     c = lambda column: np.ascontiguousarray(nodes[:, column])
     root = nodes[0, PW] if nodes.shape[0] else 1.0
-    return LightTree(c(slice(LO, LO + 3)), c(slice(HI, HI + 3)), nodes[:, LO:LO + 3] + half,
-                     np.einsum("ij,ij->i", half, half), nodes[:, PW] / root, c(slice(AX, AX + 3)),
-                     c(CO), np.sqrt(np.maximum(0.0, 1.0 - nodes[:, CO] ** 2)), c(CE),
-                     nodes[:, TW] > 0.0, child, entry, entry_node)
+    binary = (c(slice(LO, LO + 3)), c(slice(HI, HI + 3)), nodes[:, LO:LO + 3] + half,
+              np.einsum("ij,ij->i", half, half), nodes[:, PW] / root, c(slice(AX, AX + 3)),
+              c(CO), np.sqrt(np.maximum(0.0, 1.0 - nodes[:, CO] ** 2)), c(CE),
+              nodes[:, TW] > 0.0, child, entry, entry_node)
+    return LightTree(*binary, *_wide(*binary[:11]))
+
+
+def _wide(lower, upper, center, radius2, power, axis, cos_o, sin_o, cos_e, two, child):
+    """The binary tree (nodes in depth-first order, child its second children) as wide nodes:
+    a wide node's lanes are the binary nodes LEVELS levels below one of its nodes (or a leaf
+    above that), left to right; a lane that is an interior node is a wide node of its own.
+    Unused lanes have power 0, so their importance is 0 everywhere. (lanes, kid, span)."""
+    count = child.shape[0]
+    end = np.arange(1, count + 1, dtype=np.int64)       # end of each binary node's subtree
+    for k in range(count - 1, -1, -1):
+        if child[k] >= 0:
+            end[k] = end[child[k]]
+    fields = np.zeros((count, FIELDS))
+    fields[:, F_LO:F_LO + 3], fields[:, F_HI:F_HI + 3] = lower, upper
+    fields[:, F_CENTER:F_CENTER + 3], fields[:, F_R2], fields[:, F_POWER] = center, radius2, power
+    fields[:, F_AXIS:F_AXIS + 3], fields[:, F_COS_O], fields[:, F_SIN_O] = axis, cos_o, sin_o
+    fields[:, F_COS_E], fields[:, F_TWO] = cos_e, two
+    fields[:, F_FLAT] = (cos_o >= 1.0) & (cos_e >= 0.0) & ~two
+
+    def below(k, levels):
+        if child[k] < 0 or levels == 0:
+            return [k]
+        return below(k + 1, levels - 1) + below(child[k], levels - 1)
+
+    tops = [0] if count else []
+    lanes_of = []
+    wide_of = {}
+    while len(lanes_of) < len(tops):
+        top = tops[len(lanes_of)]
+        wide_of[top] = len(lanes_of)
+        lanes_of.append(below(top, LEVELS))
+        tops += [k for k in lanes_of[-1] if child[k] >= 0]
+    lanes = np.zeros((len(lanes_of), FIELDS, LANES))
+    kid = np.full((len(lanes_of), LANES), -1, dtype=np.int64)
+    span = np.zeros((len(lanes_of), LANES, 2), dtype=np.int64)
+    for w, members in enumerate(lanes_of):
+        members = np.array(members, dtype=np.int64)
+        lanes[w, :, :members.shape[0]] = fields[members].T
+        kid[w, :members.shape[0]] = [wide_of[k] if child[k] >= 0 else -1 - k for k in members]
+        span[w, :members.shape[0], 0], span[w, :members.shape[0], 1] = members, end[members]
+    return lanes, kid, span

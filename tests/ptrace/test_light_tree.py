@@ -122,25 +122,31 @@ def _pmfs(tree, p, n, count):
 
 
 def distribution(tree, p, n, count):
-    """An independent whole-tree walk: each node's probability from its parent's and the two
-    children's importances (ptrace.light_tree.node_importance); (per-entry probability, the
-    share lost at nodes whose children both have importance 0)."""
-    from ptrace.light_tree import node_importance
+    """An independent whole-tree walk: each wide node's lanes' probabilities from its own and
+    the lanes' importances (ptrace.light_tree.lane_importance, one lane at a time, not the
+    walk's vector loop); (per-entry probability, the share lost at wide nodes whose lanes all
+    have importance 0)."""
+    from ptrace.light_tree import lane_importance
+    from ptrace.light_tree_build import LANES
     n = n / np.linalg.norm(n) if n.any() else n
-    prob, dead, out = np.zeros(len(tree.child)), 0.0, np.zeros(count)
-    if len(tree.child):
-        prob[0] = 1.0 if tree.child[0] >= 0 or node_importance(tree, 0, *p, *n) > 0 else 0.0
-    for k in range(len(tree.child)):
-        if tree.child[k] < 0:
-            out[tree.entry[k]] = prob[k]
-        elif prob[k] > 0.0:
-            c0 = node_importance(tree, k + 1, *p, *n)
-            c1 = node_importance(tree, tree.child[k], *p, *n)
-            if c0 + c1 > 0.0:
-                prob[k + 1], prob[tree.child[k]] = (prob[k] * (c0 / (c0 + c1)),
-                                                    prob[k] * (c1 / (c0 + c1)))
-            else:
-                dead += prob[k]
+    out, dead = np.zeros(count), 0.0
+    prob = np.zeros(len(tree.kid))
+    if len(tree.kid):
+        prob[0] = 1.0
+    for w in range(len(tree.kid)):        # wide nodes: each after the one that holds it
+        if prob[w] == 0.0:
+            continue
+        c = np.array([lane_importance(tree.lanes, w, i, *p, *n, bool(n.any()))
+                      for i in range(LANES)])
+        if not c.sum() > 0.0:
+            dead += prob[w]
+            continue
+        for i in range(LANES):
+            share = prob[w] * (c[i] / c.sum())
+            if tree.kid[w, i] >= 0:
+                prob[tree.kid[w, i]] += share
+            elif c[i] > 0.0:
+                out[tree.entry[-1 - tree.kid[w, i]]] += share
     return out, dead
 
 
