@@ -9,8 +9,8 @@ the squared distance to its centre (clamped below by its bounding sphere's squar
 times the cosine of the smallest angle its cone can make with p's direction, times the cosine
 bound toward n; it is zero where its box lies on or below p's tangent plane, or p lies on or
 behind a box of flat one-sided emitters, and only where no entry of the node can light p. The
-tree is walked from the root three levels at a time: a wide node's LANES lanes are the binary
-nodes three levels below it, their importances are computed together on vector registers, and
+tree is walked from the root four levels at a time: a wide node's LANES lanes are the binary
+nodes four levels below it, their importances are computed together on vector registers, and
 one lane is chosen in proportion to its importance, with one uniform number rescaled from step
 to step.
 

@@ -22,7 +22,7 @@ LightTree = namedtuple("LightTree", [
                              # next node), -1 for a leaf
     "entry",                 # (M,) int64: a leaf's entry index, -1 for an interior node
     "entry_node",            # (L,) int64: each entry's leaf, -1 for an entry left out
-    # the same tree three levels at a time, as the walk reads it (_wide): W nodes of LANES
+    # the same tree four levels at a time, as the walk reads it (_wide): W nodes of LANES
     # lanes, each lane one of the binary tree's nodes
     "lanes",                 # (W, FIELDS, LANES) float64: each lane's node, field by field
     "kid",                   # (W, LANES) int64: a lane's wide node, or -1 - its binary leaf
@@ -34,8 +34,8 @@ SAMPLE = 1024
 ONE_MINUS_EPSILON = 1.0 - 2.0 ** -53
 
 
-LANES = 8         # a wide node's lanes: the binary tree's nodes three levels down
-LEVELS = 3
+LANES = 16        # a wide node's lanes: the binary tree's nodes four levels down
+LEVELS = 4
 # a lane's fields in LightTree.lanes: box, bounding sphere, power, emission cone, and flags
 F_LO, F_HI, F_CENTER, F_R2, F_POWER, F_AXIS = 0, 3, 6, 9, 10, 11
 F_COS_O, F_SIN_O, F_COS_E, F_TWO, F_FLAT = 14, 15, 16, 17, 18
