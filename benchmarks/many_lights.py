@@ -73,7 +73,7 @@ def main(argv=None):
     render(brightest, 8, 6, 1, 0, "all", args.threads)
     reference, reference_seconds, _ = render(scene, width, height, args.reference_spp, 99,
                                              "bvh", args.threads)
-    rows = {}
+    rows, yard = {}, []
     for spp in args.spp:
         for repeat in range(args.repeats):
             for sampler in SAMPLERS:
@@ -81,8 +81,9 @@ def main(argv=None):
                                               args.threads)
                 rows.setdefault((sampler, spp), []).append(
                     (relative_mse(image, reference), seconds, rays, float(image.mean())))
-    yard = [render(brightest, width, height, args.spp[-1], r, "all", args.threads)[1]
-            for r in range(args.repeats)]
+            if spp == args.spp[-1]:     # the yardstick, in the same turns
+                yard.append(render(brightest, width, height, spp, repeat, "all",
+                                   args.threads)[1])
     text = blocks(TEMPLATE)
     lines = [report.header("Many lights: every light at every vertex, or -l chosen by power "
                            "or by the light BVH"),
