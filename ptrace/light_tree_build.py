@@ -300,42 +300,60 @@ def build_light_tree(bounds_lower, bounds_upper, power, axis, cos_theta_o, cos_t
     return LightTree(*binary, *_wide(*binary[:11]))
 
 
-def _wide(lower, upper, center, radius2, power, axis, cos_o, sin_o, cos_e, two, child):
-    """The binary tree (nodes in depth-first order, child its second children) as wide nodes:
-    a wide node's lanes are the binary nodes LEVELS levels below one of its nodes (or a leaf
-    above that), left to right; a lane that is an interior node is a wide node of its own.
-    Unused lanes have power 0, so their importance is 0 everywhere. (lanes, kid, span)."""
+@njit(cache=True)
+def _wide_members(child):
+    """The wide nodes of a binary tree (nodes in depth-first order, child its second children):
+    (members (W, LANES), kid (W, LANES), end (M,)): each wide node's lanes' binary nodes (-1
+    past its last lane), each lane's wide node or -1 - its binary leaf (-1 past the last lane),
+    and the end of each binary node's subtree. Wide node 0 is the root's; the others follow in
+    the order their lanes are met, so a wide node comes after the one that holds it."""
     count = child.shape[0]
-    end = np.arange(1, count + 1, dtype=np.int64)       # end of each binary node's subtree
+    end = np.arange(1, count + 1)
     for k in range(count - 1, -1, -1):
         if child[k] >= 0:
             end[k] = end[child[k]]
-    fields = np.zeros((count, FIELDS))
-    fields[:, F_LO:F_LO + 3], fields[:, F_HI:F_HI + 3] = lower, upper
-    fields[:, F_CENTER:F_CENTER + 3], fields[:, F_R2], fields[:, F_POWER] = center, radius2, power
-    fields[:, F_AXIS:F_AXIS + 3], fields[:, F_COS_O], fields[:, F_SIN_O] = axis, cos_o, sin_o
-    fields[:, F_COS_E], fields[:, F_TWO] = cos_e, two
-    fields[:, F_FLAT] = (cos_o >= 1.0) & (cos_e >= 0.0) & ~two
+    members = np.full((max(count, 1), LANES), -1, dtype=np.int64)
+    kid = np.full((max(count, 1), LANES), -1, dtype=np.int64)
+    tops = np.zeros(max(count, 1), dtype=np.int64)
+    stack = np.zeros((2 * LEVELS + 2, 2), dtype=np.int64)
+    wide, made = 0, 1 if count else 0
+    while wide < made:
+        lane, top = 0, 1
+        stack[0, 0], stack[0, 1] = tops[wide], LEVELS
+        while top > 0:        # depth first, left before right: the lanes from left to right
+            top -= 1
+            k, levels = stack[top, 0], stack[top, 1]
+            if child[k] < 0 or levels == 0:
+                members[wide, lane] = k
+                if child[k] >= 0:
+                    tops[made] = k
+                    kid[wide, lane] = made
+                    made += 1
+                else:
+                    kid[wide, lane] = -1 - k
+                lane += 1
+            else:
+                stack[top, 0], stack[top, 1] = child[k], levels - 1
+                stack[top + 1, 0], stack[top + 1, 1] = k + 1, levels - 1
+                top += 2
+        wide += 1
+    return members[:made], kid[:made], end
 
-    def below(k, levels):
-        if child[k] < 0 or levels == 0:
-            return [k]
-        return below(k + 1, levels - 1) + below(child[k], levels - 1)
 
-    tops = [0] if count else []
-    lanes_of = []
-    wide_of = {}
-    while len(lanes_of) < len(tops):
-        top = tops[len(lanes_of)]
-        wide_of[top] = len(lanes_of)
-        lanes_of.append(below(top, LEVELS))
-        tops += [k for k in lanes_of[-1] if child[k] >= 0]
-    lanes = np.zeros((len(lanes_of), FIELDS, LANES))
-    kid = np.full((len(lanes_of), LANES), -1, dtype=np.int64)
-    span = np.zeros((len(lanes_of), LANES, 2), dtype=np.int64)
-    for w, members in enumerate(lanes_of):
-        members = np.array(members, dtype=np.int64)
-        lanes[w, :, :members.shape[0]] = fields[members].T
-        kid[w, :members.shape[0]] = [wide_of[k] if child[k] >= 0 else -1 - k for k in members]
-        span[w, :members.shape[0], 0], span[w, :members.shape[0], 1] = members, end[members]
+def _wide(lower, upper, center, radius2, power, axis, cos_o, sin_o, cos_e, two, child):
+    """The binary tree as the walk reads it, LEVELS levels a step (_wide_members): (lanes, kid,
+    span). A lane holds its binary node's fields; unused lanes have power 0, so their importance
+    is 0 everywhere, and an empty span."""
+    members, kid, end = _wide_members(np.ascontiguousarray(child, dtype=np.int64))
+    fields = np.zeros((child.shape[0] + 1, FIELDS))     # the last row: an unused lane's
+    fields[:-1, F_LO:F_LO + 3], fields[:-1, F_HI:F_HI + 3] = lower, upper
+    fields[:-1, F_CENTER:F_CENTER + 3], fields[:-1, F_R2] = center, radius2
+    fields[:-1, F_POWER], fields[:-1, F_AXIS:F_AXIS + 3] = power, axis
+    fields[:-1, F_COS_O], fields[:-1, F_SIN_O], fields[:-1, F_COS_E] = cos_o, sin_o, cos_e
+    fields[:-1, F_TWO] = two
+    fields[:-1, F_FLAT] = (cos_o >= 1.0) & (cos_e >= 0.0) & ~two
+    lanes = np.ascontiguousarray(fields[members].transpose(0, 2, 1))   # (-1: the last row)
+    used = members >= 0
+    span = np.zeros(members.shape + (2,), dtype=np.int64)
+    span[used, 0], span[used, 1] = members[used], end[members[used]]
     return lanes, kid, span
