@@ -168,6 +168,16 @@ MUTANTS = {
         "the normal texture's bitangent is n x t whatever side dP/dv is on (mirrored UVs)",
         [("ptrace/textures.py", "        cx, cy, cz = -cx, -cy, -cz\n", "        pass\n")],
         [ALPHA_TEST, "-k", "mirrored"]),
+    "light-hits-slab-unordered": (
+        "the area-light tree's slab test takes (lo - o) / d as the near end even for d < 0",
+        [("ptrace/light_hits.py", "    if t0 > t1:\n        t0, t1 = t1, t0\n", "")],
+        ["tests/ptrace/test_light_hits.py"]),
+    "light-tree-u-not-rescaled": (
+        "the light tree's walk reuses u at every step instead of rescaling it within the "
+        "chosen lane's interval",
+        [("ptrace/light_tree.py", "            u = min(max((x - low) / c[j], 0.0), "
+          "ONE_MINUS_EPSILON)\n", "")],
+        ["tests/ptrace/test_light_tree.py", "-k", "frequency or interval"]),
 }
 
 
