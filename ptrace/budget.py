@@ -40,6 +40,9 @@ BYTES_PER_TRIANGLE = {"naive": 440, "bvh": 520, "embree": 440}
 # What a loader charges a triangle before it expands instances: the least any render needs.
 LOAD_BYTES_PER_TRIANGLE = min(BYTES_PER_TRIANGLE.values())
 # A texture: its linear float32 RGB texels stay (three float32s); decoding and converting them
+# The light BVH (--light-sampler bvh, or auto above its light count) peaks at this many bytes an
+# entry while it is built (its binary tree, its wide lanes, the build's working arrays).
+LIGHT_TREE_BYTES = 3000
 # (8- or 16-bit pixels, float copies, the sRGB conversion) peaks at TEXTURE_PEAK_BYTES a texel.
 TEXEL_BYTES, TEXTURE_PEAK_BYTES = 12, 80
 # An environment map (-e): float64 radiance and its sampling tables stay; reading it and
@@ -192,21 +195,23 @@ def current():
     return budget if budget is not None else Budget.of(None)
 
 
-def check_render(scene, accel, buffer_bytes, max_memory=None):
+def check_render(scene, accel, buffer_bytes, max_memory=None, light_entries=0):
     """Refuse a render whose estimate passes the budget: the scene's triangles with the
-    backend's structure (BYTES_PER_TRIANGLE), its texels, its environment map, and the
-    render's per-pixel buffers (buffer_bytes)."""
+    backend's structure (BYTES_PER_TRIANGLE), its texels, its environment map, the render's
+    per-pixel buffers (buffer_bytes) and its light BVH's entries, if it builds one."""
     budget = Budget.of(max_memory)
     triangles = int(scene.triangle_count)
     texels = int(scene.textures.texels.shape[0]) if scene.textures is not None else 0
     environment = 0 if scene.environment is None else \
         int(scene.environment.image.shape[0] * scene.environment.image.shape[1])
     need = (triangles * BYTES_PER_TRIANGLE.get(accel, max(BYTES_PER_TRIANGLE.values()))
-            + texels * TEXEL_BYTES + environment * ENVIRONMENT_BYTES + int(buffer_bytes))
+            + texels * TEXEL_BYTES + environment * ENVIRONMENT_BYTES + int(buffer_bytes)
+            + int(light_entries) * LIGHT_TREE_BYTES)
     if need > budget.limit:
         parts = [f"{triangles:,} triangles with --accel {accel}"] + \
             ([f"{texels:,} texels"] if texels else []) + \
             ([f"an environment of {environment:,} pixels"] if environment else []) + \
+            ([f"a light BVH of {light_entries:,} lights"] if light_entries else []) + \
             [f"{size_text(buffer_bytes)} of image buffers"]
         raise BudgetError(scene.path, f"rendering it would need about {size_text(need)} "
                                       f"({', '.join(parts)}), more than {budget.describe()}; "

@@ -114,7 +114,8 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
             width, height = BASE_WIDTH, BASE_HEIGHT
         buffers = check_frame(width, height, crop, features=aovs is not None,
                               max_memory=max_memory)
-        check_render(scene, settings.accel, buffers, max_memory)
+        check_render(scene, settings.accel, buffers, max_memory,
+                     settings.light_tree_entries(scene))
         width, height = int(width), int(height)
         previous_threads = numba.get_num_threads()
         worker_threads = None

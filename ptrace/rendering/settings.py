@@ -160,7 +160,7 @@ class Settings:
         if self.hemisphere:
             return 1 + max(len(lights), 1) * self.light_samples
         delta = int(np.isin(lights.kind, [POINT, DIRECTIONAL]).sum())
-        emitters = int(_emissive_light(scene))
+        emitters = int(_emitters(scene) > 0)
         bsdf_ray = int(self.direct == "mis" and len(lights) - delta + emitters > 0)
         if self.light_mode(scene) != codes.LIGHTS_ALL:
             return 1 + self.light_samples + bsdf_ray
@@ -173,7 +173,7 @@ class Settings:
         code = LIGHT_SAMPLER_CODES[self.light_sampler]
         if code != codes.LIGHTS_AUTO:
             return code
-        count = len(scene.lights) + int(_emissive_light(scene))
+        count = len(scene.lights) + int(_emitters(scene) > 0)
         return codes.LIGHTS_ALL if count <= codes.AUTO_EVERY_LIGHT else codes.AUTO_MANY
 
     def uses_light_tree(self, scene):
@@ -181,10 +181,15 @@ class Settings:
         need the tree: ptrace.integrator.scene_records)."""
         return self.integrator == "path" and self.light_mode(scene) == codes.LIGHTS_BVH
 
+    def light_tree_entries(self, scene):
+        """How many entries a render of this scene puts in its light BVH: 0 without one, else
+        at most its lights and its emissive primitives (ptrace.budget charges them)."""
+        return len(scene.lights) + _emitters(scene) if self.uses_light_tree(scene) else 0
 
-def _emissive_light(scene):
-    """Whether the scene's emissive primitives make one more light (some are no file light's
-    face): ptrace.lights.emitter_arrays decides, imported here when a render's work is sized
-    rather than when the settings are read, since ptrace.lights is compiled code."""
+
+def _emitters(scene):
+    """How many emissive primitives make one more light (those that are no file light's face):
+    ptrace.lights.emitter_arrays decides, imported here when a render's work is sized rather
+    than when the settings are read, since ptrace.lights is compiled code."""
     from ..lights import emitter_arrays
-    return emitter_arrays(scene)[1].shape[0] > 0
+    return emitter_arrays(scene)[1].shape[0]

@@ -203,3 +203,25 @@ def test_an_ordinary_scene_renders_within_a_stated_budget(tmp_path):
     out = tmp_path / "few.png"
     code = cli.main(["-q", "-r", "16", "12", "-f", str(out), "--max-memory", "1G", str(path)])
     assert code == 0 and out.stat().st_size > 0
+
+
+def test_a_light_tree_past_the_budget_is_refused_before_it_is_built(tmp_path):
+    """The light BVH's entries count in the budget when the render builds the tree: the
+    many-light room (64 area lights, 2,048 emissive triangles) fits 6 MB with every light
+    sampled, and is refused under the light BVH, naming it, before anything is built."""
+    from pathlib import Path
+
+    from ptrace.rendering.settings import Settings
+    room = tmp_path / "room.dae"
+    subprocess.run([sys.executable, str(Path(__file__).resolve().parents[2] / "scenes"
+                                        / "make_many_lights.py"), "-o", str(room)], check=True,
+                   capture_output=True)
+    scene = ptrace.load(room)
+    assert Settings.from_options(light_sampler="all").light_tree_entries(scene) == 0
+    entries = Settings.from_options(light_sampler="bvh").light_tree_entries(scene)
+    assert entries == 64 + 2048
+    budget.check_render(scene, "bvh", 0, max_memory="6M")      # without the tree: fits
+    start = time.monotonic()
+    with pytest.raises(BudgetError, match=r"a light BVH of 2,112 lights.*--max-memory"):
+        ptrace.render(scene, resolution=(8, 6), light_sampler="bvh", max_memory="6M")
+    assert time.monotonic() - start < 5
