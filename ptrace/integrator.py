@@ -54,7 +54,7 @@ from .environment import (
     environment_sample,
 )
 from .light_bvh import bvh_arrays, bvh_choose, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
-from .light_hits import box_crossed, build_light_hits, no_light_hits
+from .light_hits import build_light_hits, next_light, no_light_hits
 from .lights import (
     EMITTER,
     area_light_hit,
@@ -92,6 +92,8 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
+FEW_AREA_LIGHTS = 15    # nodes of ptrace.light_hits' tree (8 lights) up to which emission_found
+#                         tests every area light rather than walk the tree
 RAY_KEYS = 1 << 8       # a vertex's rays' keys for ptrace.cutouts: the bounce ray 0, light or
 #                         hemisphere sample j (from 0) RAY_KEYS * (1 + j), each followed by the
 #                         keys of the cut surfaces it passes
@@ -486,6 +488,27 @@ def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
 
 
 @njit(cache=True, _nrt=False, inline="always")
+def area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx, qy, qz, qnx, qny, qnz,
+                     ox, oy, oz, dx, dy, dz, t):
+    """Area light `light`'s emission that a bounce ray from q (spawned at o, unit direction d,
+    closest hit at t) finds, as emission_found counts it: (0, 0, 0) if the ray does not cross
+    it before t, or it is a face a delta bounce sees as geometry."""
+    if delta and lights.faced[light]:
+        return 0.0, 0.0, 0.0
+    t_light = area_light_hit(lights.position, lights.direction, lights.edge_x, lights.edge_y,
+                             light, ox, oy, oz, dx, dy, dz)
+    if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
+        return 0.0, 0.0, 0.0
+    weight = 1.0
+    if not delta:   # the light's density for this direction from q, as direct_light
+        n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
+        weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz, dx,
+                                                               dy, dz))
+    return (weight * lights.radiance[light, 0], weight * lights.radiance[light, 1],
+            weight * lights.radiance[light, 2])
+
+
+@njit(cache=True, _nrt=False, inline="always")
 def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny,
                    qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
     """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit
@@ -503,34 +526,31 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     r = g = b = 0.0
     kinds = lights.kind
     mode = light_mode(options, lights)
-    # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
-    k = 0
-    t_max = t / (1.0 - SHADOW_SHORTEN)
-    while k < lights.hit_skip.shape[0]:
-        if not box_crossed(lights.hit_lower, lights.hit_upper, k, ox, oy, oz, dx, dy, dz,
-                           t_max):
-            k = lights.hit_skip[k]
-            continue
-        light = lights.hit_light[k]
-        k += 1
-        if light < 0 or (delta and lights.faced[light]):
-            continue
-        t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
-                                 lights.edge_y, light, ox, oy, oz, dx, dy, dz)
-        if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
-            continue
-        weight = 1.0
-        if not delta:   # the light's density for this direction from q, as direct_light
-            n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
-            weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
-                                                                   dx, dy, dz))
-        r += weight * lights.radiance[light, 0]
-        g += weight * lights.radiance[light, 1]
-        b += weight * lights.radiance[light, 2]
-    for j in range(lights.sky.shape[0]):     # the lights at infinity
-        light = lights.sky[j]
+    if lights.hit_skip.shape[0] > FEW_AREA_LIGHTS:
+        # many area lights: those the ray crosses before its hit, by ptrace.light_hits' tree
+        k = 0
+        t_max = t / (1.0 - SHADOW_SHORTEN)
+        while True:
+            light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                                  lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
+            if light < 0:
+                break
+            lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx,
+                                          qy, qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
+            r += lr
+            g += lg
+            b += lb
+    for j in range(kinds.shape[0] if lights.hit_skip.shape[0] <= FEW_AREA_LIGHTS
+                   else lights.sky.shape[0]):   # every light, or the lights at infinity
+        light = j if lights.hit_skip.shape[0] <= FEW_AREA_LIGHTS else lights.sky[j]
         kind = kinds[light]
-        if kind == ENVIRONMENT and prim < 0:
+        if kind == AREA:
+            lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx,
+                                          qy, qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
+            r += lr
+            g += lg
+            b += lb
+        elif kind == ENVIRONMENT and prim < 0:
             weight = 1.0
             if not delta:
                 n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)

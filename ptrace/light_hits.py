@@ -6,10 +6,11 @@ Area lights are not geometry: a ray passes on through them (the course's rule) a
 several before its hit, so the search wants every crossing, not the closest. The tree is
 stackless, for numba code compiled without the runtime: its nodes are in depth-first order, a
 node's first child is the next node, and `skip[k]` is the first node after k's subtree. A walk
-enters a node whose box the ray crosses (k + 1) and else jumps over it (skip[k]); each leaf
-holds one light, so the lights are visited in the tree's depth-first order, which depends on
-the scene alone. The boxes are padded outward, so that no ray the rectangle test
-(ptrace.lights.area_light_hit) accepts is turned away by its box.
+(next_light) enters an inner node whose box the ray crosses (k + 1) and else jumps over it
+(skip[k]); each leaf holds one light, handed to the caller's exact rectangle test
+(ptrace.lights.area_light_hit) without a box test of its own, so the lights are visited in the
+tree's depth-first order, which depends on the scene alone. The boxes are padded outward, so
+that no ray the rectangle test accepts is turned away by an inner node's box.
 """
 import numpy as np
 from numba import njit
@@ -91,3 +92,15 @@ def box_crossed(lower, upper, k, ox, oy, oz, dx, dy, dz, t_max):
         return False
     near, far = _slab(oz, dz, lower[k, 2], upper[k, 2], near, far)
     return near <= far
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def next_light(lower, upper, skip, leaf, k, ox, oy, oz, dx, dy, dz, t_max):
+    """The walk from node k: (the next light whose box's parents the ray o + t d, 0 <= t <=
+    t_max, meets, the node to go on from), or (-1, end) when there is none. Start at 0."""
+    while k < skip.shape[0]:
+        light = leaf[k]
+        if light >= 0:
+            return light, k + 1
+        k = k + 1 if box_crossed(lower, upper, k, ox, oy, oz, dx, dy, dz, t_max) else skip[k]
+    return -1, k

@@ -172,6 +172,12 @@ MUTANTS = {
         "the area-light tree's slab test takes (lo - o) / d as the near end even for d < 0",
         [("ptrace/light_hits.py", "    if t0 > t1:\n        t0, t1 = t1, t0\n", "")],
         ["tests/ptrace/test_light_hits.py"]),
+    "light-hits-never-enters": (
+        "the walk over the area-light tree jumps past every inner node, so a BSDF ray under MIS "
+        "finds none of many area lights",
+        [("ptrace/light_hits.py", "        k = k + 1 if box_crossed(lower, upper, k, ox, oy, oz, "
+          "dx, dy, dz, t_max) else skip[k]\n", "        k = skip[k]\n")],
+        ["tests/ptrace/test_light_bvh.py", "-k", "through_the_tree"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "
         "chosen lane's interval",
