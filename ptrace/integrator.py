@@ -92,8 +92,6 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
-FEW_AREA_LIGHTS = 15    # nodes of ptrace.light_hits' tree (8 lights) up to which emission_found
-#                         tests every area light rather than walk the tree
 RAY_KEYS = 1 << 8       # a vertex's rays' keys for ptrace.cutouts: the bounce ray 0, light or
 #                         hemisphere sample j (from 0) RAY_KEYS * (1 + j), each followed by the
 #                         keys of the cut surfaces it passes
@@ -526,31 +524,23 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     r = g = b = 0.0
     kinds = lights.kind
     mode = light_mode(options, lights)
-    if lights.hit_skip.shape[0] > FEW_AREA_LIGHTS:
-        # many area lights: those the ray crosses before its hit, by ptrace.light_hits' tree
-        k = 0
-        t_max = t / (1.0 - SHADOW_SHORTEN)
-        while True:
-            light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
-                                  lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
-            if light < 0:
-                break
-            lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx,
-                                          qy, qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
-            r += lr
-            g += lg
-            b += lb
-    for j in range(kinds.shape[0] if lights.hit_skip.shape[0] <= FEW_AREA_LIGHTS
-                   else lights.sky.shape[0]):   # every light, or the lights at infinity
-        light = j if lights.hit_skip.shape[0] <= FEW_AREA_LIGHTS else lights.sky[j]
+    # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
+    k = 0
+    t_max = t / (1.0 - SHADOW_SHORTEN)
+    while True:
+        light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                              lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
+        if light < 0:
+            break
+        lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx, qy, qz,
+                                      qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
+        r += lr
+        g += lg
+        b += lb
+    for j in range(lights.sky.shape[0]):     # the lights at infinity
+        light = lights.sky[j]
         kind = kinds[light]
-        if kind == AREA:
-            lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx,
-                                          qy, qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
-            r += lr
-            g += lg
-            b += lb
-        elif kind == ENVIRONMENT and prim < 0:
+        if kind == ENVIRONMENT and prim < 0:
             weight = 1.0
             if not delta:
                 n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)

@@ -1,7 +1,6 @@
 """Which area lights a ray crosses: a small bounding-volume tree over the scene's area-light
 rectangles, so that a bounce ray's search for the lights it passes through (the integrator's
-emission_found, for scenes of more than eight area lights; fewer are each tested) visits the
-lights near its path, not every light of the scene.
+emission_found) visits the lights near its path, not every light of the scene.
 
 Area lights are not geometry: a ray passes on through them (the course's rule) and may cross
 several before its hit, so the search wants every crossing, not the closest. The tree is

@@ -166,14 +166,16 @@ class Settings:
             return 1 + self.light_samples + bsdf_ray
         return 1 + delta + self.light_samples * (len(lights) - delta + emitters) + bsdf_ray
 
-    def light_mode(self, scene):
+    def light_mode(self, scene, emitters=None):
         """The light sampler a render of this scene uses (LIGHTS_ALL, LIGHTS_POWER or
         LIGHTS_BVH): auto resolved as the integrator resolves it (ptrace.integrator.light_mode),
-        by the file's lights and the emissive primitives counting as one."""
+        by the file's lights and the emissive primitives counting as one (emitters: their
+        count, if the caller has it)."""
         code = LIGHT_SAMPLER_CODES[self.light_sampler]
         if code != codes.LIGHTS_AUTO:
             return code
-        count = len(scene.lights) + int(_emitters(scene) > 0)
+        emitters = _emitters(scene) if emitters is None else emitters
+        count = len(scene.lights) + int(emitters > 0)
         return codes.LIGHTS_ALL if count <= codes.AUTO_EVERY_LIGHT else codes.AUTO_MANY
 
     def uses_light_tree(self, scene):
@@ -184,7 +186,12 @@ class Settings:
     def light_tree_entries(self, scene):
         """How many entries a render of this scene puts in its light BVH: 0 without one, else
         at most its lights and its emissive primitives (ptrace.budget charges them)."""
-        return len(scene.lights) + _emitters(scene) if self.uses_light_tree(scene) else 0
+        if self.integrator != "path" or LIGHT_SAMPLER_CODES[self.light_sampler] not in (
+                codes.LIGHTS_AUTO, codes.LIGHTS_BVH):
+            return 0
+        emitters = _emitters(scene)
+        bvh = self.light_mode(scene, emitters) == codes.LIGHTS_BVH
+        return len(scene.lights) + emitters if bvh else 0
 
 
 def _emitters(scene):
