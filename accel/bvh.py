@@ -51,6 +51,9 @@ from .simd import BLOCK, make_slab_test, moller_trumbore_block, watertight_block
 RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
 slab_test = make_slab_test(WIDTH)
+# the root's payload and the miss's primitive as int64 values, not literals: a literal argument
+# compiles each traversal helper once more for it (_blocks_closest three times, not once)
+ROOT, MISS = np.int64(0), np.int64(NO_HIT)
 
 
 BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_tri", "centers",
@@ -142,7 +145,7 @@ def _every_closest(record, shear, ray, lo, hi):
     """The closest hit by testing every primitive, for a ray with a direction component float32
     cannot invert (_ray_planes): (t, prim, u, v, 0, tests)."""
     best_t, best_prim, best_u, best_v = _blocks_closest(
-        record, 0, record.blocks.shape[0], shear, ray, lo, hi, NO_HIT, 0.0, 0.0)
+        record, ROOT, record.blocks.shape[0], shear, ray, lo, hi, MISS, 0.0, 0.0)
     ox, oy, oz, dx, dy, dz = ray
     best_t, best_prim, best_u, best_v = spheres_closest(
         record.centers, record.radii, record.n_tri, ox, oy, oz, dx, dy, dz, lo, best_t,
@@ -170,14 +173,14 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     if wild:
         return _every_closest(record, shear, ray, lo, hi)
     best_t = hi
-    best_prim = NO_HIT
+    best_prim = MISS
     best_u = 0.0
     best_v = 0.0
     best_s = hi - shift   # best_t on the slab's scale: a pushed entry t is compared with it
     visits = 0
     tests = 0
     top = 0
-    payload = 0   # the root, row 0
+    payload = ROOT   # the root, row 0
     while nodes.shape[0] > 0:
         if payload >> 32 == 0:   # a wide node
             visits += 1
@@ -238,10 +241,10 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
     if wild:   # a direction float32 cannot invert: every primitive
-        return (_blocks_any(record, 0, record.blocks.shape[0], shear, ray, lo, hi)
+        return (_blocks_any(record, ROOT, record.blocks.shape[0], shear, ray, lo, hi)
                 or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
     top = 0
-    payload = 0
+    payload = ROOT
     while nodes.shape[0] > 0:
         if payload >> 32 == 0:
             row = payload

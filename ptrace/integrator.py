@@ -92,6 +92,9 @@ DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 ar
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and
 DIM_CHOOSE_PRIM = 5     # (power) the choice of an emissive primitive
+# the camera's keys as int64 values, not literals: a literal argument compiles the sampler once
+# more for each constant (sample_2d, sobol_2d and uniform each three times, not once)
+KEY_JITTER, KEY_LENS = np.int64(0), np.int64(DIM_LENS)
 RAY_KEYS = 1 << 8       # a vertex's rays' keys for ptrace.cutouts: the bounce ray 0, light or
 #                         hemisphere sample j (from 0) RAY_KEYS * (1 + j), each followed by the
 #                         keys of the cut surfaces it passes
@@ -525,7 +528,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     kinds = lights.kind
     mode = light_mode(options, lights)
     # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
-    k = 0
+    k = np.int64(0)     # not a literal 0: next_light would compile once more for it
     t_max = t / (1.0 - SHADOW_SHORTEN)
     while True:
         light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
@@ -774,14 +777,14 @@ def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
     if options.spp == 1:
         sx, sy = pixel_x + 0.5, pixel_y + 0.5
     else:
-        jx, jy = sample_2d(options, pixel, sample, sample, 0, 0)
+        jx, jy = sample_2d(options, pixel, sample, sample, KEY_JITTER, KEY_JITTER)
         sx, sy = pixel_x + jx, pixel_y + jy
     sx = (sx - camera.half_width) / camera.screen_dist
     sy = (sy - camera.half_height) / camera.screen_dist
     m = camera.to_world
     ox, oy, oz = camera.position[0], camera.position[1], camera.position[2]
     if camera.lens_radius > 0.0:
-        u1, u2 = sample_2d(options, pixel, sample, sample, DIM_LENS, DIM_LENS)
+        u1, u2 = sample_2d(options, pixel, sample, sample, KEY_LENS, KEY_LENS)
         lx, ly = concentric_disk(u1, u2)
         lx *= camera.lens_radius
         ly *= camera.lens_radius

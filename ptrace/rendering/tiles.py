@@ -17,8 +17,9 @@ import numpy as np
 import accel
 from accel.compiled import new_scratch
 
+from ..errors import PtraceError
 from ..integrator import camera_record, render_pixels, scene_records
-from ..jit import COLD_COMPILE_SECONDS, is_cold
+from ..jit import COLD_COMPILE_SECONDS, WAVEFRONT_COMPILE_SECONDS, is_cold
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
@@ -152,6 +153,11 @@ class RenderJob:
         self.camera = camera_record(camera)
         self.rays_traced = 0
         self.build_seconds = self.records_seconds = 0.0
+        self.wavefront = None
+        if settings.loop == "wavefront":    # imported only when asked for: a prototype
+            from ..kernel import wavefront
+            wavefront.check(scene, settings)
+            self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel)
         self._counting = threading.Lock()
 
     @classmethod
@@ -162,9 +168,18 @@ class RenderJob:
         "records" begin (ptrace.rendering.timing.Phases.enter). The job's build_seconds and
         records_seconds are the wall time of the build and of the records."""
         lap = lap if lap is not None else (lambda phase: None)
+        if settings.loop == "wavefront":   # refused before anything compiles or is built
+            from ..kernel import wavefront
+            wavefront.check(scene, settings)
         lap("compile")
-        if notice is not None and is_cold(accel.record_class(settings.accel)):
-            notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
+        if notice is not None:
+            cold, seconds = is_cold(accel.record_class(settings.accel)), COLD_COMPILE_SECONDS
+            if settings.loop == "wavefront":
+                from ..kernel.trace import closest_stage
+                cold = is_cold(accel.record_class(settings.accel), closest_stage)
+                seconds = WAVEFRONT_COMPILE_SECONDS
+            if cold:
+                notice(f"compiling kernels (first run only, about {seconds} s)")
         lap("build")
         start = time.perf_counter()
         backend = accel.build(settings.accel, scene.geometry, **settings.accel_options())
@@ -205,9 +220,15 @@ class RenderJob:
         pixel_y = np.ascontiguousarray(pixel_y, dtype=np.int64)
         rows = np.ascontiguousarray(rows, dtype=np.int64)
         first_sample, pass_n = int(first_sample), int(pass_n)
+        if features is not None and self.wavefront is not None:
+            raise PtraceError("--loop wavefront does not make AOVs (--aov) yet")
         features = NO_FEATURES if features is None else features
 
         def block(start, end):
+            if self.wavefront is not None:
+                return end - start, self.wavefront.trace(
+                    pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample,
+                    pass_n, sum_rgb, sum_l, sum_l2, count)
             return end - start, render_pixels(
                 shapes, materials, lights, self.camera, self.options, self.accel,
                 new_scratch(self.accel), pixel_x[start:end], pixel_y[start:end], rows[start:end],

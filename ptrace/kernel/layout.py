@@ -1,0 +1,40 @@
+"""Where a wave's paths keep their state: two structure-of-arrays blocks, one float64 row per
+field (FLOATS rows x wave size) and one int64 row per field (INTS rows x wave size), and the
+shadow queue's (SHADOW_FLOATS rows x its size). A stage takes the whole block and a queue of
+path slots, so its arguments are a few arrays, whatever the fields."""
+import numpy as np
+
+# the float rows of a path: its ray (origin, direction, interval) and closest hit (t, u, v);
+# throughput and radiance; the vertex it left (point q and shading normal qn) and the BSDF pdf
+# of the bounce that left it; the surface at its hit (point, geometric normal, shading normal,
+# spawn offset)
+(OX, OY, OZ, DX, DY, DZ, TMIN, TMAX, T, U, V, TR, TG, TB, R, G, B, QX, QY, QZ, QNX, QNY, QNZ,
+ PDF, PX, PY, PZ, GX, GY, GZ, NX, NY, NZ, OFFSET) = range(34)
+FLOATS = 34
+# the int rows: the pixel (y * width + x) and sample, the hit primitive and its material, the
+# vertex the path is at (0: the camera's) and the rays it traced
+PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS = range(6)
+INTS = 6
+# the shadow queue's rows: origin, direction, end, and the light it carries if it is clear
+(SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB) = range(10)
+SHADOW_FLOATS = 10
+
+
+class Wave:
+    """The arrays of one wave of `size` paths with room for `shadows` shadow rays, kept by one
+    thread and used again for every wave it runs."""
+
+    def __init__(self, size, shadows):
+        self.size, self.shadows = size, shadows
+        self.floats = np.zeros((FLOATS, size))
+        self.ints = np.zeros((INTS, size), dtype=np.int64)
+        self.queue = np.zeros(size, dtype=np.int64)       # the paths a stage runs over
+        self.next = np.zeros(size, dtype=np.int64)        # the paths a stage hands on
+        self.shadow = np.zeros((SHADOW_FLOATS, max(shadows, 1)))
+        self.shadow_path = np.zeros(max(shadows, 1), dtype=np.int64)
+        self.blocked = np.zeros(max(shadows, 1), dtype=np.bool_)
+
+    @staticmethod
+    def bytes(size, shadows):
+        """The memory a wave of this size holds."""
+        return size * 8 * (FLOATS + INTS + 2) + max(shadows, 1) * (8 * SHADOW_FLOATS + 9)

@@ -1,0 +1,205 @@
+"""The wavefront's stages that know no material kind and no backend: camera rays, what a hit
+leaves (its surface, the emission it finds, and the queue of the paths that go on to shading),
+the light that clear shadow rays carry, and the per-pixel sums. Each runs over a queue of path
+slots of one wave (ptrace.kernel.layout) and is compiled once, for every backend.
+
+A path's arithmetic is the megakernel's (ptrace.integrator.trace_path), operation for
+operation and in the same order, and its random numbers have the same keys, so a wave renders
+the megakernel's image bit for bit, whatever the wave size."""
+
+import numpy as np
+from numba import njit
+
+from ..environment import LUMINANCE
+from ..integrator import SHADOW_SHORTEN, camera_ray, power_heuristic, surface
+from ..light_hits import next_light
+from ..lights import area_light_hit, area_light_pdf
+from ..scene import DIFFUSE, EMISSION
+from .layout import (
+    DX,
+    DY,
+    DZ,
+    GX,
+    GY,
+    GZ,
+    MAT,
+    NX,
+    NY,
+    NZ,
+    OFFSET,
+    OX,
+    OY,
+    OZ,
+    PDF,
+    PIXEL,
+    PRIM,
+    PX,
+    PY,
+    PZ,
+    QX,
+    QY,
+    QZ,
+    RAYS,
+    SAMPLE,
+    SB,
+    SG,
+    SR,
+    TB,
+    TG,
+    TMAX,
+    TMIN,
+    TR,
+    VERTEX,
+    B,
+    G,
+    R,
+    T,
+    U,
+    V,
+)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def camera_stage(camera, options, pixel_x, pixel_y, first_sample, pass_n, start, count, floats,
+                 ints, queue):
+    """Slots 0 .. count - 1 get the camera rays of the block's paths start .. start + count - 1
+    (path b is sample first_sample + b % pass_n of pixel b // pass_n), each with throughput 1,
+    no radiance, and one ray traced; the queue lists them."""
+    width = camera.width
+    for slot in range(count):
+        b = start + slot
+        k = b // pass_n
+        sample = first_sample + b % pass_n
+        pixel = pixel_y[k] * width + pixel_x[k]
+        ox, oy, oz, dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel,
+                                            sample)
+        floats[OX, slot], floats[OY, slot], floats[OZ, slot] = ox, oy, oz
+        floats[DX, slot], floats[DY, slot], floats[DZ, slot] = dx, dy, dz
+        floats[TMIN, slot], floats[TMAX, slot] = camera.znear, camera.zfar
+        floats[TR, slot] = floats[TG, slot] = floats[TB, slot] = 1.0
+        floats[R, slot] = floats[G, slot] = floats[B, slot] = 0.0
+        ints[PIXEL, slot], ints[SAMPLE, slot] = pixel, sample
+        ints[VERTEX, slot], ints[RAYS, slot] = 0, 1
+        queue[slot] = slot
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def area_lights_found(lights, light_samples, bsdf_pdf_, qx, qy, qz, ox, oy, oz, dx, dy, dz, t):
+    """The area lights' emission that a bounce ray from q (spawned at o, unit direction d,
+    closest hit at t) finds after a non-delta bounce of density bsdf_pdf_, each weighted by the
+    power heuristic against the -l samples that light sampling took of it at q (every light
+    sampled: the megakernel's emission_found under --light-sampler all)."""
+    r = g = b = 0.0
+    k = np.int64(0)     # not a literal 0: next_light would compile once more for it
+    t_max = t / (1.0 - SHADOW_SHORTEN)
+    while True:
+        light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                              lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
+        if light < 0:
+            break
+        t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
+                                 lights.edge_y, light, ox, oy, oz, dx, dy, dz)
+        if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
+            continue
+        weight = power_heuristic(bsdf_pdf_, light_samples * area_light_pdf(
+            lights, light, qx, qy, qz, dx, dy, dz))
+        r += weight * lights.radiance[light, 0]
+        g += weight * lights.radiance[light, 1]
+        b += weight * lights.radiance[light, 2]
+    return r, g, b
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out):
+    """For each queued path whose closest hit is known: the surface it hit (material, point,
+    normals, spawn offset); at the camera's vertex, the emission it sees; after a bounce with
+    multiple importance sampling, the area lights' emission its ray found. A path that missed,
+    hit an emitter or reached -m ends; the others move to their next vertex and are listed in
+    out (all diffuse, the only kind shaded so far). Returns how many."""
+    kinds = materials.kind
+    light_samples = float(options.light_samples)
+    max_depth = options.max_depth
+    kept = 0
+    for k in range(n):
+        i = queue[k]
+        ox, oy, oz = floats[OX, i], floats[OY, i], floats[OZ, i]
+        dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
+        t, prim, u, v = floats[T, i], ints[PRIM, i], floats[U, i], floats[V, i]
+        m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
+                                                                dy, dz, t, prim, u, v)
+        vertex = ints[VERTEX, i]
+        if vertex == 0:
+            if m >= 0 and kinds[m] == EMISSION:
+                floats[R, i] = materials.emission[m, 0]
+                floats[G, i] = materials.emission[m, 1]
+                floats[B, i] = materials.emission[m, 2]
+        elif mis:
+            er, eg, eb = area_lights_found(lights, light_samples, floats[PDF, i], floats[QX, i],
+                                           floats[QY, i], floats[QZ, i], ox, oy, oz, dx, dy, dz,
+                                           t)
+            floats[R, i] += floats[TR, i] * er
+            floats[G, i] += floats[TG, i] * eg
+            floats[B, i] += floats[TB, i] * eb
+        if m < 0 or vertex == max_depth or kinds[m] != DIFFUSE:
+            continue
+        floats[PX, i], floats[PY, i], floats[PZ, i] = px, py, pz
+        floats[GX, i], floats[GY, i], floats[GZ, i] = gx, gy, gz
+        floats[NX, i], floats[NY, i], floats[NZ, i] = nx, ny, nz
+        floats[OFFSET, i] = offset
+        ints[MAT, i] = m
+        ints[VERTEX, i] = vertex + 1
+        out[kept] = i
+        kept += 1
+    return kept
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def shadow_stage(floats, shadow, shadow_path, blocked, n):
+    """Each clear shadow ray's light, added to its path's radiance, in queue order (a path's
+    light samples in the order it took them)."""
+    for s in range(n):
+        if not blocked[s]:
+            i = shadow_path[s]
+            floats[R, i] += shadow[SR, s]
+            floats[G, i] += shadow[SG, s]
+            floats[B, i] += shadow[SB, s]
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def fold_stage(floats, ints, start, count, pass_n, sums, counts):
+    """The wave's finished paths added to their block pixel's sums (radiance, illuminance and
+    its square; counts: finite samples) in path order, which is sample order, as the megakernel
+    sums them. Returns (non-finite samples dropped, rays traced)."""
+    l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
+    dropped = 0
+    rays = 0
+    for slot in range(count):
+        k = (start + slot) // pass_n
+        rays += ints[RAYS, slot]
+        x, y, z = floats[R, slot], floats[G, slot], floats[B, slot]
+        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
+            dropped += 1
+            continue
+        value = x * l0 + y * l1 + z * l2
+        sums[k, 0] += x
+        sums[k, 1] += y
+        sums[k, 2] += z
+        sums[k, 3] += value
+        sums[k, 4] += value * value
+        counts[k] += 1
+    return dropped, rays
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count):
+    """A block's per-pixel sums added to the render's at their rows."""
+    for k in range(rows.shape[0]):
+        row = rows[k]
+        sum_rgb[row, 0] += sums[k, 0]
+        sum_rgb[row, 1] += sums[k, 1]
+        sum_rgb[row, 2] += sums[k, 2]
+        sum_l[row] += sums[k, 3]
+        sum_l2[row] += sums[k, 4]
+        count[row] += counts[k]
+
+

@@ -1,0 +1,51 @@
+"""The backend's part of the wavefront: closest and any hit over a queue of rays, through the
+compiled face (accel.compiled). These two small kernels are the only code compiled once per
+backend; every other stage is compiled once for all of them."""
+from numba import njit
+
+from accel.compiled import any_hit, closest_hit
+
+from .layout import (
+    DX,
+    DY,
+    DZ,
+    OX,
+    OY,
+    OZ,
+    PRIM,
+    SDX,
+    SDY,
+    SDZ,
+    SOX,
+    SOY,
+    SOZ,
+    STMAX,
+    TMAX,
+    TMIN,
+    T,
+    U,
+    V,
+)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def closest_stage(record, scratch, floats, ints, queue, n):
+    """The closest hit (t, prim, u, v) of each queued path's ray in [tmin, tmax]."""
+    for k in range(n):
+        i = queue[k]
+        t, prim, u, v = closest_hit(record, scratch, floats[OX, i], floats[OY, i], floats[OZ, i],
+                                    floats[DX, i], floats[DY, i], floats[DZ, i], floats[TMIN, i],
+                                    floats[TMAX, i])
+        floats[T, i] = t
+        floats[U, i] = u
+        floats[V, i] = v
+        ints[PRIM, i] = prim
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def any_stage(record, scratch, shadow, n, blocked):
+    """Whether anything lies on each of the first n shadow rays, in [0, its end]."""
+    for s in range(n):
+        blocked[s] = any_hit(record, scratch, shadow[SOX, s], shadow[SOY, s], shadow[SOZ, s],
+                             shadow[SDX, s], shadow[SDY, s], shadow[SDZ, s], 0.0,
+                             shadow[STMAX, s])

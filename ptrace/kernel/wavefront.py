@@ -1,0 +1,130 @@
+"""The wavefront path loop's driver: which scenes it renders so far, the records its stages
+take, and one block of (pixel, sample) paths traced as waves of stage calls.
+
+A block's paths are cut into waves of at most WAVE_PATHS paths (fewer when -l and the lights
+would make a wave's shadow queue longer than SHADOW_RAYS). Each wave: camera rays; then, until
+no path is left, closest hits (the backend's stage), the hit stage (surface, emission found,
+the paths to shade), the diffuse kernel (light samples into the shadow queue, bounces), any
+hits over the shadow queue (the backend's) and their light added. Python calls each stage once
+per bounce of a wave; the stages run without the GIL, so the render's threads overlap. Waves
+are folded into the block's per-pixel sums in path order, which is sample order: the image does
+not depend on the wave size."""
+import threading
+from collections import namedtuple
+
+import numpy as np
+
+from accel.compiled import new_scratch
+
+from .. import codes
+from ..errors import PtraceError
+from ..scene import AREA, BSDF_NAMES, DIFFUSE, EMISSION, KIND_NAMES
+from .diffuse import diffuse_stage
+from .layout import Wave
+from .stages import add_stage, camera_stage, fold_stage, hit_stage, shadow_stage
+from .trace import any_stage, closest_stage
+
+WAVE_PATHS = 1024      # paths a wave holds at most (its float rows about 280 KB)
+SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.6 MB)
+
+AreaLights = namedtuple("AreaLights", ["radiance", "position", "direction", "edge_x", "edge_y",
+                                       "area", "hit_lower", "hit_upper", "hit_skip",
+                                       "hit_light"])
+SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission"])
+
+
+def unsupported(scene, settings):
+    """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
+    so far it renders the path integrator on diffuse, untextured surfaces lit by area lights,
+    every light sampled at every vertex."""
+    if settings.integrator != "path":
+        return f"the {settings.integrator} integrator"
+    if settings.hemisphere:
+        return "hemisphere sampling (-H)"
+    m = scene.materials
+    kinds = set(np.unique(np.asarray(m.kind)).tolist()) - {DIFFUSE, EMISSION}
+    if kinds:
+        return " or ".join(sorted(BSDF_NAMES[k] for k in kinds)) + " materials"
+    for field in ("albedo_texture", "emission_texture", "normal_texture", "alpha_texture"):
+        if np.any(np.asarray(getattr(m, field)) >= 0):
+            return "textures"
+    if np.any(np.asarray(m.cutoff) != 0.0):
+        return "cut-out materials"
+    if np.asarray(scene.vertex_colours).size:
+        return "vertex colours"
+    kinds = set(np.unique(np.asarray(scene.lights.kind)).tolist()) - {AREA}
+    if kinds:
+        return " or ".join(sorted(KIND_NAMES[k] for k in kinds)) + " lights"
+    from ..emitters import emitter_arrays
+    if emitter_arrays(scene)[1].shape[0]:
+        return "emissive geometry that is no light's face"
+    if settings.light_mode(scene) != codes.LIGHTS_ALL:
+        return f"the {settings.light_sampler} light sampler on this scene's lights"
+    return None
+
+
+def check(scene, settings):
+    """Refuse, in one line, a render the wavefront cannot do yet."""
+    reason = unsupported(scene, settings)
+    if reason is not None:
+        raise PtraceError(f"--loop wavefront renders only diffuse scenes lit by area lights so "
+                          f"far; this render has {reason} (use --loop megakernel)")
+
+
+class Wavefront:
+    """What a render job's wavefront needs beside the pixels: the stage records (built once
+    from the job's kernel records) and each thread's wave buffers."""
+
+    def __init__(self, records, options, camera, accel_record):
+        shapes, materials, lights = records
+        self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
+        self.surfaces = SurfaceArrays(materials.kind, materials.emission)
+        self.albedo = materials.albedo
+        self.lights = AreaLights(lights.radiance, lights.position, lights.direction,
+                                 lights.edge_x, lights.edge_y, lights.area, lights.hit_lower,
+                                 lights.hit_upper, lights.hit_skip, lights.hit_light)
+        self.mis = bool(options.mis and lights.radiance.shape[0] > 0)
+        per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)
+        self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
+        self.shadow_rays = self.wave_paths * lights.radiance.shape[0] * options.light_samples
+        self._local = threading.local()
+
+    def _wave(self):
+        wave = getattr(self._local, "wave", None)
+        if wave is None:
+            wave = self._local.wave = Wave(self.wave_paths, self.shadow_rays)
+        return wave
+
+    def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
+        """The megakernel's render_pixels, as waves: samples first_sample .. + pass_n - 1 of
+        each pixel added to the sums at rows. Returns (dropped, rays traced)."""
+        wave, scratch = self._wave(), new_scratch(self.accel)
+        floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
+        shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
+        shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
+        accel, mis, albedo = self.accel, self.mis, self.albedo
+        sums = np.zeros((pixel_x.shape[0], 5))
+        counts = np.zeros(pixel_x.shape[0], dtype=np.int64)
+        total = pixel_x.shape[0] * pass_n
+        dropped = rays = 0
+        for start in range(0, total, self.wave_paths):
+            size = min(self.wave_paths, total - start)
+            camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
+                         size, floats, ints, queue)
+            n = size
+            while n:
+                closest_stage(accel, scratch, floats, ints, queue, n)
+                n = hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
+                              after)
+                if not n:
+                    break
+                shadows, n = diffuse_stage(albedo, lights, options, mis, floats, ints, after, n,
+                                           shadow, shadow_path, queue)
+                if shadows:
+                    any_stage(accel, scratch, shadow, shadows, blocked)
+                    shadow_stage(floats, shadow, shadow_path, blocked, shadows)
+            wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts)
+            dropped += wave_dropped
+            rays += wave_rays
+        add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count)
+        return dropped, rays

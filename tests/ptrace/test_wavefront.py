@@ -1,0 +1,121 @@
+"""The wavefront prototype (--loop wavefront, ptrace.kernel) renders the megakernel's image bit for
+bit on the scenes it takes (diffuse surfaces, area lights), whatever the backend, the wave size,
+the threads, adaptive sampling or the crop; it refuses the rest in one line; its memory does not
+grow with -s, -m or -l."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import ptrace
+from ptrace.errors import PtraceError
+from ptrace.kernel import layout, wavefront
+from ptrace.rendering.settings import Settings
+from ptrace.rendering.tiles import RenderJob
+
+from conftest import REPO, course_scene
+
+CORNELL = REPO / "scenes" / "cornell.dae"
+SMALL = dict(spp=3, light_samples=2, max_depth=5, rr_depth=2)
+
+
+def framed(scene, eye_z, width=24, height=18):
+    """A camera that sees the whole box (the course's camera at this size sees a crop)."""
+    return ptrace.look_at(scene, eye=(0.0, 0.75, eye_z), target=(0.0, 0.75, 0.0), fov=50,
+                          width=width, height=height)
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    scene = ptrace.load(str(CORNELL))
+    return scene, framed(scene, 3.5)
+
+
+def both(scene_camera, **options):
+    """(megakernel image, wavefront image) of one render's options."""
+    scene, camera = scene_camera
+    return (ptrace.render(scene, camera=camera, **options),
+            ptrace.render(scene, camera=camera, loop="wavefront", **options))
+
+
+def assert_same(images):
+    mega, wave = images
+    assert mega.shape == wave.shape
+    assert np.array_equal(mega, wave), f"max difference {np.abs(mega - wave).max()}"
+    assert mega.mean() > 0.01     # lit: a black image would match trivially
+
+
+@pytest.mark.parametrize("kind", ["naive", "bvh", "embree"])
+def test_same_image_as_the_megakernel_on_every_backend(cornell, kind):
+    assert_same(both(cornell, accel=kind, **SMALL))
+
+
+@pytest.mark.parametrize("options", [
+    dict(direct="light"),
+    dict(sampler="independent", seed=5),
+    dict(max_depth=0),
+    dict(max_depth=1),
+    dict(roulette=False, max_depth=3),
+    dict(light_samples=1, spp=1),
+    dict(adaptive=(2, 0.2), spp=8),
+], ids=["light-sampling", "independent", "m0", "m1", "no-roulette", "s1", "adaptive"])
+def test_same_image_under_each_setting(cornell, options):
+    assert_same(both(cornell, **dict(SMALL, **options)))
+
+
+def test_same_image_on_the_course_boxes():
+    for name, eye_z in (("sky/CBspheres_lambertian.dae", 3.5), ("sky/CBbunny.dae", -3.5)):
+        scene = ptrace.load(str(course_scene(name)))
+        assert_same(both((scene, framed(scene, eye_z, 20, 15)), spp=2, light_samples=1,
+                         max_depth=4))
+
+
+def test_same_image_whatever_the_wave_size_threads_and_crop(cornell, monkeypatch):
+    scene, camera = cornell
+    reference = ptrace.render(scene, camera=camera, loop="wavefront", threads=2, **SMALL)
+    monkeypatch.setattr(wavefront, "WAVE_PATHS", 7)       # waves cut pixels' samples apart
+    assert_same((reference, ptrace.render(scene, camera=camera, loop="wavefront", threads=1,
+                                          **SMALL)))
+    assert_same(both(cornell, crop=(5, 4, 9, 7), **SMALL))
+
+
+def test_a_wave_holds_the_same_memory_whatever_spp_and_depth_and_bounds_light_samples(cornell):
+    cornell, camera = cornell
+    sizes = set()
+    for spp, depth in ((1, 1), (4096, 10_000)):
+        job = RenderJob.build(cornell, Settings(loop="wavefront", spp=spp, max_depth=depth),
+                              camera)
+        sizes.add((job.wavefront.wave_paths, job.wavefront.shadow_rays))
+    assert len(sizes) == 1
+    job = RenderJob.build(cornell, Settings(loop="wavefront", light_samples=2 ** 16), camera)
+    lights = len(cornell.lights)
+    assert job.wavefront.shadow_rays <= wavefront.SHADOW_RAYS
+    assert job.wavefront.wave_paths * lights * 2 ** 16 == job.wavefront.shadow_rays
+    assert layout.Wave.bytes(job.wavefront.wave_paths, job.wavefront.shadow_rays) < 8 << 20
+
+
+@pytest.mark.parametrize("options, phrase", [
+    (dict(integrator="normals"), "normals integrator"),
+    (dict(hemisphere=True), "hemisphere"),
+    (dict(light_sampler="power"), "power light sampler"),
+])
+def test_settings_it_cannot_render_are_refused(cornell, options, phrase):
+    with pytest.raises(PtraceError, match=phrase):
+        ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), **options)
+
+
+def test_aovs_are_refused(cornell):
+    with pytest.raises(PtraceError, match="AOV"):
+        ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), aovs={})
+
+
+def test_the_command_refuses_a_scene_it_cannot_render_in_one_line(tmp_path):
+    output = tmp_path / "out.png"
+    run = subprocess.run([sys.executable, "-m", "ptrace", "--loop", "wavefront", "-r", "8", "6",
+                          "-f", str(output), str(course_scene("sky/CBspheres.dae"))],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "glass" in lines[0], lines
+    assert not output.exists()
