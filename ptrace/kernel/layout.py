@@ -4,6 +4,8 @@ shadow queue's (SHADOW_FLOATS rows x its size). A stage takes the whole block an
 path slots, so its arguments are a few arrays, whatever the fields."""
 import numpy as np
 
+from ..scene import BSDF_NAMES
+
 # the float rows of a path: its ray (origin, direction, interval) and closest hit (t, u, v);
 # throughput and radiance; the vertex it left (point q and shading normal qn) and the BSDF pdf
 # of the bounce that left it; the surface at its hit (point, geometric normal, shading normal,
@@ -12,9 +14,10 @@ import numpy as np
  PDF, PX, PY, PZ, GX, GY, GZ, NX, NY, NZ, OFFSET) = range(34)
 FLOATS = 34
 # the int rows: the pixel (y * width + x) and sample, the hit primitive and its material, the
-# vertex the path is at (0: the camera's) and the rays it traced
-PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS = range(6)
-INTS = 6
+# vertex the path is at (0: the camera's), the rays it traced, and whether its last bounce was
+# a delta BSDF's
+PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA = range(7)
+INTS = 7
 # the shadow queue's rows: origin, direction, end, and the light it carries if it is clear
 (SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB) = range(10)
 SHADOW_FLOATS = 10
@@ -30,6 +33,7 @@ class Wave:
         self.ints = np.zeros((INTS, size), dtype=np.int64)
         self.queue = np.zeros(size, dtype=np.int64)       # the paths a stage runs over
         self.next = np.zeros(size, dtype=np.int64)        # the paths a stage hands on
+        self.starts = np.zeros(len(BSDF_NAMES) + 1, dtype=np.int64)   # kinds' queues in next
         self.shadow = np.zeros((SHADOW_FLOATS, max(shadows, 1)))
         self.shadow_path = np.zeros(max(shadows, 1), dtype=np.int64)
         self.blocked = np.zeros(max(shadows, 1), dtype=np.bool_)

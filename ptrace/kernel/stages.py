@@ -14,8 +14,9 @@ from ..environment import LUMINANCE
 from ..integrator import SHADOW_SHORTEN, camera_ray, power_heuristic, surface
 from ..light_hits import next_light
 from ..lights import area_light_hit, area_light_pdf
-from ..scene import DIFFUSE, EMISSION
+from ..scene import EMISSION
 from .layout import (
+    DELTA,
     DX,
     DY,
     DZ,
@@ -79,16 +80,19 @@ def camera_stage(camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
         floats[TR, slot] = floats[TG, slot] = floats[TB, slot] = 1.0
         floats[R, slot] = floats[G, slot] = floats[B, slot] = 0.0
         ints[PIXEL, slot], ints[SAMPLE, slot] = pixel, sample
-        ints[VERTEX, slot], ints[RAYS, slot] = 0, 1
+        ints[VERTEX, slot], ints[RAYS, slot], ints[DELTA, slot] = 0, 1, 0
         queue[slot] = slot
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def area_lights_found(lights, light_samples, bsdf_pdf_, qx, qy, qz, ox, oy, oz, dx, dy, dz, t):
+def area_lights_found(lights, light_samples, delta, bsdf_pdf_, qx, qy, qz, ox, oy, oz, dx, dy,
+                      dz, t):
     """The area lights' emission that a bounce ray from q (spawned at o, unit direction d,
-    closest hit at t) finds after a non-delta bounce of density bsdf_pdf_, each weighted by the
-    power heuristic against the -l samples that light sampling took of it at q (every light
-    sampled: the megakernel's emission_found under --light-sampler all)."""
+    closest hit at t) finds: after a delta bounce whole, but for the lights whose face is
+    geometry (which then counts as emissive geometry); after a non-delta bounce of density
+    bsdf_pdf_, each weighted by the power heuristic against the -l samples that light sampling
+    took of it at q (every light sampled: the megakernel's emission_found under
+    --light-sampler all)."""
     r = g = b = 0.0
     k = np.int64(0)     # not a literal 0: next_light would compile once more for it
     t_max = t / (1.0 - SHADOW_SHORTEN)
@@ -97,12 +101,16 @@ def area_lights_found(lights, light_samples, bsdf_pdf_, qx, qy, qz, ox, oy, oz, 
                               lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
         if light < 0:
             break
+        if delta and lights.faced[light]:
+            continue
         t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
                                  lights.edge_y, light, ox, oy, oz, dx, dy, dz)
         if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
             continue
-        weight = power_heuristic(bsdf_pdf_, light_samples * area_light_pdf(
-            lights, light, qx, qy, qz, dx, dy, dz))
+        weight = 1.0
+        if not delta:
+            weight = power_heuristic(bsdf_pdf_, light_samples * area_light_pdf(
+                lights, light, qx, qy, qz, dx, dy, dz))
         r += weight * lights.radiance[light, 0]
         g += weight * lights.radiance[light, 1]
         b += weight * lights.radiance[light, 2]
@@ -110,16 +118,20 @@ def area_lights_found(lights, light_samples, bsdf_pdf_, qx, qy, qz, ox, oy, oz, 
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out):
+def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out, starts):
     """For each queued path whose closest hit is known: the surface it hit (material, point,
-    normals, spawn offset); at the camera's vertex, the emission it sees; after a bounce with
-    multiple importance sampling, the area lights' emission its ray found. A path that missed,
-    hit an emitter or reached -m ends; the others move to their next vertex and are listed in
-    out (all diffuse, the only kind shaded so far). Returns how many."""
+    normals, spawn offset); at the camera's vertex, the emission it sees; after a delta bounce,
+    or a bounce with multiple importance sampling, the emission its ray found (area lights, and
+    after a delta bounce the emitter it hit). A path that missed, hit an emitter or reached -m
+    ends; the others move to their next vertex and are listed in out by material kind: kind c's
+    paths are out[starts[c]:starts[c + 1]] (a counting sort, so each kind's shading kernel runs
+    over a queue of its own). Returns how many."""
     kinds = materials.kind
     light_samples = float(options.light_samples)
     max_depth = options.max_depth
-    kept = 0
+    kinds_count = starts.shape[0] - 1
+    for c in range(kinds_count + 1):
+        starts[c] = 0
     for k in range(n):
         i = queue[k]
         ox, oy, oz = floats[OX, i], floats[OY, i], floats[OZ, i]
@@ -133,14 +145,21 @@ def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, o
                 floats[R, i] = materials.emission[m, 0]
                 floats[G, i] = materials.emission[m, 1]
                 floats[B, i] = materials.emission[m, 2]
-        elif mis:
-            er, eg, eb = area_lights_found(lights, light_samples, floats[PDF, i], floats[QX, i],
-                                           floats[QY, i], floats[QZ, i], ox, oy, oz, dx, dy, dz,
-                                           t)
-            floats[R, i] += floats[TR, i] * er
-            floats[G, i] += floats[TG, i] * eg
-            floats[B, i] += floats[TB, i] * eb
-        if m < 0 or vertex == max_depth or kinds[m] != DIFFUSE:
+        else:
+            delta = ints[DELTA, i] != 0
+            if delta or mis:
+                er, eg, eb = area_lights_found(lights, light_samples, delta, floats[PDF, i],
+                                               floats[QX, i], floats[QY, i], floats[QZ, i], ox,
+                                               oy, oz, dx, dy, dz, t)
+                if delta and m >= 0 and kinds[m] == EMISSION:
+                    er += 1.0 * materials.emission[m, 0]
+                    eg += 1.0 * materials.emission[m, 1]
+                    eb += 1.0 * materials.emission[m, 2]
+                floats[R, i] += floats[TR, i] * er
+                floats[G, i] += floats[TG, i] * eg
+                floats[B, i] += floats[TB, i] * eb
+        if m < 0 or vertex == max_depth or kinds[m] == EMISSION:
+            ints[MAT, i] = -1
             continue
         floats[PX, i], floats[PY, i], floats[PZ, i] = px, py, pz
         floats[GX, i], floats[GY, i], floats[GZ, i] = gx, gy, gz
@@ -148,8 +167,20 @@ def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, o
         floats[OFFSET, i] = offset
         ints[MAT, i] = m
         ints[VERTEX, i] = vertex + 1
-        out[kept] = i
-        kept += 1
+        starts[kinds[m] + 1] += 1
+    for c in range(kinds_count):     # where each kind's paths begin
+        starts[c + 1] += starts[c]
+    kept = starts[kinds_count]
+    for k in range(n):               # (the ends move up to the next kind's start as they fill)
+        i = queue[k]
+        m = ints[MAT, i]
+        if m >= 0:
+            c = kinds[m]
+            out[starts[c]] = i
+            starts[c] += 1
+    for c in range(kinds_count, 0, -1):
+        starts[c] = starts[c - 1]
+    starts[0] = 0
     return kept
 
 

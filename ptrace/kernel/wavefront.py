@@ -4,7 +4,8 @@ take, and one block of (pixel, sample) paths traced as waves of stage calls.
 A block's paths are cut into waves of at most WAVE_PATHS paths (fewer when -l and the lights
 would make a wave's shadow queue longer than SHADOW_RAYS). Each wave: camera rays; then, until
 no path is left, closest hits (the backend's stage), the hit stage (surface, emission found,
-the paths to shade), the diffuse kernel (light samples into the shadow queue, bounces), any
+the paths to shade, sorted by material kind), each kind's shading kernel (light samples into
+the shadow queue, bounces; ptrace.kernel.shading), any
 hits over the shadow queue (the backend's) and their light added. Python calls each stage once
 per bounce of a wave; the stages run without the GIL, so the render's threads overlap. Waves
 are folded into the block's per-pixel sums in path order, which is sample order: the image does
@@ -18,35 +19,59 @@ from accel.compiled import new_scratch
 
 from .. import codes
 from ..errors import PtraceError
-from ..scene import AREA, BSDF_NAMES, DIFFUSE, EMISSION, KIND_NAMES
-from .diffuse import diffuse_stage
+from ..scene import (
+    AREA,
+    BSDF_NAMES,
+    DIFFUSE,
+    EMISSION,
+    GLASS,
+    GLOSSY,
+    KIND_NAMES,
+    MICROFACET,
+    MIRROR,
+    REFRACTION,
+)
 from .layout import Wave
+from .shading import shading_stage
 from .stages import add_stage, camera_stage, fold_stage, hit_stage, shadow_stage
 from .trace import any_stage, closest_stage
 
 WAVE_PATHS = 1024      # paths a wave holds at most (its float rows about 280 KB)
 SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.6 MB)
 
+SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY)   # kinds with a kernel so far
+
 AreaLights = namedtuple("AreaLights", ["radiance", "position", "direction", "edge_x", "edge_y",
-                                       "area", "hit_lower", "hit_upper", "hit_skip",
+                                       "area", "faced", "hit_lower", "hit_upper", "hit_skip",
                                        "hit_light"])
-SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission"])
+SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission", "albedo", "transmittance",
+                                             "ior", "alpha", "metallic", "eta", "k",
+                                             "specular"])
+
+
+def used_kinds(scene):
+    """The material kinds of the scene's primitives, sorted."""
+    used = np.unique(np.asarray(scene.material_index))
+    return sorted(set(np.asarray(scene.materials.kind)[used].tolist()))
 
 
 def unsupported(scene, settings):
     """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
-    so far it renders the path integrator on diffuse, untextured surfaces lit by area lights,
-    every light sampled at every vertex."""
+    so far it renders the path integrator on untextured surfaces of the course's kinds
+    (diffuse, mirror, glass, refraction, microfacet, glossy) lit by area lights, every light
+    sampled at every vertex."""
     if settings.integrator != "path":
         return f"the {settings.integrator} integrator"
     if settings.hemisphere:
         return "hemisphere sampling (-H)"
     m = scene.materials
-    kinds = set(np.unique(np.asarray(m.kind)).tolist()) - {DIFFUSE, EMISSION}
+    kinds = set(used_kinds(scene)) - set(SHADED) - {EMISSION}
     if kinds:
         return " or ".join(sorted(BSDF_NAMES[k] for k in kinds)) + " materials"
-    for field in ("albedo_texture", "emission_texture", "normal_texture", "alpha_texture"):
-        if np.any(np.asarray(getattr(m, field)) >= 0):
+    used = np.unique(np.asarray(scene.material_index))
+    for field in ("albedo_texture", "emission_texture", "roughness_texture", "normal_texture",
+                  "alpha_texture"):
+        if np.any(np.asarray(getattr(m, field))[used] >= 0):
             return "textures"
     if np.any(np.asarray(m.cutoff) != 0.0):
         return "cut-out materials"
@@ -67,22 +92,27 @@ def check(scene, settings):
     """Refuse, in one line, a render the wavefront cannot do yet."""
     reason = unsupported(scene, settings)
     if reason is not None:
-        raise PtraceError(f"--loop wavefront renders only diffuse scenes lit by area lights so "
-                          f"far; this render has {reason} (use --loop megakernel)")
+        raise PtraceError(f"--loop wavefront renders only untextured course materials lit by "
+                          f"area lights so far; this render has {reason} (use --loop "
+                          f"megakernel)")
 
 
 class Wavefront:
     """What a render job's wavefront needs beside the pixels: the stage records (built once
     from the job's kernel records) and each thread's wave buffers."""
 
-    def __init__(self, records, options, camera, accel_record):
+    def __init__(self, records, options, camera, accel_record, kinds):
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
-        self.surfaces = SurfaceArrays(materials.kind, materials.emission)
-        self.albedo = materials.albedo
+        m = materials
+        self.surfaces = SurfaceArrays(m.kind, m.emission, m.albedo, m.transmittance, m.ior,
+                                      m.alpha, m.metallic, m.eta, m.k, m.specular)
+        # the shading kernels of the kinds the scene has: no other is ever compiled
+        self.stages = [(kind, shading_stage(kind)) for kind in kinds if kind in SHADED]
         self.lights = AreaLights(lights.radiance, lights.position, lights.direction,
-                                 lights.edge_x, lights.edge_y, lights.area, lights.hit_lower,
-                                 lights.hit_upper, lights.hit_skip, lights.hit_light)
+                                 lights.edge_x, lights.edge_y, lights.area, lights.faced,
+                                 lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                                 lights.hit_light)
         self.mis = bool(options.mis and lights.radiance.shape[0] > 0)
         per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)
         self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
@@ -102,7 +132,7 @@ class Wavefront:
         floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
         shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
         shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
-        accel, mis, albedo = self.accel, self.mis, self.albedo
+        accel, mis, starts = self.accel, self.mis, wave.starts
         sums = np.zeros((pixel_x.shape[0], 5))
         counts = np.zeros(pixel_x.shape[0], dtype=np.int64)
         total = pixel_x.shape[0] * pass_n
@@ -115,11 +145,16 @@ class Wavefront:
             while n:
                 closest_stage(accel, scratch, floats, ints, queue, n)
                 n = hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
-                              after)
+                              after, starts)
                 if not n:
                     break
-                shadows, n = diffuse_stage(albedo, lights, options, mis, floats, ints, after, n,
-                                           shadow, shadow_path, queue)
+                shadows = n = 0
+                for kind, stage in self.stages:   # each kind's paths, through its kernel
+                    first, end = starts[kind], starts[kind + 1]
+                    if end > first:
+                        shadows, n = stage(surfaces, lights, options, mis, floats, ints,
+                                           after[first:end], end - first, shadow, shadow_path,
+                                           shadows, queue, n)
                 if shadows:
                     any_stage(accel, scratch, shadow, shadows, blocked)
                     shadow_stage(floats, shadow, shadow_path, blocked, shadows)

@@ -63,13 +63,13 @@ class Settings:
     suggestion) or "sah" (binned surface area heuristic); only with accel="bvh". loop:
     "megakernel" (one compiled loop carries each path to its end: ptrace.integrator) or
     "wavefront" (waves of paths through small stage kernels, ptrace.kernel; a prototype that
-    renders diffuse scenes lit by area lights, the same image bit for bit). light_sampler:
-    "all" (at each vertex -l samples of every light, one of each point or directional light: the
-    course's estimator), "power" (-l samples at each vertex, each of one light chosen by its
-    estimated power), "bvh" (-l samples at each vertex, each of one light or emissive primitive
-    chosen by a light BVH for that vertex, ptrace.light_bvh) or "auto" (all while a scene has at
-    most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives counting as one, else
-    ptrace.integrator.AUTO_MANY).
+    renders the course's untextured materials lit by area lights, the same image bit for bit).
+    light_sampler: "all" (at each vertex -l samples of every light, one of each point or
+    directional light: the course's estimator), "power" (-l samples at each vertex, each of one
+    light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or
+    emissive primitive chosen by a light BVH for that vertex, ptrace.light_bvh) or "auto" (all
+    while a scene has at most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives
+    counting as one, else ptrace.integrator.AUTO_MANY).
     """
     spp: int = 1
     accel: str = "bvh"

@@ -157,7 +157,8 @@ class RenderJob:
         if settings.loop == "wavefront":    # imported only when asked for: a prototype
             from ..kernel import wavefront
             wavefront.check(scene, settings)
-            self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel)
+            self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
+                                                 wavefront.used_kinds(scene))
         self._counting = threading.Lock()
 
     @classmethod

@@ -1,7 +1,8 @@
 """The wavefront prototype (--loop wavefront, ptrace.kernel) renders the megakernel's image bit for
-bit on the scenes it takes (diffuse surfaces, area lights), whatever the backend, the wave size,
-the threads, adaptive sampling or the crop; it refuses the rest in one line; its memory does not
-grow with -s, -m or -l."""
+bit on the scenes it takes (the course's untextured materials, area lights), whatever the
+backend, the wave size, the threads, adaptive sampling or the crop; it refuses the rest in one
+line; its memory does not grow with -s, -m or -l; it compiles a shading kernel only for the
+material kinds a scene has."""
 import subprocess
 import sys
 
@@ -13,6 +14,7 @@ from ptrace.errors import PtraceError
 from ptrace.kernel import layout, wavefront
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import RenderJob
+from ptrace.scene import DIFFUSE, GLASS, MIRROR
 
 from conftest import REPO, course_scene
 
@@ -65,7 +67,9 @@ def test_same_image_under_each_setting(cornell, options):
 
 
 def test_same_image_on_the_course_boxes():
-    for name, eye_z in (("sky/CBspheres_lambertian.dae", 3.5), ("sky/CBbunny.dae", -3.5)):
+    """Diffuse, mirror, glass and microfacet surfaces: each kind through its own kernel."""
+    for name, eye_z in (("sky/CBspheres_lambertian.dae", 3.5), ("sky/CBbunny.dae", -3.5),
+                        ("sky/CBspheres.dae", 3.5), ("sky/CBspheres_microfacet_al_ag.dae", 3.5)):
         scene = ptrace.load(str(course_scene(name)))
         assert_same(both((scene, framed(scene, eye_z, 20, 15)), spp=2, light_samples=1,
                          max_depth=4))
@@ -105,6 +109,15 @@ def test_settings_it_cannot_render_are_refused(cornell, options, phrase):
         ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), **options)
 
 
+def test_only_the_kinds_a_scene_has_get_a_kernel(cornell):
+    scene, camera = cornell
+    job = RenderJob.build(scene, Settings(loop="wavefront"), camera)
+    assert [kind for kind, _ in job.wavefront.stages] == [DIFFUSE]
+    spheres = ptrace.load(str(course_scene("sky/CBspheres.dae")))
+    job = RenderJob.build(spheres, Settings(loop="wavefront"), camera)
+    assert [kind for kind, _ in job.wavefront.stages] == [DIFFUSE, MIRROR, GLASS]
+
+
 def test_aovs_are_refused(cornell):
     with pytest.raises(PtraceError, match="AOV"):
         ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), aovs={})
@@ -113,9 +126,10 @@ def test_aovs_are_refused(cornell):
 def test_the_command_refuses_a_scene_it_cannot_render_in_one_line(tmp_path):
     output = tmp_path / "out.png"
     run = subprocess.run([sys.executable, "-m", "ptrace", "--loop", "wavefront", "-r", "8", "6",
-                          "-f", str(output), str(course_scene("sky/CBspheres.dae"))],
+                          "-f", str(output), str(course_scene("sky/CBempty.dae"))],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "glass" in lines[0], lines
+    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "point lights" in lines[0], \
+        lines
     assert not output.exists()

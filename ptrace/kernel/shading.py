@@ -1,0 +1,231 @@
+"""One shading kernel per material kind, made on demand (shading_stage(kind)) and compiled only for
+the kinds a scene has: at each queued vertex, -l samples of every area light unless the kind is
+delta (each a shadow ray in the wave's shadow queue, carrying the light it would add, weighted
+by the power heuristic against the BSDF's sample with multiple importance sampling), then the
+BSDF's sample, roulette, and the next ray. The kind is a constant of its kernel, so LLVM keeps
+only that kind's branch of ptrace.bsdf's functions. The megakernel's arithmetic
+(ptrace.integrator.direct_light and trace_path) for these kinds and these lights, with the same
+random-number keys."""
+import math
+
+from numba import njit
+
+from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from ..integrator import (
+    DIM_BSDF,
+    DIM_GLASS,
+    DIM_LIGHT,
+    DIM_RR,
+    DIMS_PER_VERTEX,
+    SHADOW_SHORTEN,
+    frame,
+    power_heuristic,
+    sample_1d,
+    sample_2d,
+    spawn,
+)
+from ..scene import GLASS, GLOSSY, GLTF_PBR
+from ..solid_angle import rectangle_sample
+from .layout import (
+    DELTA,
+    DX,
+    DY,
+    DZ,
+    GX,
+    GY,
+    GZ,
+    MAT,
+    NX,
+    NY,
+    NZ,
+    OFFSET,
+    OX,
+    OY,
+    OZ,
+    PDF,
+    PIXEL,
+    PX,
+    PY,
+    PZ,
+    QNX,
+    QNY,
+    QNZ,
+    QX,
+    QY,
+    QZ,
+    RAYS,
+    SAMPLE,
+    SB,
+    SDX,
+    SDY,
+    SDZ,
+    SG,
+    SOX,
+    SOY,
+    SOZ,
+    SR,
+    STMAX,
+    TB,
+    TG,
+    TMAX,
+    TMIN,
+    TR,
+    VERTEX,
+)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sample_area(lights, i, px, py, pz, u1, u2):
+    """Area light i sampled from p by solid angle: (radiance, unit direction, distance, pdf),
+    pdf 0 for a point behind the one-sided light (ptrace.lights.sample_light's rectangle)."""
+    position, direction = lights.position, lights.direction
+    edge_x, edge_y, radiance = lights.edge_x, lights.edge_y, lights.radiance
+    if lights.area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
+                                 + (position[i, 1] - py) * direction[i, 1]
+                                 + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
+                                       position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                       edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                       edge_y[i, 2], u1, u2)
+    dx, dy, dz = qx - px, qy - py, qz - pz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0 or not pdf > 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    return radiance[i, 0], radiance[i, 1], radiance[i, 2], dx / dist, dy / dist, dz / dist, \
+        dist, pdf
+
+
+_STAGES = {}
+
+
+def shading_stage(kind):
+    """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
+    EMISSION), made once per process and cached on disk per kind:
+
+        shadows, kept = stage(materials, lights, options, mis, floats, ints, queue, n,
+                              shadow, shadow_path, shadows, out, kept)
+
+    shades the n queued vertices, appending their shadow rays to the shadow queue from row
+    `shadows` on and the paths that bounce to out from `kept` on; returns both new counts."""
+    if kind in _STAGES:
+        return _STAGES[kind]
+    KIND = kind
+    DELTA_KIND = bool(is_delta.py_func(kind))
+    LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
+
+    @njit(cache=True, nogil=True, _nrt=False)
+    def stage(materials, lights, options, mis, floats, ints, queue, n, shadow, shadow_path,
+              shadows, out, kept):
+        light_count = lights.radiance.shape[0] if not DELTA_KIND else 0
+        samples = options.light_samples
+        max_depth = options.max_depth
+        for k in range(n):
+            i = queue[k]
+            pixel, sample, vertex = ints[PIXEL, i], ints[SAMPLE, i], ints[VERTEX, i]
+            m = ints[MAT, i]
+            px, py, pz = floats[PX, i], floats[PY, i], floats[PZ, i]
+            gx, gy, gz = floats[GX, i], floats[GY, i], floats[GZ, i]
+            nx, ny, nz = floats[NX, i], floats[NY, i], floats[NZ, i]
+            offset = floats[OFFSET, i]
+            dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
+            tr, tg, tb = floats[TR, i], floats[TG, i], floats[TB, i]
+            xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
+            wox = -dx * xx - dy * xy - dz * xz
+            woy = -dx * yx - dy * yy - dz * yz
+            woz = -dx * nx - dy * ny - dz * nz
+            ar, ag, ab = materials.albedo[m, 0], materials.albedo[m, 1], materials.albedo[m, 2]
+            alpha, metallic = materials.alpha[m], materials.metallic[m]
+            base = vertex * DIMS_PER_VERTEX
+            rays = 0
+            j = 0
+            for light in range(light_count):
+                for s in range(samples):
+                    index = sample * samples + s
+                    u1, u2 = sample_2d(options, pixel, sample, index,
+                                       base + DIM_LIGHT + 2 * light, base + DIM_LIGHT + 2 * j)
+                    lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py, pz,
+                                                                    u1, u2)
+                    j += 1
+                    if pdf < 1e-11:
+                        continue
+                    wiz = wx * nx + wy * ny + wz * nz
+                    if wiz <= 0.0:
+                        continue
+                    wix = wx * xx + wy * xy + wz * xz
+                    wiy = wx * yx + wy * yy + wz * yz
+                    fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
+                                           materials.k, materials.specular, m, wox, woy, woz,
+                                           wix, wiy, wiz)
+                    scale = wiz / (samples * pdf)
+                    if options.mis:
+                        scale *= power_heuristic(samples * pdf, bsdf_pdf(
+                            KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz))
+                    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+                    # aim from the spawned origin at the light's point, stopping just short
+                    ax = px + dist * wx - ox
+                    ay = py + dist * wy - oy
+                    az = pz + dist * wz - oz
+                    length = math.sqrt(ax * ax + ay * ay + az * az)
+                    sdx, sdy, sdz = wx, wy, wz
+                    if length > 0.0:
+                        sdx, sdy, sdz = ax / length, ay / length, az / length
+                    rays += 1
+                    shadow[SOX, shadows] = ox
+                    shadow[SOY, shadows] = oy
+                    shadow[SOZ, shadows] = oz
+                    shadow[SDX, shadows] = sdx
+                    shadow[SDY, shadows] = sdy
+                    shadow[SDZ, shadows] = sdz
+                    shadow[STMAX, shadows] = length * (1.0 - SHADOW_SHORTEN)
+                    shadow[SR, shadows] = tr * (lr * fr * scale)
+                    shadow[SG, shadows] = tg * (lg * fg * scale)
+                    shadow[SB, shadows] = tb * (lb * fb * scale)
+                    shadow_path[shadows] = i
+                    shadows += 1
+            ints[RAYS, i] += rays
+            if vertex == max_depth and not (DELTA_KIND or mis):
+                continue
+            u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
+            u3 = 0.0
+            if LOBES:
+                u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS,
+                               base + DIM_GLASS)
+            wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
+                KIND, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
+                materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
+            if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
+                continue
+            weight = abs(wiz) / pdf
+            tr *= fr * weight
+            tg *= fg * weight
+            tb *= fb * weight
+            if options.roulette and vertex >= options.rr_depth:
+                q = min(options.rr_cap, max(tr, tg, tb))
+                if not sample_1d(options, pixel, sample, sample, base + DIM_RR,
+                                 base + DIM_RR) < q:
+                    continue
+                tr /= q
+                tg /= q
+                tb /= q
+            wx = wix * xx + wiy * yx + wiz * nx
+            wy = wix * xy + wiy * yy + wiz * ny
+            wz = wix * xz + wiy * yz + wiz * nz
+            length = math.sqrt(wx * wx + wy * wy + wz * wz)
+            dx, dy, dz = wx / length, wy / length, wz / length
+            ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
+            floats[QX, i], floats[QY, i], floats[QZ, i] = px, py, pz
+            floats[QNX, i], floats[QNY, i], floats[QNZ, i] = nx, ny, nz
+            floats[OX, i], floats[OY, i], floats[OZ, i] = ox, oy, oz
+            floats[DX, i], floats[DY, i], floats[DZ, i] = dx, dy, dz
+            floats[TMIN, i], floats[TMAX, i] = 0.0, math.inf
+            floats[TR, i], floats[TG, i], floats[TB, i] = tr, tg, tb
+            floats[PDF, i] = pdf
+            ints[DELTA, i] = DELTA_KIND
+            ints[RAYS, i] += 1
+            out[kept] = i
+            kept += 1
+        return shadows, kept
+
+    _STAGES[kind] = stage
+    return stage
