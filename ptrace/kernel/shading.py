@@ -11,11 +11,13 @@ import math
 from numba import njit
 
 from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from ..environment import environment_radiance, environment_sample
 from ..integrator import (
     DIM_BSDF,
     DIM_GLASS,
     DIM_LIGHT,
     DIM_RR,
+    DIM_SELECT,
     DIMS_PER_VERTEX,
     SHADOW_SHORTEN,
     frame,
@@ -24,7 +26,8 @@ from ..integrator import (
     sample_2d,
     spawn,
 )
-from ..scene import GLASS, GLOSSY, GLTF_PBR
+from ..lights import EMITTER, light_is_delta, sample_emitter, sample_light
+from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
 from ..solid_angle import rectangle_sample
 from .layout import (
     DELTA,
@@ -96,27 +99,52 @@ def sample_area(lights, i, px, py, pz, u1, u2):
         dist, pdf
 
 
+@njit(cache=True, _nrt=False, forceinline=True)
+def any_light(shapes, materials, lights, options, pixel, sample, index, base, light, j, px, py,
+              pz):
+    """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from p, the
+    j-th light sample of the vertex: (radiance, unit direction, distance (inf at infinity),
+    pdf), with direct_light's keys for the light sampler `all`."""
+    light_kind = lights.kind[light]
+    u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
+                       base + DIM_LIGHT + 2 * j)
+    if light_kind == EMITTER:
+        u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
+                       base + DIM_SELECT + j)
+        return sample_emitter(shapes, materials, lights.emitter_prims, lights.emitter_cdf,
+                              lights.prim_pdf, px, py, pz, u0, u1, u2)
+    if light_kind == ENVIRONMENT:
+        wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
+                                             lights.env_table, u1, u2)
+        lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
+        return lr, lg, lb, wx, wy, wz, math.inf, pdf
+    return sample_light(lights, light, px, py, pz, u1, u2)
+
+
 _STAGES = {}
 
 
-def shading_stage(kind):
+def shading_stage(kind, general=False):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
-        shadows, kept = stage(materials, lights, options, mis, floats, ints, queue, n,
+        shadows, kept = stage(shapes, materials, lights, options, mis, floats, ints, queue, n,
                               shadow, shadow_path, shadows, out, kept)
 
     shades the n queued vertices, appending their shadow rays to the shadow queue from row
-    `shadows` on and the paths that bounce to out from `kept` on; returns both new counts."""
-    if kind in _STAGES:
-        return _STAGES[kind]
-    KIND = kind
+    `shadows` on and the paths that bounce to out from `kept` on; returns both new counts.
+    Without `general` the lights are area lights (wavefront.AreaLights; the other records may
+    be the stages' own); with it, any of ptrace.integrator's lights and the emissive geometry,
+    from its full records (shapes, materials, lights)."""
+    if (kind, general) in _STAGES:
+        return _STAGES[kind, general]
+    KIND, GENERAL = kind, general
     DELTA_KIND = bool(is_delta.py_func(kind))
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
 
     @njit(cache=True, nogil=True, _nrt=False)
-    def stage(materials, lights, options, mis, floats, ints, queue, n, shadow, shadow_path,
-              shadows, out, kept):
+    def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, shadow,
+              shadow_path, shadows, out, kept):
         light_count = lights.radiance.shape[0] if not DELTA_KIND else 0
         samples = options.light_samples
         max_depth = options.max_depth
@@ -140,15 +168,31 @@ def shading_stage(kind):
             rays = 0
             j = 0
             for light in range(light_count):
-                for s in range(samples):
-                    index = sample * samples + s
-                    u1, u2 = sample_2d(options, pixel, sample, index,
-                                       base + DIM_LIGHT + 2 * light, base + DIM_LIGHT + 2 * j)
-                    lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py, pz,
-                                                                    u1, u2)
+                count = samples
+                delta_light = False
+                if GENERAL:
+                    delta_light = light_is_delta(lights.kind[light], lights.model[light])
+                    if delta_light:
+                        count = 1
+                for s in range(count):
+                    index = sample * count + s
+                    if GENERAL:
+                        lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
+                            shapes, materials, lights, options, pixel, sample, index, base,
+                            light, j, px, py, pz)
+                    else:
+                        u1, u2 = sample_2d(options, pixel, sample, index,
+                                           base + DIM_LIGHT + 2 * light,
+                                           base + DIM_LIGHT + 2 * j)
+                        lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py,
+                                                                        pz, u1, u2)
                     j += 1
                     if pdf < 1e-11:
                         continue
+                    if GENERAL:
+                        if lights.kind[light] == EMITTER and dist <= offset:
+                            # a point of p's own emissive surface (direct_light's rule)
+                            continue
                     wiz = wx * nx + wy * ny + wz * nz
                     if wiz <= 0.0:
                         continue
@@ -157,19 +201,21 @@ def shading_stage(kind):
                     fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
                                            materials.k, materials.specular, m, wox, woy, woz,
                                            wix, wiy, wiz)
-                    scale = wiz / (samples * pdf)
-                    if options.mis:
-                        scale *= power_heuristic(samples * pdf, bsdf_pdf(
+                    scale = wiz / (count * pdf)
+                    if options.mis and not delta_light:
+                        scale *= power_heuristic(count * pdf, bsdf_pdf(
                             KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz))
                     ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-                    # aim from the spawned origin at the light's point, stopping just short
-                    ax = px + dist * wx - ox
-                    ay = py + dist * wy - oy
-                    az = pz + dist * wz - oz
-                    length = math.sqrt(ax * ax + ay * ay + az * az)
-                    sdx, sdy, sdz = wx, wy, wz
-                    if length > 0.0:
-                        sdx, sdy, sdz = ax / length, ay / length, az / length
+                    sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
+                    if dist != math.inf:
+                        # aim from the spawned origin at the light's point, stopping just short
+                        ax = px + dist * wx - ox
+                        ay = py + dist * wy - oy
+                        az = pz + dist * wz - oz
+                        length = math.sqrt(ax * ax + ay * ay + az * az)
+                        if length > 0.0:
+                            sdx, sdy, sdz = ax / length, ay / length, az / length
+                        tmax = length * (1.0 - SHADOW_SHORTEN)
                     rays += 1
                     shadow[SOX, shadows] = ox
                     shadow[SOY, shadows] = oy
@@ -177,7 +223,7 @@ def shading_stage(kind):
                     shadow[SDX, shadows] = sdx
                     shadow[SDY, shadows] = sdy
                     shadow[SDZ, shadows] = sdz
-                    shadow[STMAX, shadows] = length * (1.0 - SHADOW_SHORTEN)
+                    shadow[STMAX, shadows] = tmax
                     shadow[SR, shadows] = tr * (lr * fr * scale)
                     shadow[SG, shadows] = tg * (lg * fg * scale)
                     shadow[SB, shadows] = tb * (lb * fb * scale)
@@ -227,5 +273,5 @@ def shading_stage(kind):
             kept += 1
         return shadows, kept
 
-    _STAGES[kind] = stage
+    _STAGES[kind, general] = stage
     return stage

@@ -10,11 +10,12 @@ the megakernel's image bit for bit, whatever the wave size."""
 import numpy as np
 from numba import njit
 
-from ..environment import LUMINANCE
-from ..integrator import SHADOW_SHORTEN, camera_ray, power_heuristic, surface
+from ..environment import LUMINANCE, environment_radiance
+from ..integrator import SHADOW_SHORTEN, camera_ray, emission_found, power_heuristic, surface
 from ..light_hits import next_light
 from ..lights import area_light_hit, area_light_pdf
 from ..scene import EMISSION
+from ..textures import surface_emission
 from .layout import (
     DELTA,
     DX,
@@ -37,6 +38,9 @@ from .layout import (
     PX,
     PY,
     PZ,
+    QNX,
+    QNY,
+    QNZ,
     QX,
     QY,
     QZ,
@@ -117,71 +121,105 @@ def area_lights_found(lights, light_samples, delta, bsdf_pdf_, qx, qy, qz, ox, o
     return r, g, b
 
 
-@njit(cache=True, nogil=True, _nrt=False)
-def hit_stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out, starts):
-    """For each queued path whose closest hit is known: the surface it hit (material, point,
+_HIT_STAGES = {}
+
+
+def hit_stage(general=False):
+    """The hit stage (made once per process, cached on disk per variant):
+
+        kept = stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out,
+                     starts)
+
+    For each queued path whose closest hit is known: the surface it hit (material, point,
     normals, spawn offset); at the camera's vertex, the emission it sees; after a delta bounce,
-    or a bounce with multiple importance sampling, the emission its ray found (area lights, and
-    after a delta bounce the emitter it hit). A path that missed, hit an emitter or reached -m
-    ends; the others move to their next vertex and are listed in out by material kind: kind c's
-    paths are out[starts[c]:starts[c + 1]] (a counting sort, so each kind's shading kernel runs
-    over a queue of its own). Returns how many."""
-    kinds = materials.kind
-    light_samples = float(options.light_samples)
-    max_depth = options.max_depth
-    kinds_count = starts.shape[0] - 1
-    for c in range(kinds_count + 1):
-        starts[c] = 0
-    for k in range(n):
-        i = queue[k]
-        ox, oy, oz = floats[OX, i], floats[OY, i], floats[OZ, i]
-        dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
-        t, prim, u, v = floats[T, i], ints[PRIM, i], floats[U, i], floats[V, i]
-        m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
-                                                                dy, dz, t, prim, u, v)
-        vertex = ints[VERTEX, i]
-        if vertex == 0:
-            if m >= 0 and kinds[m] == EMISSION:
-                floats[R, i] = materials.emission[m, 0]
-                floats[G, i] = materials.emission[m, 1]
-                floats[B, i] = materials.emission[m, 2]
-        else:
-            delta = ints[DELTA, i] != 0
-            if delta or mis:
-                er, eg, eb = area_lights_found(lights, light_samples, delta, floats[PDF, i],
-                                               floats[QX, i], floats[QY, i], floats[QZ, i], ox,
-                                               oy, oz, dx, dy, dz, t)
-                if delta and m >= 0 and kinds[m] == EMISSION:
-                    er += 1.0 * materials.emission[m, 0]
-                    eg += 1.0 * materials.emission[m, 1]
-                    eb += 1.0 * materials.emission[m, 2]
-                floats[R, i] += floats[TR, i] * er
-                floats[G, i] += floats[TG, i] * eg
-                floats[B, i] += floats[TB, i] * eb
-        if m < 0 or vertex == max_depth or kinds[m] == EMISSION:
-            ints[MAT, i] = -1
-            continue
-        floats[PX, i], floats[PY, i], floats[PZ, i] = px, py, pz
-        floats[GX, i], floats[GY, i], floats[GZ, i] = gx, gy, gz
-        floats[NX, i], floats[NY, i], floats[NZ, i] = nx, ny, nz
-        floats[OFFSET, i] = offset
-        ints[MAT, i] = m
-        ints[VERTEX, i] = vertex + 1
-        starts[kinds[m] + 1] += 1
-    for c in range(kinds_count):     # where each kind's paths begin
-        starts[c + 1] += starts[c]
-    kept = starts[kinds_count]
-    for k in range(n):               # (the ends move up to the next kind's start as they fill)
-        i = queue[k]
-        m = ints[MAT, i]
-        if m >= 0:
-            c = kinds[m]
-            out[starts[c]] = i
-            starts[c] += 1
-    for c in range(kinds_count, 0, -1):
-        starts[c] = starts[c - 1]
-    starts[0] = 0
-    return kept
+    or a bounce with multiple importance sampling, the emission its ray found. A path that
+    missed, hit an emitter or reached -m ends; the others move to their next vertex and are
+    listed in out by material kind: kind c's paths are out[starts[c]:starts[c + 1]] (a counting
+    sort, so each kind's shading kernel runs over a queue of its own). Returns how many.
+    Without `general` the lights are area lights (wavefront.AreaLights) and the emitters their
+    faces; with it, the emission is the megakernel's emission_found over ptrace.integrator's
+    full records (any light, the environment as the background, emissive geometry)."""
+    if general in _HIT_STAGES:
+        return _HIT_STAGES[general]
+    GENERAL = general
+
+    @njit(cache=True, nogil=True, _nrt=False)
+    def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out, starts):
+        kinds = materials.kind
+        light_samples = float(options.light_samples)
+        max_depth = options.max_depth
+        kinds_count = starts.shape[0] - 1
+        for c in range(kinds_count + 1):
+            starts[c] = 0
+        for k in range(n):
+            i = queue[k]
+            ox, oy, oz = floats[OX, i], floats[OY, i], floats[OZ, i]
+            dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
+            t, prim, u, v = floats[T, i], ints[PRIM, i], floats[U, i], floats[V, i]
+            m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz,
+                                                                    dx, dy, dz, t, prim, u, v)
+            vertex = ints[VERTEX, i]
+            if vertex == 0:
+                if GENERAL:
+                    r = g = b = 0.0
+                    if m < 0:
+                        if lights.env_image.shape[0] > 0:   # the environment is the background
+                            r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
+                    elif kinds[m] == EMISSION:
+                        r, g, b = surface_emission(shapes, materials, m, prim, u, v)
+                    floats[R, i], floats[G, i], floats[B, i] = r, g, b
+                elif m >= 0 and kinds[m] == EMISSION:
+                    floats[R, i] = materials.emission[m, 0]
+                    floats[G, i] = materials.emission[m, 1]
+                    floats[B, i] = materials.emission[m, 2]
+            else:
+                delta = ints[DELTA, i] != 0
+                if delta or mis:
+                    if GENERAL:
+                        er, eg, eb = emission_found(
+                            shapes, materials, lights, options, delta, floats[PDF, i],
+                            floats[QX, i], floats[QY, i], floats[QZ, i], floats[QNX, i],
+                            floats[QNY, i], floats[QNZ, i], ox, oy, oz, dx, dy, dz, t, prim, u, v,
+                            m, gx, gy, gz)
+                    else:
+                        er, eg, eb = area_lights_found(lights, light_samples, delta,
+                                                       floats[PDF, i], floats[QX, i],
+                                                       floats[QY, i], floats[QZ, i], ox, oy, oz,
+                                                       dx, dy, dz, t)
+                        if delta and m >= 0 and kinds[m] == EMISSION:
+                            er += 1.0 * materials.emission[m, 0]
+                            eg += 1.0 * materials.emission[m, 1]
+                            eb += 1.0 * materials.emission[m, 2]
+                    floats[R, i] += floats[TR, i] * er
+                    floats[G, i] += floats[TG, i] * eg
+                    floats[B, i] += floats[TB, i] * eb
+            if m < 0 or vertex == max_depth or kinds[m] == EMISSION:
+                ints[MAT, i] = -1
+                continue
+            floats[PX, i], floats[PY, i], floats[PZ, i] = px, py, pz
+            floats[GX, i], floats[GY, i], floats[GZ, i] = gx, gy, gz
+            floats[NX, i], floats[NY, i], floats[NZ, i] = nx, ny, nz
+            floats[OFFSET, i] = offset
+            ints[MAT, i] = m
+            ints[VERTEX, i] = vertex + 1
+            starts[kinds[m] + 1] += 1
+        for c in range(kinds_count):     # where each kind's paths begin
+            starts[c + 1] += starts[c]
+        kept = starts[kinds_count]
+        for k in range(n):               # (the ends move up to the next kind's start as they fill)
+            i = queue[k]
+            m = ints[MAT, i]
+            if m >= 0:
+                c = kinds[m]
+                out[starts[c]] = i
+                starts[c] += 1
+        for c in range(kinds_count, 0, -1):
+            starts[c] = starts[c - 1]
+        starts[0] = 0
+        return kept
+
+    _HIT_STAGES[general] = stage
+    return stage
 
 
 @njit(cache=True, nogil=True, _nrt=False)

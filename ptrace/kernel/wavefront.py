@@ -26,7 +26,6 @@ from ..scene import (
     EMISSION,
     GLASS,
     GLOSSY,
-    KIND_NAMES,
     MICROFACET,
     MIRROR,
     REFRACTION,
@@ -36,8 +35,10 @@ from .shading import shading_stage
 from .stages import add_stage, camera_stage, fold_stage, hit_stage, shadow_stage
 from .trace import any_stage, closest_stage
 
-WAVE_PATHS = 1024      # paths a wave holds at most (its float rows about 280 KB)
-SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.6 MB)
+# paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
+# and larger ones gained nothing (benchmarks/results/wavefront_gate.md)
+WAVE_PATHS = 4096
+SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.8 MB)
 
 SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY)   # kinds with a kernel so far
 
@@ -49,6 +50,14 @@ SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission", "albedo", "tran
                                              "specular"])
 
 
+def only_area_lights(scene):
+    """Whether the scene's lights are area lights alone (no other kind, no environment, and no
+    emissive geometry but their faces): its stages then take small records of their own."""
+    from ..emitters import emitter_arrays
+    return (set(np.asarray(scene.lights.kind).tolist()) <= {AREA}
+            and emitter_arrays(scene)[1].shape[0] == 0)
+
+
 def used_kinds(scene):
     """The material kinds of the scene's primitives, sorted."""
     used = np.unique(np.asarray(scene.material_index))
@@ -58,8 +67,8 @@ def used_kinds(scene):
 def unsupported(scene, settings):
     """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
     so far it renders the path integrator on untextured surfaces of the course's kinds
-    (diffuse, mirror, glass, refraction, microfacet, glossy) lit by area lights, every light
-    sampled at every vertex."""
+    (diffuse, mirror, glass, refraction, microfacet, glossy) under any lights, the environment
+    and emissive geometry, every light sampled at every vertex."""
     if settings.integrator != "path":
         return f"the {settings.integrator} integrator"
     if settings.hemisphere:
@@ -77,12 +86,6 @@ def unsupported(scene, settings):
         return "cut-out materials"
     if np.asarray(scene.vertex_colours).size:
         return "vertex colours"
-    kinds = set(np.unique(np.asarray(scene.lights.kind)).tolist()) - {AREA}
-    if kinds:
-        return " or ".join(sorted(KIND_NAMES[k] for k in kinds)) + " lights"
-    from ..emitters import emitter_arrays
-    if emitter_arrays(scene)[1].shape[0]:
-        return "emissive geometry that is no light's face"
     if settings.light_mode(scene) != codes.LIGHTS_ALL:
         return f"the {settings.light_sampler} light sampler on this scene's lights"
     return None
@@ -92,28 +95,37 @@ def check(scene, settings):
     """Refuse, in one line, a render the wavefront cannot do yet."""
     reason = unsupported(scene, settings)
     if reason is not None:
-        raise PtraceError(f"--loop wavefront renders only untextured course materials lit by "
-                          f"area lights so far; this render has {reason} (use --loop "
-                          f"megakernel)")
+        raise PtraceError(f"--loop wavefront renders only untextured course materials, every "
+                          f"light sampled at every vertex, so far; this render has {reason} "
+                          f"(use --loop megakernel)")
 
 
 class Wavefront:
     """What a render job's wavefront needs beside the pixels: the stage records (built once
     from the job's kernel records) and each thread's wave buffers."""
 
-    def __init__(self, records, options, camera, accel_record, kinds):
+    def __init__(self, records, options, camera, accel_record, kinds, area_only):
+        """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
+        primitives have; area_only: its lights are area lights alone (only_area_lights)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
-        m = materials
-        self.surfaces = SurfaceArrays(m.kind, m.emission, m.albedo, m.transmittance, m.ior,
-                                      m.alpha, m.metallic, m.eta, m.k, m.specular)
+        general = not area_only
+        if general:     # any light: the megakernel's records, whole
+            self.surfaces, self.lights = materials, lights
+            findable = lights.findable
+        else:           # area lights: records of just what the stages read
+            m = materials
+            self.surfaces = SurfaceArrays(m.kind, m.emission, m.albedo, m.transmittance, m.ior,
+                                          m.alpha, m.metallic, m.eta, m.k, m.specular)
+            self.lights = AreaLights(lights.radiance, lights.position, lights.direction,
+                                     lights.edge_x, lights.edge_y, lights.area, lights.faced,
+                                     lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                                     lights.hit_light)
+            findable = lights.radiance.shape[0] > 0
         # the shading kernels of the kinds the scene has: no other is ever compiled
-        self.stages = [(kind, shading_stage(kind)) for kind in kinds if kind in SHADED]
-        self.lights = AreaLights(lights.radiance, lights.position, lights.direction,
-                                 lights.edge_x, lights.edge_y, lights.area, lights.faced,
-                                 lights.hit_lower, lights.hit_upper, lights.hit_skip,
-                                 lights.hit_light)
-        self.mis = bool(options.mis and lights.radiance.shape[0] > 0)
+        self.stages = [(kind, shading_stage(kind, general)) for kind in kinds if kind in SHADED]
+        self.hit_stage = hit_stage(general)
+        self.mis = bool(options.mis and findable)
         per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)
         self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
         self.shadow_rays = self.wave_paths * lights.radiance.shape[0] * options.light_samples
@@ -144,15 +156,15 @@ class Wavefront:
             n = size
             while n:
                 closest_stage(accel, scratch, floats, ints, queue, n)
-                n = hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
-                              after, starts)
+                n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue,
+                                   n, after, starts)
                 if not n:
                     break
                 shadows = n = 0
                 for kind, stage in self.stages:   # each kind's paths, through its kernel
                     first, end = starts[kind], starts[kind + 1]
                     if end > first:
-                        shadows, n = stage(surfaces, lights, options, mis, floats, ints,
+                        shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
                                            after[first:end], end - first, shadow, shadow_path,
                                            shadows, queue, n)
                 if shadows:

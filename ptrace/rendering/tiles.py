@@ -158,7 +158,8 @@ class RenderJob:
             from ..kernel import wavefront
             wavefront.check(scene, settings)
             self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
-                                                 wavefront.used_kinds(scene))
+                                                 wavefront.used_kinds(scene),
+                                                 wavefront.only_area_lights(scene))
         self._counting = threading.Lock()
 
     @classmethod

@@ -1,5 +1,5 @@
 """The wavefront prototype (--loop wavefront, ptrace.kernel) renders the megakernel's image bit for
-bit on the scenes it takes (the course's untextured materials, area lights), whatever the
+bit on the scenes it takes (the course's untextured materials under any lights), whatever the
 backend, the wave size, the threads, adaptive sampling or the crop; it refuses the rest in one
 line; its memory does not grow with -s, -m or -l; it compiles a shading kernel only for the
 material kinds a scene has."""
@@ -75,6 +75,24 @@ def test_same_image_on_the_course_boxes():
                          max_depth=4))
 
 
+def test_same_image_under_every_kind_of_light(tmp_path):
+    """A point light, the ambient light, an environment beside an area light (and seen by a
+    mirror and glass), and emissive geometry that is no light's face: the stages of any light."""
+    from test_default_light import room
+
+    from ptrace.environment import load_environment
+    sky = load_environment(str(REPO / "scenes" / "sky.exr"))
+    scenes = [(ptrace.load(str(course_scene("sky/CBempty.dae"))), 3.5),
+              (ptrace.load(str(course_scene("sky/bunny.dae"))), None),
+              (ptrace.load(str(course_scene("sky/CBspheres.dae"))).with_environment(sky), 3.5),
+              (ptrace.load(str(room(tmp_path))), 0.9)]
+    assert len(scenes[3][0].lights) == 0      # the room is lit by its emissive quad alone
+    for scene, eye_z in scenes:
+        camera = framed(scene, eye_z) if eye_z is not None else None
+        options = dict(SMALL, resolution=(24, 18)) if camera is None else SMALL
+        assert_same(both((scene, camera), **options))
+
+
 def test_same_image_whatever_the_wave_size_threads_and_crop(cornell, monkeypatch):
     scene, camera = cornell
     reference = ptrace.render(scene, camera=camera, loop="wavefront", threads=2, **SMALL)
@@ -126,10 +144,9 @@ def test_aovs_are_refused(cornell):
 def test_the_command_refuses_a_scene_it_cannot_render_in_one_line(tmp_path):
     output = tmp_path / "out.png"
     run = subprocess.run([sys.executable, "-m", "ptrace", "--loop", "wavefront", "-r", "8", "6",
-                          "-f", str(output), str(course_scene("sky/CBempty.dae"))],
+                          "-f", str(output), str(REPO / "scenes" / "files" / "room.obj")],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "point lights" in lines[0], \
-        lines
+    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "textures" in lines[0], lines
     assert not output.exists()
