@@ -29,6 +29,7 @@ from ..integrator import (
 from ..lights import EMITTER, light_is_delta, sample_emitter, sample_light
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
 from ..solid_angle import rectangle_sample
+from ..textures import mapped_normal, surface_albedo
 from .layout import (
     DELTA,
     DX,
@@ -47,6 +48,7 @@ from .layout import (
     OZ,
     PDF,
     PIXEL,
+    PRIM,
     PX,
     PY,
     PZ,
@@ -74,6 +76,8 @@ from .layout import (
     TMIN,
     TR,
     VERTEX,
+    U,
+    V,
 )
 
 
@@ -133,9 +137,10 @@ def shading_stage(kind, general=False):
 
     shades the n queued vertices, appending their shadow rays to the shadow queue from row
     `shadows` on and the paths that bounce to out from `kept` on; returns both new counts.
-    Without `general` the lights are area lights (wavefront.AreaLights; the other records may
-    be the stages' own); with it, any of ptrace.integrator's lights and the emissive geometry,
-    from its full records (shapes, materials, lights)."""
+    Without `general` the lights are area lights and the surfaces untextured
+    (wavefront.AreaLights and SurfaceArrays); with it, any of ptrace.integrator's lights and
+    emissive geometry, and textured albedo, roughness, metallic and normals, from its full
+    records (shapes, materials, lights)."""
     if (kind, general) in _STAGES:
         return _STAGES[kind, general]
     KIND, GENERAL = kind, general
@@ -162,8 +167,22 @@ def shading_stage(kind, general=False):
             wox = -dx * xx - dy * xy - dz * xz
             woy = -dx * yx - dy * yy - dz * yz
             woz = -dx * nx - dy * ny - dz * nz
-            ar, ag, ab = materials.albedo[m, 0], materials.albedo[m, 1], materials.albedo[m, 2]
-            alpha, metallic = materials.alpha[m], materials.metallic[m]
+            if GENERAL:     # textures: a bent normal, the albedo, roughness and metallic
+                prim, u, v = ints[PRIM, i], floats[U, i], floats[V, i]
+                sx, sy, sz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
+                if (sx != nx or sy != ny or sz != nz) and \
+                        (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
+                    # a bent normal that keeps wo on its side (else the unbent one shades)
+                    nx, ny, nz = sx, sy, sz
+                    xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
+                    wox = -dx * xx - dy * xy - dz * xz
+                    woy = -dx * yx - dy * yy - dz * yz
+                    woz = -dx * nx - dy * ny - dz * nz
+                ar, ag, ab, alpha, metallic = surface_albedo(shapes, materials, m, prim, u, v)
+            else:
+                ar, ag, ab = (materials.albedo[m, 0], materials.albedo[m, 1],
+                              materials.albedo[m, 2])
+                alpha, metallic = materials.alpha[m], materials.metallic[m]
             base = vertex * DIMS_PER_VERTEX
             rays = 0
             j = 0

@@ -11,7 +11,14 @@ import numpy as np
 from numba import njit
 
 from ..environment import LUMINANCE, environment_radiance
-from ..integrator import SHADOW_SHORTEN, camera_ray, emission_found, power_heuristic, surface
+from ..integrator import (
+    SHADOW_SHORTEN,
+    camera_ray,
+    emission_found,
+    emits,
+    power_heuristic,
+    surface,
+)
 from ..light_hits import next_light
 from ..lights import area_light_hit, area_light_pdf
 from ..scene import EMISSION
@@ -136,9 +143,10 @@ def hit_stage(general=False):
     missed, hit an emitter or reached -m ends; the others move to their next vertex and are
     listed in out by material kind: kind c's paths are out[starts[c]:starts[c + 1]] (a counting
     sort, so each kind's shading kernel runs over a queue of its own). Returns how many.
-    Without `general` the lights are area lights (wavefront.AreaLights) and the emitters their
-    faces; with it, the emission is the megakernel's emission_found over ptrace.integrator's
-    full records (any light, the environment as the background, emissive geometry)."""
+    Without `general` the lights are area lights (wavefront.AreaLights), the emitters their
+    faces and the surfaces untextured; with it, the emission is the megakernel's
+    emission_found over ptrace.integrator's full records (any light, the environment as the
+    background, emissive geometry, emission textures, glTF's emissive material)."""
     if general in _HIT_STAGES:
         return _HIT_STAGES[general]
     GENERAL = general
@@ -165,7 +173,7 @@ def hit_stage(general=False):
                     if m < 0:
                         if lights.env_image.shape[0] > 0:   # the environment is the background
                             r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
-                    elif kinds[m] == EMISSION:
+                    elif emits(kinds[m]):
                         r, g, b = surface_emission(shapes, materials, m, prim, u, v)
                     floats[R, i], floats[G, i], floats[B, i] = r, g, b
                 elif m >= 0 and kinds[m] == EMISSION:

@@ -21,11 +21,10 @@ from .. import codes
 from ..errors import PtraceError
 from ..scene import (
     AREA,
-    BSDF_NAMES,
     DIFFUSE,
-    EMISSION,
     GLASS,
     GLOSSY,
+    GLTF_PBR,
     MICROFACET,
     MIRROR,
     REFRACTION,
@@ -40,7 +39,7 @@ from .trace import any_stage, closest_stage
 WAVE_PATHS = 4096
 SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.8 MB)
 
-SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY)   # kinds with a kernel so far
+SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR)   # all but EMISSION
 
 AreaLights = namedtuple("AreaLights", ["radiance", "position", "direction", "edge_x", "edge_y",
                                        "area", "faced", "hit_lower", "hit_upper", "hit_skip",
@@ -50,12 +49,17 @@ SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission", "albedo", "tran
                                              "specular"])
 
 
-def only_area_lights(scene):
+def simple(scene):
     """Whether the scene's lights are area lights alone (no other kind, no environment, and no
-    emissive geometry but their faces): its stages then take small records of their own."""
+    emissive geometry but their faces) and its surfaces the course's, untextured (no texture,
+    no vertex colours, no glTF material): its stages then take small records of their own."""
     from ..emitters import emitter_arrays
+    m, used = scene.materials, np.unique(np.asarray(scene.material_index))
+    textured = any(np.any(np.asarray(getattr(m, field))[used] >= 0) for field in (
+        "albedo_texture", "emission_texture", "roughness_texture", "normal_texture"))
     return (set(np.asarray(scene.lights.kind).tolist()) <= {AREA}
-            and emitter_arrays(scene)[1].shape[0] == 0)
+            and emitter_arrays(scene)[1].shape[0] == 0 and not textured
+            and np.asarray(scene.vertex_colours).size == 0 and GLTF_PBR not in used_kinds(scene))
 
 
 def used_kinds(scene):
@@ -66,26 +70,14 @@ def used_kinds(scene):
 
 def unsupported(scene, settings):
     """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
-    so far it renders the path integrator on untextured surfaces of the course's kinds
-    (diffuse, mirror, glass, refraction, microfacet, glossy) under any lights, the environment
-    and emissive geometry, every light sampled at every vertex."""
+    so far it renders the path integrator on every material kind, textured or not, under any
+    lights, the environment and emissive geometry, every light sampled at every vertex."""
     if settings.integrator != "path":
         return f"the {settings.integrator} integrator"
     if settings.hemisphere:
         return "hemisphere sampling (-H)"
-    m = scene.materials
-    kinds = set(used_kinds(scene)) - set(SHADED) - {EMISSION}
-    if kinds:
-        return " or ".join(sorted(BSDF_NAMES[k] for k in kinds)) + " materials"
-    used = np.unique(np.asarray(scene.material_index))
-    for field in ("albedo_texture", "emission_texture", "roughness_texture", "normal_texture",
-                  "alpha_texture"):
-        if np.any(np.asarray(getattr(m, field))[used] >= 0):
-            return "textures"
-    if np.any(np.asarray(m.cutoff) != 0.0):
+    if np.any(np.asarray(scene.materials.cutoff) != 0.0):
         return "cut-out materials"
-    if np.asarray(scene.vertex_colours).size:
-        return "vertex colours"
     if settings.light_mode(scene) != codes.LIGHTS_ALL:
         return f"the {settings.light_sampler} light sampler on this scene's lights"
     return None
@@ -95,9 +87,9 @@ def check(scene, settings):
     """Refuse, in one line, a render the wavefront cannot do yet."""
     reason = unsupported(scene, settings)
     if reason is not None:
-        raise PtraceError(f"--loop wavefront renders only untextured course materials, every "
-                          f"light sampled at every vertex, so far; this render has {reason} "
-                          f"(use --loop megakernel)")
+        raise PtraceError(f"--loop wavefront renders only the path integrator with every light "
+                          f"sampled at every vertex so far; this render has {reason} (use --loop "
+                          f"megakernel)")
 
 
 class Wavefront:
@@ -106,7 +98,8 @@ class Wavefront:
 
     def __init__(self, records, options, camera, accel_record, kinds, area_only):
         """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
-        primitives have; area_only: its lights are area lights alone (only_area_lights)."""
+        primitives have; area_only: its lights are area lights alone and its surfaces
+        untextured (simple)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
         general = not area_only

@@ -159,7 +159,7 @@ class RenderJob:
             wavefront.check(scene, settings)
             self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
                                                  wavefront.used_kinds(scene),
-                                                 wavefront.only_area_lights(scene))
+                                                 wavefront.simple(scene))
         self._counting = threading.Lock()
 
     @classmethod

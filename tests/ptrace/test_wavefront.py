@@ -1,5 +1,5 @@
 """The wavefront prototype (--loop wavefront, ptrace.kernel) renders the megakernel's image bit for
-bit on the scenes it takes (the course's untextured materials under any lights), whatever the
+bit on the scenes it takes (every material kind, textured or not, under any lights), whatever the
 backend, the wave size, the threads, adaptive sampling or the crop; it refuses the rest in one
 line; its memory does not grow with -s, -m or -l; it compiles a shading kernel only for the
 material kinds a scene has."""
@@ -93,6 +93,14 @@ def test_same_image_under_every_kind_of_light(tmp_path):
         assert_same(both((scene, camera), **options))
 
 
+@pytest.mark.parametrize("name", ["room.obj", "pbr.glb", "colours.ply"])
+def test_same_image_on_mesh_files(name):
+    """Albedo, emission and roughness textures (room.obj), glTF's material (pbr.glb), vertex
+    colours (colours.ply)."""
+    scene = ptrace.load(str(REPO / "scenes" / "files" / name))
+    assert_same(both((scene, None), resolution=(24, 18), **SMALL))
+
+
 def test_same_image_whatever_the_wave_size_threads_and_crop(cornell, monkeypatch):
     scene, camera = cornell
     reference = ptrace.render(scene, camera=camera, loop="wavefront", threads=2, **SMALL)
@@ -141,12 +149,12 @@ def test_aovs_are_refused(cornell):
         ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), aovs={})
 
 
-def test_the_command_refuses_a_scene_it_cannot_render_in_one_line(tmp_path):
+def test_the_command_refuses_a_render_it_cannot_do_in_one_line(tmp_path):
     output = tmp_path / "out.png"
     run = subprocess.run([sys.executable, "-m", "ptrace", "--loop", "wavefront", "-r", "8", "6",
-                          "-f", str(output), str(REPO / "scenes" / "files" / "room.obj")],
+                          "--light-sampler", "power", "-f", str(output), str(CORNELL)],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
-    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "textures" in lines[0], lines
+    assert len(lines) == 1 and "--loop wavefront" in lines[0] and "power" in lines[0], lines
     assert not output.exists()
