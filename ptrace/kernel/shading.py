@@ -11,9 +11,12 @@ import math
 from numba import njit
 
 from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
     DIM_BSDF,
+    DIM_CHOOSE,
+    DIM_CHOOSE_PRIM,
     DIM_GLASS,
     DIM_LIGHT,
     DIM_RR,
@@ -26,7 +29,15 @@ from ..integrator import (
     sample_2d,
     spawn,
 )
-from ..lights import EMITTER, light_is_delta, sample_emitter, sample_light
+from ..light_bvh import bvh_choose
+from ..lights import (
+    EMITTER,
+    choose,
+    light_is_delta,
+    sample_emitter,
+    sample_light,
+    sample_primitive,
+)
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
 from ..solid_angle import rectangle_sample
 from ..textures import mapped_normal, surface_albedo
@@ -125,10 +136,34 @@ def any_light(shapes, materials, lights, options, pixel, sample, index, base, li
     return sample_light(lights, light, px, py, pz, u1, u2)
 
 
+@njit(cache=True, _nrt=False, forceinline=True)
+def chosen_light(shapes, materials, lights, options, pixel, sample, index, base, light, prim,
+                 outer, px, py, pz):
+    """Light sample `outer` of -l at p, of the light (or, with prim >= 0, the emissive
+    primitive) that the power or bvh light sampler chose for it: (radiance, unit direction,
+    distance, pdf), with direct_light's keys for those samplers."""
+    u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
+                       base + DIM_LIGHT + 4 * outer)
+    light_kind = lights.kind[light]
+    if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
+        return sample_primitive(shapes, materials, prim, px, py, pz, u1, u2)
+    if light_kind == EMITTER:
+        u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE_PRIM,
+                       base + DIM_LIGHT + 4 * outer + 3)
+        return sample_emitter(shapes, materials, lights.emitter_prims, lights.emitter_cdf,
+                              lights.prim_pdf, px, py, pz, u0, u1, u2)
+    if light_kind == ENVIRONMENT:
+        wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
+                                             lights.env_table, u1, u2)
+        lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
+        return lr, lg, lb, wx, wy, wz, math.inf, pdf
+    return sample_light(lights, light, px, py, pz, u1, u2)
+
+
 _STAGES = {}
 
 
-def shading_stage(kind, general=False):
+def shading_stage(kind, general=False, mode=LIGHTS_ALL):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
@@ -140,10 +175,12 @@ def shading_stage(kind, general=False):
     Without `general` the lights are area lights and the surfaces untextured
     (wavefront.AreaLights and SurfaceArrays); with it, any of ptrace.integrator's lights and
     emissive geometry, and textured albedo, roughness, metallic and normals, from its full
-    records (shapes, materials, lights)."""
-    if (kind, general) in _STAGES:
-        return _STAGES[kind, general]
-    KIND, GENERAL = kind, general
+    records (shapes, materials, lights). mode: the light sampler (ptrace.codes: LIGHTS_ALL,
+    or LIGHTS_POWER or LIGHTS_BVH, which need `general`)."""
+    if (kind, general, mode) in _STAGES:
+        return _STAGES[kind, general, mode]
+    KIND, GENERAL, MODE = kind, general, mode
+    CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(is_delta.py_func(kind))
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
 
@@ -186,20 +223,41 @@ def shading_stage(kind, general=False):
             base = vertex * DIMS_PER_VERTEX
             rays = 0
             j = 0
-            for light in range(light_count):
+            for outer in range(samples if CHOOSE and light_count else light_count):
+                light = outer
+                if CHOOSE:   # light sample `outer` of -l: one light, chosen by power or the tree
+                    index = sample * samples + outer
+                    u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
+                                   base + DIM_LIGHT + 4 * outer + 2)
+                    light_prim = -1
+                    if MODE == LIGHTS_BVH:
+                        light, light_prim, chosen = bvh_choose(lights, u0, px, py, pz, nx, ny, nz)
+                        if light < 0:
+                            continue
+                    else:
+                        light = choose(lights.select_cdf, u0)
+                        chosen = lights.select_pmf[light]
                 count = samples
                 delta_light = False
                 if GENERAL:
                     delta_light = light_is_delta(lights.kind[light], lights.model[light])
-                    if delta_light:
+                    if delta_light or CHOOSE:
                         count = 1
                 for s in range(count):
-                    index = sample * count + s
-                    if GENERAL:
+                    if CHOOSE:   # weight: the light's expected samples at this vertex
+                        weight = samples * chosen
+                        lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light(
+                            shapes, materials, lights, options, pixel, sample, index, base,
+                            light, light_prim, outer, px, py, pz)
+                    elif GENERAL:
+                        weight = count
+                        index = sample * count + s
                         lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
                             shapes, materials, lights, options, pixel, sample, index, base,
                             light, j, px, py, pz)
                     else:
+                        weight = count
+                        index = sample * count + s
                         u1, u2 = sample_2d(options, pixel, sample, index,
                                            base + DIM_LIGHT + 2 * light,
                                            base + DIM_LIGHT + 2 * j)
@@ -220,9 +278,9 @@ def shading_stage(kind, general=False):
                     fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
                                            materials.k, materials.specular, m, wox, woy, woz,
                                            wix, wiy, wiz)
-                    scale = wiz / (count * pdf)
+                    scale = wiz / (weight * pdf)
                     if options.mis and not delta_light:
-                        scale *= power_heuristic(count * pdf, bsdf_pdf(
+                        scale *= power_heuristic(weight * pdf, bsdf_pdf(
                             KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz))
                     ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
                     sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
@@ -292,5 +350,5 @@ def shading_stage(kind, general=False):
             kept += 1
         return shadows, kept
 
-    _STAGES[kind, general] = stage
+    _STAGES[kind, general, mode] = stage
     return stage

@@ -78,8 +78,6 @@ def unsupported(scene, settings):
         return "hemisphere sampling (-H)"
     if np.any(np.asarray(scene.materials.cutoff) != 0.0):
         return "cut-out materials"
-    if settings.light_mode(scene) != codes.LIGHTS_ALL:
-        return f"the {settings.light_sampler} light sampler on this scene's lights"
     return None
 
 
@@ -96,13 +94,15 @@ class Wavefront:
     """What a render job's wavefront needs beside the pixels: the stage records (built once
     from the job's kernel records) and each thread's wave buffers."""
 
-    def __init__(self, records, options, camera, accel_record, kinds, area_only):
+    def __init__(self, records, options, camera, accel_record, kinds, area_only, mode):
         """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
         primitives have; area_only: its lights are area lights alone and its surfaces
-        untextured (simple)."""
+        untextured (simple); mode: its light sampler (Settings.light_mode)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
-        general = not area_only
+        if mode == codes.LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
+            mode = codes.LIGHTS_POWER     # records without the tree (integrator.light_mode)
+        general = not area_only or mode != codes.LIGHTS_ALL
         if general:     # any light: the megakernel's records, whole
             self.surfaces, self.lights = materials, lights
             findable = lights.findable
@@ -116,7 +116,8 @@ class Wavefront:
                                      lights.hit_light)
             findable = lights.radiance.shape[0] > 0
         # the shading kernels of the kinds the scene has: no other is ever compiled
-        self.stages = [(kind, shading_stage(kind, general)) for kind in kinds if kind in SHADED]
+        self.stages = [(kind, shading_stage(kind, general, mode)) for kind in kinds
+                       if kind in SHADED]
         self.hit_stage = hit_stage(general)
         self.mis = bool(options.mis and findable)
         per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)

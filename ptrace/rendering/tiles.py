@@ -159,7 +159,8 @@ class RenderJob:
             wavefront.check(scene, settings)
             self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
                                                  wavefront.used_kinds(scene),
-                                                 wavefront.simple(scene))
+                                                 wavefront.simple(scene),
+                                                 settings.light_mode(scene))
         self._counting = threading.Lock()
 
     @classmethod
