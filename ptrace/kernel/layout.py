@@ -14,10 +14,10 @@ from ..scene import BSDF_NAMES
  PDF, PX, PY, PZ, GX, GY, GZ, NX, NY, NZ, OFFSET) = range(34)
 FLOATS = 34
 # the int rows: the pixel (y * width + x) and sample, the hit primitive and its material, the
-# vertex the path is at (0: the camera's), the rays it traced, and whether its last bounce was
-# a delta BSDF's
-PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA = range(7)
-INTS = 7
+# vertex the path is at (0: the camera's), the rays it traced, whether its last bounce was a
+# delta BSDF's, and its ray's key (ptrace.cutouts: the random numbers of the surfaces it passes)
+PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA, KEY = range(8)
+INTS = 8
 # the shadow queue's rows: origin, direction, end, and the light it carries if it is clear
 (SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB) = range(10)
 SHADOW_FLOATS = 10
@@ -36,9 +36,10 @@ class Wave:
         self.starts = np.zeros(len(BSDF_NAMES) + 1, dtype=np.int64)   # kinds' queues in next
         self.shadow = np.zeros((SHADOW_FLOATS, max(shadows, 1)))
         self.shadow_path = np.zeros(max(shadows, 1), dtype=np.int64)
+        self.shadow_key = np.zeros(max(shadows, 1), dtype=np.int64)
         self.blocked = np.zeros(max(shadows, 1), dtype=np.bool_)
 
     @staticmethod
     def bytes(size, shadows):
         """The memory a wave of this size holds."""
-        return size * 8 * (FLOATS + INTS + 2) + max(shadows, 1) * (8 * SHADOW_FLOATS + 9)
+        return size * 8 * (FLOATS + INTS + 2) + max(shadows, 1) * (8 * SHADOW_FLOATS + 17)

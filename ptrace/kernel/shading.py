@@ -22,6 +22,7 @@ from ..integrator import (
     DIM_RR,
     DIM_SELECT,
     DIMS_PER_VERTEX,
+    RAY_KEYS,
     SHADOW_SHORTEN,
     frame,
     power_heuristic,
@@ -49,6 +50,7 @@ from .layout import (
     GX,
     GY,
     GZ,
+    KEY,
     MAT,
     NX,
     NY,
@@ -168,7 +170,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
     EMISSION), made once per process and cached on disk per kind:
 
         shadows, kept = stage(shapes, materials, lights, options, mis, floats, ints, queue, n,
-                              shadow, shadow_path, shadows, out, kept)
+                              shadow, shadow_path, shadow_key, shadows, out, kept)
 
     shades the n queued vertices, appending their shadow rays to the shadow queue from row
     `shadows` on and the paths that bounce to out from `kept` on; returns both new counts.
@@ -186,7 +188,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
 
     @njit(cache=True, nogil=True, _nrt=False)
     def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, shadow,
-              shadow_path, shadows, out, kept):
+              shadow_path, shadow_key, shadows, out, kept):
         light_count = lights.radiance.shape[0] if not DELTA_KIND else 0
         samples = options.light_samples
         max_depth = options.max_depth
@@ -305,6 +307,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
                     shadow[SG, shadows] = tg * (lg * fg * scale)
                     shadow[SB, shadows] = tb * (lb * fb * scale)
                     shadow_path[shadows] = i
+                    shadow_key[shadows] = base + RAY_KEYS * j
                     shadows += 1
             ints[RAYS, i] += rays
             if vertex == max_depth and not (DELTA_KIND or mis):
@@ -345,6 +348,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
             floats[TR, i], floats[TG, i], floats[TB, i] = tr, tg, tb
             floats[PDF, i] = pdf
             ints[DELTA, i] = DELTA_KIND
+            ints[KEY, i] = base
             ints[RAYS, i] += 1
             out[kept] = i
             kept += 1

@@ -31,6 +31,7 @@ from .layout import (
     GX,
     GY,
     GZ,
+    KEY,
     MAT,
     NX,
     NY,
@@ -91,7 +92,7 @@ def camera_stage(camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
         floats[TR, slot] = floats[TG, slot] = floats[TB, slot] = 1.0
         floats[R, slot] = floats[G, slot] = floats[B, slot] = 0.0
         ints[PIXEL, slot], ints[SAMPLE, slot] = pixel, sample
-        ints[VERTEX, slot], ints[RAYS, slot], ints[DELTA, slot] = 0, 1, 0
+        ints[VERTEX, slot], ints[RAYS, slot], ints[DELTA, slot], ints[KEY, slot] = 0, 1, 0, 0
         queue[slot] = slot
 
 

@@ -32,7 +32,7 @@ from ..scene import (
 from .layout import Wave
 from .shading import shading_stage
 from .stages import add_stage, camera_stage, fold_stage, hit_stage, shadow_stage
-from .trace import any_stage, closest_stage
+from .trace import any_stage, closest_stage, shadowed_stage, visible_stage
 
 # paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
 # and larger ones gained nothing (benchmarks/results/wavefront_gate.md)
@@ -51,15 +51,17 @@ SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission", "albedo", "tran
 
 def simple(scene):
     """Whether the scene's lights are area lights alone (no other kind, no environment, and no
-    emissive geometry but their faces) and its surfaces the course's, untextured (no texture,
-    no vertex colours, no glTF material): its stages then take small records of their own."""
+    emissive geometry but their faces) and its surfaces the course's, untextured and opaque (no
+    texture, no vertex colours, no glTF material, no cut-outs): its stages then take small
+    records of their own."""
     from ..emitters import emitter_arrays
     m, used = scene.materials, np.unique(np.asarray(scene.material_index))
     textured = any(np.any(np.asarray(getattr(m, field))[used] >= 0) for field in (
         "albedo_texture", "emission_texture", "roughness_texture", "normal_texture"))
     return (set(np.asarray(scene.lights.kind).tolist()) <= {AREA}
             and emitter_arrays(scene)[1].shape[0] == 0 and not textured
-            and np.asarray(scene.vertex_colours).size == 0 and GLTF_PBR not in used_kinds(scene))
+            and np.asarray(scene.vertex_colours).size == 0 and GLTF_PBR not in used_kinds(scene)
+            and not np.any(np.asarray(m.cutoff) != 0.0))
 
 
 def used_kinds(scene):
@@ -76,8 +78,6 @@ def unsupported(scene, settings):
         return f"the {settings.integrator} integrator"
     if settings.hemisphere:
         return "hemisphere sampling (-H)"
-    if np.any(np.asarray(scene.materials.cutoff) != 0.0):
-        return "cut-out materials"
     return None
 
 
@@ -119,6 +119,9 @@ class Wavefront:
         self.stages = [(kind, shading_stage(kind, general, mode)) for kind in kinds
                        if kind in SHADED]
         self.hit_stage = hit_stage(general)
+        # cut-out surfaces: the backend's stages that trace past them (the records hold an
+        # empty cutoff array when no material is cut)
+        self.cutouts = general and materials.cutoff.shape[0] > 0
         self.mis = bool(options.mis and findable)
         per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)
         self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
@@ -137,6 +140,7 @@ class Wavefront:
         wave, scratch = self._wave(), new_scratch(self.accel)
         floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
         shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
+        shadow_key, cutouts = wave.shadow_key, self.cutouts
         shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
         accel, mis, starts = self.accel, self.mis, wave.starts
         sums = np.zeros((pixel_x.shape[0], 5))
@@ -149,7 +153,11 @@ class Wavefront:
                          size, floats, ints, queue)
             n = size
             while n:
-                closest_stage(accel, scratch, floats, ints, queue, n)
+                if cutouts:
+                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
+                                  n)
+                else:
+                    closest_stage(accel, scratch, floats, ints, queue, n)
                 n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue,
                                    n, after, starts)
                 if not n:
@@ -160,9 +168,13 @@ class Wavefront:
                     if end > first:
                         shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
                                            after[first:end], end - first, shadow, shadow_path,
-                                           shadows, queue, n)
+                                           shadow_key, shadows, queue, n)
                 if shadows:
-                    any_stage(accel, scratch, shadow, shadows, blocked)
+                    if cutouts:
+                        shadowed_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
+                                       shadow_path, shadow_key, shadows, blocked)
+                    else:
+                        any_stage(accel, scratch, shadow, shadows, blocked)
                     shadow_stage(floats, shadow, shadow_path, blocked, shadows)
             wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts)
             dropped += wave_dropped

@@ -63,7 +63,7 @@ class Settings:
     suggestion) or "sah" (binned surface area heuristic); only with accel="bvh". loop:
     "megakernel" (one compiled loop carries each path to its end: ptrace.integrator) or
     "wavefront" (waves of paths through small stage kernels, ptrace.kernel; a prototype that
-    renders the path integrator without cut-outs or -H, the same image bit for bit).
+    renders the path integrator without -H, the same image bit for bit).
     light_sampler: "all" (at each vertex -l samples of every light, one of each point or
     directional light: the course's estimator), "power" (-l samples at each vertex, each of one
     light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or

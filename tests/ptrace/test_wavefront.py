@@ -115,6 +115,16 @@ def test_same_image_under_every_light_sampler(tmp_path):
     assert not np.array_equal(images["all"][0], images["bvh"][0])   # three estimators
 
 
+def test_same_image_past_cut_out_surfaces(tmp_path):
+    """glTF's BLEND (a ray passes with probability 1 - alpha, by the ray's own key) in front of
+    a floor under the sun: the camera's rays and the shadow rays pass the same surfaces."""
+    from test_gltf_alpha_normals import render, white, write
+    path = write(tmp_path / "blend.gltf", white("BLEND", factor=[1, 1, 1, 0.5]))
+    mega, scene = render(path)
+    assert scene.materials.cutoff.any()
+    assert_same((mega, render(path, loop="wavefront")[0]))
+
+
 def test_same_image_whatever_the_wave_size_threads_and_crop(cornell, monkeypatch):
     scene, camera = cornell
     reference = ptrace.render(scene, camera=camera, loop="wavefront", threads=2, **SMALL)
