@@ -31,7 +31,7 @@ from ..scene import (
 )
 from .layout import Wave
 from .shading import shading_stage
-from .stages import add_stage, camera_stage, fold_stage, hit_stage, shadow_stage
+from .stages import add_stage, camera_stage, fold_stage, hit_stage, normals_stage, shadow_stage
 from .trace import any_stage, closest_stage, shadowed_stage, visible_stage
 
 # paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
@@ -74,9 +74,7 @@ def unsupported(scene, settings):
     """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
     so far it renders the path integrator on every material kind, textured or not, under any
     lights, the environment and emissive geometry, every light sampled at every vertex."""
-    if settings.integrator != "path":
-        return f"the {settings.integrator} integrator"
-    if settings.hemisphere:
+    if settings.integrator == "path" and settings.hemisphere:
         return "hemisphere sampling (-H)"
     return None
 
@@ -115,10 +113,12 @@ class Wavefront:
                                      lights.hit_lower, lights.hit_upper, lights.hit_skip,
                                      lights.hit_light)
             findable = lights.radiance.shape[0] > 0
-        # the shading kernels of the kinds the scene has: no other is ever compiled
-        self.stages = [(kind, shading_stage(kind, general, mode)) for kind in kinds
-                       if kind in SHADED]
-        self.hit_stage = hit_stage(general)
+        # the shading kernels of the kinds the scene has: no other is ever compiled (none at
+        # all for the normals integrator)
+        self.normals = options.mode == codes.NORMALS
+        self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode))
+                                               for kind in kinds if kind in SHADED]
+        self.hit_stage = None if self.normals else hit_stage(general)
         # cut-out surfaces: the backend's stages that trace past them (the records hold an
         # empty cutoff array when no material is cut)
         self.cutouts = general and materials.cutoff.shape[0] > 0
@@ -152,6 +152,14 @@ class Wavefront:
             camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
                          size, floats, ints, queue)
             n = size
+            if self.normals:   # the camera rays' hits, coloured by their normals
+                if cutouts:
+                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
+                                  n)
+                else:
+                    closest_stage(accel, scratch, floats, ints, queue, n)
+                normals_stage(shapes, floats, ints, n)
+                n = 0
             while n:
                 if cutouts:
                     visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
