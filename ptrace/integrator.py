@@ -697,6 +697,12 @@ def normal_colour(shapes, materials, options, record, scratch, pixel, sample, ox
     cut-out surface is seen through, as in the image)."""
     t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
                                 ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v):
+    """normal_colour of a known hit (t, prim, u, v) of the ray o + t d; black on a miss."""
     if prim < 0:
         return 0.0, 0.0, 0.0
     faces, normals = shapes.faces, shapes.vertex_normals

@@ -46,6 +46,30 @@ def spot_falloff(cos_inner, cos_outer, cos_axis):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def sample_area(lights, i, px, py, pz, u1, u2):
+    """Area light i (of any record with the area lights' radiance, position, direction, edges
+    and area) sampled from p by solid angle (ptrace.solid_angle: spherical rectangles, area
+    sampling where the solid angle is too small to be stable): sample_light's values. The light
+    is one-sided: nothing reaches a point behind its plane (pdf 0)."""
+    position, direction = lights.position, lights.direction
+    edge_x, edge_y, radiance = lights.edge_x, lights.edge_y, lights.radiance
+    if lights.area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
+                                 + (position[i, 1] - py) * direction[i, 1]
+                                 + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
+                                       position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                       edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                       edge_y[i, 2], u1, u2)
+    dx, dy, dz = qx - px, qy - py, qz - pz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0 or not pdf > 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+    wx, wy, wz = dx / dist, dy / dist, dz / dist
+    return radiance[i, 0], radiance[i, 1], radiance[i, 2], wx, wy, wz, dist, pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def sample_light(lights, i, px, py, pz, u1, u2):
     """Sample light i (of the integrator's LightArrays) as seen from point p.
 
@@ -56,7 +80,6 @@ def sample_light(lights, i, px, py, pz, u1, u2):
     """
     kind, radiance, position, direction = lights.kind[i], lights.radiance, lights.position, \
         lights.direction
-    edge_x, edge_y, area = lights.edge_x, lights.edge_y, lights.area
     physical = lights.model[i] == PHYSICAL
     if kind == POINT or (kind == SPOT and physical):
         dx, dy, dz = position[i, 0] - px, position[i, 1] - py, position[i, 2] - pz
@@ -77,23 +100,7 @@ def sample_light(lights, i, px, py, pz, u1, u2):
         return radiance[i, 0], radiance[i, 1], radiance[i, 2], direction[i, 0], \
             direction[i, 1], direction[i, 2], INF, 1.0
     if kind == AREA:
-        # by solid angle (ptrace.solid_angle: spherical rectangles, area sampling where the
-        # solid angle is too small to be stable); the light is one-sided: nothing reaches a
-        # point behind its plane
-        if area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
-                              + (position[i, 1] - py) * direction[i, 1]
-                              + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
-            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
-                                           position[i, 2], edge_x[i, 0], edge_x[i, 1],
-                                           edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
-                                           edge_y[i, 2], u1, u2)
-        dx, dy, dz = qx - px, qy - py, qz - pz
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if dist == 0.0 or not pdf > 0.0:
-            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        wx, wy, wz = dx / dist, dy / dist, dz / dist
-        return radiance[i, 0], radiance[i, 1], radiance[i, 2], wx, wy, wz, dist, pdf
+        return sample_area(lights, i, px, py, pz, u1, u2)
     if kind == AMBIENT:
         # uniform over the hemisphere about world +Y, pdf 1 / (2 pi)
         y = u1

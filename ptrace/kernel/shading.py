@@ -35,12 +35,12 @@ from ..lights import (
     EMITTER,
     choose,
     light_is_delta,
+    sample_area,
     sample_emitter,
     sample_light,
     sample_primitive,
 )
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
-from ..solid_angle import rectangle_sample
 from ..textures import mapped_normal, surface_albedo
 from .layout import (
     DELTA,
@@ -92,28 +92,6 @@ from .layout import (
     U,
     V,
 )
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def sample_area(lights, i, px, py, pz, u1, u2):
-    """Area light i sampled from p by solid angle: (radiance, unit direction, distance, pdf),
-    pdf 0 for a point behind the one-sided light (ptrace.lights.sample_light's rectangle)."""
-    position, direction = lights.position, lights.direction
-    edge_x, edge_y, radiance = lights.edge_x, lights.edge_y, lights.radiance
-    if lights.area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
-                                 + (position[i, 1] - py) * direction[i, 1]
-                                 + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-    qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
-                                       position[i, 2], edge_x[i, 0], edge_x[i, 1],
-                                       edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
-                                       edge_y[i, 2], u1, u2)
-    dx, dy, dz = qx - px, qy - py, qz - pz
-    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if dist == 0.0 or not pdf > 0.0:
-        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-    return radiance[i, 0], radiance[i, 1], radiance[i, 2], dx / dist, dy / dist, dz / dist, \
-        dist, pdf
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

@@ -16,6 +16,7 @@ from ..integrator import (
     camera_ray,
     emission_found,
     emits,
+    hit_normal_colour,
     power_heuristic,
     surface,
 )
@@ -236,25 +237,10 @@ def normals_stage(shapes, floats, ints, n):
     """The normals integrator's colour of each of the first n paths' camera hit (the
     megakernel's normal_colour): 0.5 n + 0.5, n the barycentric blend of the vertex normals (not
     renormalised, like the course) or a sphere's unit outward normal; black on a miss."""
-    faces, normals = shapes.faces, shapes.vertex_normals
     for i in range(n):
-        prim = ints[PRIM, i]
-        r = g = b = 0.0
-        if prim >= 0:
-            u, v = floats[U, i], floats[V, i]
-            if prim < faces.shape[0]:
-                w = 1.0 - u - v
-                a, c1, c2 = faces[prim, 0], faces[prim, 1], faces[prim, 2]
-                nx = w * normals[a, 0] + u * normals[c1, 0] + v * normals[c2, 0]
-                ny = w * normals[a, 1] + u * normals[c1, 1] + v * normals[c2, 1]
-                nz = w * normals[a, 2] + u * normals[c1, 2] + v * normals[c2, 2]
-            else:
-                s = prim - faces.shape[0]
-                radius, t = shapes.radii[s], floats[T, i]
-                nx = (floats[OX, i] + t * floats[DX, i] - shapes.centers[s, 0]) / radius
-                ny = (floats[OY, i] + t * floats[DY, i] - shapes.centers[s, 1]) / radius
-                nz = (floats[OZ, i] + t * floats[DZ, i] - shapes.centers[s, 2]) / radius
-            r, g, b = 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
+        r, g, b = hit_normal_colour(shapes, floats[OX, i], floats[OY, i], floats[OZ, i],
+                                    floats[DX, i], floats[DY, i], floats[DZ, i], floats[T, i],
+                                    ints[PRIM, i], floats[U, i], floats[V, i])
         floats[R, i], floats[G, i], floats[B, i] = r, g, b
 
 
