@@ -732,6 +732,12 @@ def first_hit_features(shapes, materials, options, record, scratch, pixel, sampl
     hit 0 on a miss. The hit is the camera ray's, past the surfaces it passes through."""
     t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
                                 ox, oy, oz, dx, dy, dz, tmin, tmax)
+    return hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v):
+    """first_hit_features of a known hit (t, prim, u, v) of the camera ray o + t d."""
     m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, materials.kind, ox, oy, oz,
                                                             dx, dy, dz, t, prim, u, v)
     if m < 0:

@@ -181,8 +181,8 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
              "(binned surface area heuristic)")
     add("--loop", choices=LOOPS, default="megakernel",
         help="the path loop: megakernel (one compiled loop per path; default) or wavefront "
-             "(waves of paths through small stage kernels: a prototype for the path integrator "
-             "without -H or AOVs; the same image)")
+             "(waves of paths through small stage kernels: a prototype for everything but -H; "
+             "the same image)")
     add("--seed", type=int_range("seed (--seed)", "seed"), default=0,
         help=f"random seed, {range_text('seed')} (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",

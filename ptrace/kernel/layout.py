@@ -34,6 +34,7 @@ class Wave:
         self.queue = np.zeros(size, dtype=np.int64)       # the paths a stage runs over
         self.next = np.zeros(size, dtype=np.int64)        # the paths a stage hands on
         self.starts = np.zeros(len(BSDF_NAMES) + 1, dtype=np.int64)   # kinds' queues in next
+        self.features = np.zeros((8, size))   # the AOVs of each path's camera hit
         self.shadow = np.zeros((SHADOW_FLOATS, max(shadows, 1)))
         self.shadow_path = np.zeros(max(shadows, 1), dtype=np.int64)
         self.shadow_key = np.zeros(max(shadows, 1), dtype=np.int64)
@@ -42,4 +43,4 @@ class Wave:
     @staticmethod
     def bytes(size, shadows):
         """The memory a wave of this size holds."""
-        return size * 8 * (FLOATS + INTS + 2) + max(shadows, 1) * (8 * SHADOW_FLOATS + 17)
+        return size * 8 * (FLOATS + INTS + 10) + max(shadows, 1) * (8 * SHADOW_FLOATS + 17)

@@ -16,6 +16,7 @@ from ..integrator import (
     camera_ray,
     emission_found,
     emits,
+    hit_features,
     hit_normal_colour,
     power_heuristic,
     surface,
@@ -233,6 +234,20 @@ def hit_stage(general=False):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
+def features_stage(shapes, materials, floats, ints, n, features):
+    """The AOVs (albedo, normal, distance, hit: the megakernel's first_hit_features) of each of
+    the first n paths' camera hit, into the rows of features (8, wave size). materials: the
+    megakernel's full record."""
+    for i in range(n):
+        a0, a1, a2, a3, a4, a5, a6, a7 = hit_features(
+            shapes, materials, floats[OX, i], floats[OY, i], floats[OZ, i], floats[DX, i],
+            floats[DY, i], floats[DZ, i], floats[T, i], ints[PRIM, i], floats[U, i],
+            floats[V, i])
+        features[0, i], features[1, i], features[2, i], features[3, i] = a0, a1, a2, a3
+        features[4, i], features[5, i], features[6, i], features[7, i] = a4, a5, a6, a7
+
+
+@njit(cache=True, nogil=True, _nrt=False)
 def normals_stage(shapes, floats, ints, n):
     """The normals integrator's colour of each of the first n paths' camera hit (the
     megakernel's normal_colour): 0.5 n + 0.5, n the barycentric blend of the vertex normals (not
@@ -257,10 +272,12 @@ def shadow_stage(floats, shadow, shadow_path, blocked, n):
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def fold_stage(floats, ints, start, count, pass_n, sums, counts):
+def fold_stage(floats, ints, start, count, pass_n, sums, counts, features, feature_sums):
     """The wave's finished paths added to their block pixel's sums (radiance, illuminance and
     its square; counts: finite samples) in path order, which is sample order, as the megakernel
-    sums them. Returns (non-finite samples dropped, rays traced)."""
+    sums them; with AOVs (feature_sums has rows), each kept sample's features too, and the ray
+    the megakernel traces again for them. Returns (non-finite samples dropped, rays traced)."""
+    aovs = feature_sums.shape[0] > 0
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
     dropped = 0
     rays = 0
@@ -278,13 +295,21 @@ def fold_stage(floats, ints, start, count, pass_n, sums, counts):
         sums[k, 3] += value
         sums[k, 4] += value * value
         counts[k] += 1
+        if aovs:
+            rays += 1
+            for f in range(8):
+                feature_sums[k, f] += features[f, slot]
     return dropped, rays
 
 
 @njit(cache=True, nogil=True, _nrt=False)
-def add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count):
-    """A block's per-pixel sums added to the render's at their rows."""
+def add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features):
+    """A block's per-pixel sums (and AOV sums, if feature_sums has rows) added to the render's
+    at their rows."""
     for k in range(rows.shape[0]):
+        if feature_sums.shape[0] > 0:
+            for f in range(8):
+                features[rows[k], f] += feature_sums[k, f]
         row = rows[k]
         sum_rgb[row, 0] += sums[k, 0]
         sum_rgb[row, 1] += sums[k, 1]

@@ -31,7 +31,15 @@ from ..scene import (
 )
 from .layout import Wave
 from .shading import shading_stage
-from .stages import add_stage, camera_stage, fold_stage, hit_stage, normals_stage, shadow_stage
+from .stages import (
+    add_stage,
+    camera_stage,
+    features_stage,
+    fold_stage,
+    hit_stage,
+    normals_stage,
+    shadow_stage,
+)
 from .trace import any_stage, closest_stage, shadowed_stage, visible_stage
 
 # paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
@@ -98,6 +106,7 @@ class Wavefront:
         untextured (simple); mode: its light sampler (Settings.light_mode)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
+        self.materials = materials     # the full record: the AOVs read it
         if mode == codes.LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
             mode = codes.LIGHTS_POWER     # records without the tree (integrator.light_mode)
         general = not area_only or mode != codes.LIGHTS_ALL
@@ -134,9 +143,11 @@ class Wavefront:
             wave = self._local.wave = Wave(self.wave_paths, self.shadow_rays)
         return wave
 
-    def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count):
+    def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count,
+              features):
         """The megakernel's render_pixels, as waves: samples first_sample .. + pass_n - 1 of
-        each pixel added to the sums at rows. Returns (dropped, rays traced)."""
+        each pixel added to the sums at rows, and their AOVs to features if it has rows ((n, 8),
+        else (0, 8)). Returns (dropped, rays traced)."""
         wave, scratch = self._wave(), new_scratch(self.accel)
         floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
         shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
@@ -144,6 +155,8 @@ class Wavefront:
         shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
         accel, mis, starts = self.accel, self.mis, wave.starts
         sums = np.zeros((pixel_x.shape[0], 5))
+        aovs = features.shape[0] > 0
+        feature_sums = np.zeros((pixel_x.shape[0] if aovs else 0, 8))
         counts = np.zeros(pixel_x.shape[0], dtype=np.int64)
         total = pixel_x.shape[0] * pass_n
         dropped = rays = 0
@@ -152,6 +165,13 @@ class Wavefront:
             camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
                          size, floats, ints, queue)
             n = size
+            if aovs:   # the camera rays' first hits, before any stage moves on from them
+                if cutouts:
+                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
+                                  n)
+                else:
+                    closest_stage(accel, scratch, floats, ints, queue, n)
+                features_stage(shapes, self.materials, floats, ints, n, wave.features)
             if self.normals:   # the camera rays' hits, coloured by their normals
                 if cutouts:
                     visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
@@ -184,8 +204,9 @@ class Wavefront:
                     else:
                         any_stage(accel, scratch, shadow, shadows, blocked)
                     shadow_stage(floats, shadow, shadow_path, blocked, shadows)
-            wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts)
+            wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts,
+                                                 wave.features, feature_sums)
             dropped += wave_dropped
             rays += wave_rays
-        add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count)
+        add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features)
         return dropped, rays

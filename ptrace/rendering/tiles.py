@@ -17,7 +17,6 @@ import numpy as np
 import accel
 from accel.compiled import new_scratch
 
-from ..errors import PtraceError
 from ..integrator import camera_record, render_pixels, scene_records
 from ..jit import COLD_COMPILE_SECONDS, WAVEFRONT_COMPILE_SECONDS, is_cold
 
@@ -223,15 +222,13 @@ class RenderJob:
         pixel_y = np.ascontiguousarray(pixel_y, dtype=np.int64)
         rows = np.ascontiguousarray(rows, dtype=np.int64)
         first_sample, pass_n = int(first_sample), int(pass_n)
-        if features is not None and self.wavefront is not None:
-            raise PtraceError("--loop wavefront does not make AOVs (--aov) yet")
         features = NO_FEATURES if features is None else features
 
         def block(start, end):
             if self.wavefront is not None:
                 return end - start, self.wavefront.trace(
                     pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample,
-                    pass_n, sum_rgb, sum_l, sum_l2, count)
+                    pass_n, sum_rgb, sum_l, sum_l2, count, features)
             return end - start, render_pixels(
                 shapes, materials, lights, self.camera, self.options, self.accel,
                 new_scratch(self.accel), pixel_x[start:end], pixel_y[start:end], rows[start:end],

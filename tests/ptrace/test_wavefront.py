@@ -170,9 +170,20 @@ def test_only_the_kinds_a_scene_has_get_a_kernel(cornell):
     assert [kind for kind, _ in job.wavefront.stages] == [DIFFUSE, MIRROR, GLASS]
 
 
-def test_aovs_are_refused(cornell):
-    with pytest.raises(PtraceError, match="AOV"):
-        ptrace.render(cornell[0], loop="wavefront", resolution=(4, 3), aovs={})
+def test_same_aovs_as_the_megakernel(cornell):
+    """Albedo, normal and distance of each sample's camera hit (a mirror, glass and diffuse
+    spheres' box, and the normals integrator's too)."""
+    spheres = ptrace.load(str(course_scene("sky/CBspheres.dae")))
+    for scene, options in ((spheres, SMALL), (cornell[0], dict(integrator="normals", spp=2))):
+        camera = framed(scene, 3.5)
+        mega, wave = {}, {}
+        images = (ptrace.render(scene, camera=camera, aovs=mega, **options),
+                  ptrace.render(scene, camera=camera, aovs=wave, loop="wavefront", **options))
+        assert_same(images)
+        assert sorted(mega) == sorted(wave) and len(mega) >= 3, sorted(mega)
+        for name in mega:
+            assert np.array_equal(mega[name], wave[name]), name
+        assert mega["albedo"].mean() > 0.05 and mega["depth"].max() > 0
 
 
 def test_the_command_refuses_a_render_it_cannot_do_in_one_line(tmp_path):
