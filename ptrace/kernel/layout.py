@@ -18,16 +18,18 @@ FLOATS = 34
 # delta BSDF's, and its ray's key (ptrace.cutouts: the random numbers of the surfaces it passes)
 PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA, KEY = range(8)
 INTS = 8
-# the shadow queue's rows: origin, direction, end, and the light it carries if it is clear
+# the shadow queue's rows: origin, direction, end, and the light it carries if it is clear (with
+# -H: the hemisphere's rays, each with the weight of the emission it finds)
 (SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB) = range(10)
 SHADOW_FLOATS = 10
 
 
 class Wave:
     """The arrays of one wave of `size` paths with room for `shadows` shadow rays, kept by one
-    thread and used again for every wave it runs."""
+    thread and used again for every wave it runs; with `probes` (-H), room for those rays'
+    closest hits too."""
 
-    def __init__(self, size, shadows):
+    def __init__(self, size, shadows, probes=False):
         self.size, self.shadows = size, shadows
         self.floats = np.zeros((FLOATS, size))
         self.ints = np.zeros((INTS, size), dtype=np.int64)
@@ -39,8 +41,12 @@ class Wave:
         self.shadow_path = np.zeros(max(shadows, 1), dtype=np.int64)
         self.shadow_key = np.zeros(max(shadows, 1), dtype=np.int64)
         self.blocked = np.zeros(max(shadows, 1), dtype=np.bool_)
+        hits = max(shadows, 1) if probes else 1
+        self.probe_prim = np.zeros(hits, dtype=np.int64)    # (-H) each ray's closest hit
+        self.probe_uv = np.zeros((2, hits))
 
     @staticmethod
-    def bytes(size, shadows):
+    def bytes(size, shadows, probes=False):
         """The memory a wave of this size holds."""
-        return size * 8 * (FLOATS + INTS + 10) + max(shadows, 1) * (8 * SHADOW_FLOATS + 17)
+        return (size * 8 * (FLOATS + INTS + 10) + max(shadows, 1) * (8 * SHADOW_FLOATS + 17)
+                + (max(shadows, 1) * 24 if probes else 0))

@@ -10,7 +10,7 @@ import math
 
 from numba import njit
 
-from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta
+from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
@@ -143,7 +143,7 @@ def chosen_light(shapes, materials, lights, options, pixel, sample, index, base,
 _STAGES = {}
 
 
-def shading_stage(kind, general=False, mode=LIGHTS_ALL):
+def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
@@ -156,10 +156,15 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
     (wavefront.AreaLights and SurfaceArrays); with it, any of ptrace.integrator's lights and
     emissive geometry, and textured albedo, roughness, metallic and normals, from its full
     records (shapes, materials, lights). mode: the light sampler (ptrace.codes: LIGHTS_ALL,
-    or LIGHTS_POWER or LIGHTS_BVH, which need `general`)."""
-    if (kind, general, mode) in _STAGES:
-        return _STAGES[kind, general, mode]
-    KIND, GENERAL, MODE = kind, general, mode
+    or LIGHTS_POWER or LIGHTS_BVH, which need `general`). With `hemisphere` (-H, which needs
+    `general`), the shadow queue gets the course's uniform hemisphere rays instead of light
+    samples: -l for each light that is not emissive geometry (at least -l), each carrying
+    f cos / (pdf n) times the throughput, the weight of the emission it will find
+    (stages.probe_found_stage)."""
+    key = (kind, general, mode, hemisphere)
+    if key in _STAGES:
+        return _STAGES[key]
+    KIND, GENERAL, MODE, HEMI = kind, general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(is_delta.py_func(kind))
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
@@ -202,8 +207,40 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
                 alpha, metallic = materials.alpha[m], materials.metallic[m]
             base = vertex * DIMS_PER_VERTEX
             rays = 0
+            if HEMI and light_count:    # (the megakernel's direct_light under -H)
+                count = 0
+                for light in range(light_count):
+                    count += lights.kind[light] != EMITTER
+                count = max(count, 1) * samples
+                for j in range(count):
+                    u1, u2 = sample_2d(options, pixel, sample, sample * count + j,
+                                       base + DIM_LIGHT, base + DIM_LIGHT + 2 * j)
+                    lx, ly, lz = uniform_hemisphere(u1, u2)
+                    fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
+                                           materials.k, materials.specular, m, wox, woy, woz,
+                                           lx, ly, lz)
+                    scale = lz * 2.0 * math.pi / count
+                    wx = lx * xx + ly * yx + lz * nx
+                    wy = lx * xy + ly * yy + lz * ny
+                    wz = lx * xz + ly * yz + lz * nz
+                    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+                    rays += 1
+                    shadow[SOX, shadows] = ox
+                    shadow[SOY, shadows] = oy
+                    shadow[SOZ, shadows] = oz
+                    shadow[SDX, shadows] = wx
+                    shadow[SDY, shadows] = wy
+                    shadow[SDZ, shadows] = wz
+                    shadow[STMAX, shadows] = math.inf
+                    shadow[SR, shadows] = tr * (fr * scale)
+                    shadow[SG, shadows] = tg * (fg * scale)
+                    shadow[SB, shadows] = tb * (fb * scale)
+                    shadow_path[shadows] = i
+                    shadow_key[shadows] = base + RAY_KEYS * (1 + j)
+                    shadows += 1
             j = 0
-            for outer in range(samples if CHOOSE and light_count else light_count):
+            lit = 0 if HEMI else light_count     # (-H takes no light samples)
+            for outer in range(samples if CHOOSE and lit else lit):
                 light = outer
                 if CHOOSE:   # light sample `outer` of -l: one light, chosen by power or the tree
                     index = sample * samples + outer
@@ -332,5 +369,5 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL):
             kept += 1
         return shadows, kept
 
-    _STAGES[kind, general, mode] = stage
+    _STAGES[key] = stage
     return stage

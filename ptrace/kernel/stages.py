@@ -57,6 +57,9 @@ from .layout import (
     RAYS,
     SAMPLE,
     SB,
+    SDX,
+    SDY,
+    SDZ,
     SG,
     SR,
     TB,
@@ -269,6 +272,32 @@ def shadow_stage(floats, shadow, shadow_path, blocked, n):
             floats[R, i] += shadow[SR, s]
             floats[G, i] += shadow[SG, s]
             floats[B, i] += shadow[SB, s]
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def probe_found_stage(shapes, materials, lights, floats, shadow, shadow_path, probe_prim,
+                      probe_uv, n):
+    """(-H) The emission each hemisphere ray found (the environment's radiance where it escaped),
+    times its weight, added to its path's radiance in queue order (the megakernel's
+    direct_light under -H). materials, lights: the megakernel's full records."""
+    env = lights.env_image.shape[0] > 0
+    for s in range(n):
+        prim = probe_prim[s]
+        if prim < 0:
+            if not env:
+                continue
+            er, eg, eb = environment_radiance(lights.env_image, shadow[SDX, s], shadow[SDY, s],
+                                              shadow[SDZ, s])
+        else:
+            e = shapes.material_index[prim]
+            if not emits(materials.kind[e]):
+                continue
+            er, eg, eb = surface_emission(shapes, materials, e, prim, probe_uv[0, s],
+                                          probe_uv[1, s])
+        i = shadow_path[s]
+        floats[R, i] += shadow[SR, s] * er
+        floats[G, i] += shadow[SG, s] * eg
+        floats[B, i] += shadow[SB, s] * eb
 
 
 @njit(cache=True, nogil=True, _nrt=False)

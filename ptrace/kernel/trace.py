@@ -83,3 +83,31 @@ def shadowed_stage(record, scratch, shapes, materials, options, ints, shadow, sh
                               ints[SAMPLE, i], np.int64(shadow_key[s]), shadow[SOX, s],
                               shadow[SOY, s], shadow[SOZ, s], shadow[SDX, s], shadow[SDY, s],
                               shadow[SDZ, s], shadow[STMAX, s])
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def probe_stage(record, scratch, shadow, n, probe_prim, probe_uv):
+    """(-H) The closest hit (prim, u, v) of each of the first n rays of the shadow queue, which
+    holds the hemisphere's rays, in [0, its end]."""
+    for s in range(n):
+        t, prim, u, v = closest_hit(record, scratch, shadow[SOX, s], shadow[SOY, s],
+                                    shadow[SOZ, s], shadow[SDX, s], shadow[SDY, s],
+                                    shadow[SDZ, s], 0.0, shadow[STMAX, s])
+        probe_prim[s] = prim
+        probe_uv[0, s] = u
+        probe_uv[1, s] = v
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def visible_probe_stage(record, scratch, shapes, materials, options, ints, shadow, shadow_path,
+                        shadow_key, n, probe_prim, probe_uv):
+    """probe_stage past the cut-out surfaces (ptrace.cutouts.visible_hit)."""
+    for s in range(n):
+        i = shadow_path[s]
+        t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, ints[PIXEL, i],
+                                    ints[SAMPLE, i], np.int64(shadow_key[s]), shadow[SOX, s],
+                                    shadow[SOY, s], shadow[SOZ, s], shadow[SDX, s],
+                                    shadow[SDY, s], shadow[SDZ, s], 0.0, shadow[STMAX, s])
+        probe_prim[s] = prim
+        probe_uv[0, s] = u
+        probe_uv[1, s] = v

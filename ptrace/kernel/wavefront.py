@@ -1,12 +1,13 @@
-"""The wavefront path loop's driver: which scenes it renders so far, the records its stages
-take, and one block of (pixel, sample) paths traced as waves of stage calls.
+"""The wavefront path loop's driver: the records its stages take, and one block of (pixel,
+sample) paths traced as waves of stage calls.
 
 A block's paths are cut into waves of at most WAVE_PATHS paths (fewer when -l and the lights
 would make a wave's shadow queue longer than SHADOW_RAYS). Each wave: camera rays; then, until
 no path is left, closest hits (the backend's stage), the hit stage (surface, emission found,
 the paths to shade, sorted by material kind), each kind's shading kernel (light samples into
 the shadow queue, bounces; ptrace.kernel.shading), any
-hits over the shadow queue (the backend's) and their light added. Python calls each stage once
+hits over the shadow queue (the backend's) and their light added (with -H: the hemisphere's
+rays, their closest hits and the emission they find). Python calls each stage once
 per bounce of a wave; the stages run without the GIL, so the render's threads overlap. Waves
 are folded into the block's per-pixel sums in path order, which is sample order: the image does
 not depend on the wave size."""
@@ -18,7 +19,6 @@ import numpy as np
 from accel.compiled import new_scratch
 
 from .. import codes
-from ..errors import PtraceError
 from ..scene import (
     AREA,
     DIFFUSE,
@@ -38,9 +38,17 @@ from .stages import (
     fold_stage,
     hit_stage,
     normals_stage,
+    probe_found_stage,
     shadow_stage,
 )
-from .trace import any_stage, closest_stage, shadowed_stage, visible_stage
+from .trace import (
+    any_stage,
+    closest_stage,
+    probe_stage,
+    shadowed_stage,
+    visible_probe_stage,
+    visible_stage,
+)
 
 # paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
 # and larger ones gained nothing (benchmarks/results/wavefront_gate.md)
@@ -78,24 +86,6 @@ def used_kinds(scene):
     return sorted(set(np.asarray(scene.materials.kind)[used].tolist()))
 
 
-def unsupported(scene, settings):
-    """Why the wavefront cannot render this scene with these settings yet (one phrase), or None:
-    so far it renders the path integrator on every material kind, textured or not, under any
-    lights, the environment and emissive geometry, every light sampled at every vertex."""
-    if settings.integrator == "path" and settings.hemisphere:
-        return "hemisphere sampling (-H)"
-    return None
-
-
-def check(scene, settings):
-    """Refuse, in one line, a render the wavefront cannot do yet."""
-    reason = unsupported(scene, settings)
-    if reason is not None:
-        raise PtraceError(f"--loop wavefront renders only the path integrator with every light "
-                          f"sampled at every vertex so far; this render has {reason} (use --loop "
-                          f"megakernel)")
-
-
 class Wavefront:
     """What a render job's wavefront needs beside the pixels: the stage records (built once
     from the job's kernel records) and each thread's wave buffers."""
@@ -109,7 +99,8 @@ class Wavefront:
         self.materials = materials     # the full record: the AOVs read it
         if mode == codes.LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
             mode = codes.LIGHTS_POWER     # records without the tree (integrator.light_mode)
-        general = not area_only or mode != codes.LIGHTS_ALL
+        self.hemisphere = bool(options.hemisphere)
+        general = not area_only or mode != codes.LIGHTS_ALL or self.hemisphere
         if general:     # any light: the megakernel's records, whole
             self.surfaces, self.lights = materials, lights
             findable = lights.findable
@@ -125,13 +116,14 @@ class Wavefront:
         # the shading kernels of the kinds the scene has: no other is ever compiled (none at
         # all for the normals integrator)
         self.normals = options.mode == codes.NORMALS
-        self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode))
+        self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode,
+                                                                   self.hemisphere))
                                                for kind in kinds if kind in SHADED]
         self.hit_stage = None if self.normals else hit_stage(general)
         # cut-out surfaces: the backend's stages that trace past them (the records hold an
         # empty cutoff array when no material is cut)
         self.cutouts = general and materials.cutoff.shape[0] > 0
-        self.mis = bool(options.mis and findable)
+        self.mis = bool(options.mis and findable and not self.hemisphere)
         per_vertex = max(1, lights.radiance.shape[0] * options.light_samples)
         self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
         self.shadow_rays = self.wave_paths * lights.radiance.shape[0] * options.light_samples
@@ -140,7 +132,7 @@ class Wavefront:
     def _wave(self):
         wave = getattr(self._local, "wave", None)
         if wave is None:
-            wave = self._local.wave = Wave(self.wave_paths, self.shadow_rays)
+            wave = self._local.wave = Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
         return wave
 
     def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count,
@@ -197,7 +189,17 @@ class Wavefront:
                         shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
                                            after[first:end], end - first, shadow, shadow_path,
                                            shadow_key, shadows, queue, n)
-                if shadows:
+                if shadows and self.hemisphere:   # the hemisphere's rays, and what they find
+                    if cutouts:
+                        visible_probe_stage(accel, scratch, shapes, surfaces, options, ints,
+                                            shadow, shadow_path, shadow_key, shadows,
+                                            wave.probe_prim, wave.probe_uv)
+                    else:
+                        probe_stage(accel, scratch, shadow, shadows, wave.probe_prim,
+                                    wave.probe_uv)
+                    probe_found_stage(shapes, surfaces, lights, floats, shadow, shadow_path,
+                                      wave.probe_prim, wave.probe_uv, shadows)
+                elif shadows:
                     if cutouts:
                         shadowed_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
                                        shadow_path, shadow_key, shadows, blocked)

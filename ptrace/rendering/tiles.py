@@ -155,7 +155,6 @@ class RenderJob:
         self.wavefront = None
         if settings.loop == "wavefront":    # imported only when asked for: a prototype
             from ..kernel import wavefront
-            wavefront.check(scene, settings)
             self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
                                                  wavefront.used_kinds(scene),
                                                  wavefront.simple(scene),
@@ -170,9 +169,6 @@ class RenderJob:
         "records" begin (ptrace.rendering.timing.Phases.enter). The job's build_seconds and
         records_seconds are the wall time of the build and of the records."""
         lap = lap if lap is not None else (lambda phase: None)
-        if settings.loop == "wavefront":   # refused before anything compiles or is built
-            from ..kernel import wavefront
-            wavefront.check(scene, settings)
         lap("compile")
         if notice is not None:
             cold, seconds = is_cold(accel.record_class(settings.accel)), COLD_COMPILE_SECONDS
