@@ -30,9 +30,10 @@ ASPECT_TOLERANCE = 1e-3
 
 def is_course_path(path):
     """Whether a scene read from this path keeps the course's camera rule: every scene but one
-    read from a mesh file (told by the extension, as ptrace.load picks its reader)."""
+    read from a mesh file or a Mitsuba scene (told by the extension, as ptrace.load picks its
+    reader)."""
     from .io.meshes import MESH_EXTENSIONS
-    return not str(path).lower().endswith(MESH_EXTENSIONS)
+    return not str(path).lower().endswith(MESH_EXTENSIONS + (".xml",))
 
 
 def is_course_scene(scene):

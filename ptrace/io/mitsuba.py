@@ -1,0 +1,376 @@
+"""load_mitsuba: a Mitsuba 3 XML scene (and the 0.4-0.6 files Mitsuba upgrades) into a Scene.
+
+ptrace.io.mitsuba_xml parses the file into plugins; this module turns them into ptrace's
+geometry, materials (ptrace.io.mitsuba_materials), lights and camera. What each plugin becomes
+is docs/usage.md's table "Mitsuba scenes". What ptrace draws differently is one note per kind;
+what it would draw wrongly (media, unsupported plugins, a mirroring camera) is refused in one
+SceneError line naming the file and the element. The scene has the file's lights only: no
+default light, so an unlit file renders black as it does in Mitsuba.
+"""
+import math
+
+import numpy as np
+
+import accel
+
+from ..budget import BudgetError
+from ..environment import Environment
+from ..errors import SceneError
+from ..scene import (
+    DIRECTIONAL,
+    EMISSION,
+    PHYSICAL,
+    POINT,
+    SPOT,
+    FileCamera,
+    Lights,
+    Materials,
+    Scene,
+    Textures,
+    area_weighted_normals,
+)
+from . import mitsuba_shapes as shapes
+from .files import describe_failure
+from .materials import TexturePool, read_image_file
+from .mitsuba_materials import Materials as MaterialTable
+from .mitsuba_xml import Colour, Plugin, Reader
+
+SHAPES = ("obj", "ply", "rectangle", "cube", "disk", "sphere")
+INTEGRATORS = ("path", "volpath", "volpathmis", "direct", "ptracer", "moment", "aov")
+
+
+def load_mitsuba(path, defines=None):
+    """Read a Mitsuba XML scene; defines ({name: value}, the CLI's -D) set $name before the
+    file's <default>s. Any problem raises SceneError."""
+    path = str(path)
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            return Builder(path, defines).build()
+    except (SceneError, BudgetError):
+        raise
+    except Exception as error:      # a case the explicit checks missed: still one line
+        raise SceneError(path, f"could not read the scene: {describe_failure(error)}") \
+            from error
+
+
+class Builder:
+    """Walks the scene's plugins into flat arrays."""
+
+    def __init__(self, path, defines):
+        self.path = path
+        self.reader = Reader(path, defines)
+        self.notes = []
+        self.pool = TexturePool(path)
+        self.materials = MaterialTable(self.reader, self.pool, self.notes)
+        self.vertices, self.faces, self.normals, self.uvs, self.tri_materials = [], [], [], [], []
+        self.centres, self.radii, self.sphere_materials = [], [], []
+        self.count = 0
+        self.lights, self.cameras, self.environment = [], [], None
+        self.settings = {}
+
+    def build(self):
+        scene = self.reader.read()
+        if self.reader.upgrade:
+            self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
+                              f"upgrades it")
+        for plugin in scene.children:
+            handler = getattr(self, "_" + plugin.tag, None)
+            if handler is not None:
+                handler(plugin)
+            elif plugin.tag in ("medium", "volume", "phase"):
+                plugin.fail("participating media are not supported by ptrace")
+        return self._finish()
+
+    # --- shapes ---------------------------------------------------------------------------
+
+    def _shape(self, shape):
+        if shape.type not in SHAPES:
+            shape.fail(f"shape type {shape.type!r} is not supported (ptrace reads "
+                       f"{', '.join(SHAPES)})")
+        for name in ("interior", "exterior"):
+            if shape.has(name):
+                shape.fail("participating media (interior, exterior) are not supported")
+        bsdf = self._one(shape, "bsdf")
+        emitter = self._one(shape, "emitter")
+        if emitter is not None and emitter.type != "area":
+            emitter.fail("only an area emitter can sit on a shape")
+        radiance = None if emitter is None else self._radiance(emitter, "radiance")
+        material = self.materials.index(bsdf)
+        if shape.type == "sphere":
+            centre, radius = shapes.sphere(shape)
+            if radiance is not None:
+                material = self.materials.emitter(radiance)
+                self.notes.append("<shape type=\"sphere\">: an area emitter on a sphere does "
+                                  "not also reflect (ptrace's emitters do not)")
+            self.centres.append(centre)
+            self.radii.append(radius)
+            self.sphere_materials.append(material)
+            self._unread(shape)
+            return
+        if shape.type in ("obj", "ply"):
+            name = shape.string("filename")
+            if name is None:
+                shape.fail("has no filename")
+            vertices, faces, uv = shapes.mesh_file(shape, self.reader.resolve(shape, name),
+                                                   self.notes)
+        else:
+            vertices, faces, uv = getattr(shapes, shape.type)()
+        vertices, faces, uv = shapes.placed(shape, vertices, faces, uv)
+        if radiance is not None:    # the emitting front, and behind it the reflecting back
+            self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance))
+            vertices, faces, uv = shapes.backing(vertices, faces, uv)
+            self.notes.append(f"<shape type=\"{shape.type}\">: an area emitter: its shape "
+                              f"emits from its front only, as Mitsuba's, and reflects with its "
+                              f"BSDF from its back ({shapes.BACKING:g} of its size behind), not "
+                              f"from its front")
+        self._add_triangles(vertices, faces, uv, material)
+        self._unread(shape)
+
+    def _add_triangles(self, vertices, faces, uv, material):
+        self.vertices.append(vertices)
+        self.faces.append(faces + self.count)
+        self.normals.append(area_weighted_normals(vertices, faces))
+        self.uvs.append(np.zeros((len(faces), 3, 2)) if uv is None else uv)
+        self.tri_materials.append(np.full(len(faces), material, np.int32))
+        self.count += len(vertices)
+
+    def _one(self, plugin, tag):
+        found = [p for p in plugin.children if p.tag == tag] + \
+            [v for k, v in plugin.params.items() if isinstance(v, Plugin) and v.tag == tag
+             and plugin.get(k) is not None]
+        if len(found) > 1:
+            plugin.fail(f"has {len(found)} <{tag}> elements (at most one)")
+        return found[0] if found else None
+
+    # --- emitters -------------------------------------------------------------------------
+
+    def _radiance(self, emitter, name, default=(1.0, 1.0, 1.0), scale=1.0):
+        value = emitter.colour(name, Colour(default))
+        if isinstance(value, Plugin):
+            emitter.fail(f"a texture for {name!r} is not supported")
+        if min(value) < 0:
+            emitter.fail(f"{name} is negative")
+        self._unread(emitter)
+        return tuple(scale * v for v in value)
+
+    def _emitter(self, emitter):
+        transform = emitter.transform("to_world")
+        kind = emitter.type
+        if kind == "point":
+            position = emitter.point("position")
+            position = transform.apply([0.0, 0.0, 0.0])[0] if position is None else position
+            self.lights.append({"kind": POINT, "model": PHYSICAL, "position": position,
+                                "radiance": self._radiance(emitter, "intensity")})
+        elif kind == "spot":
+            cutoff = emitter.float("cutoff_angle", 20.0)
+            beam = emitter.float("beam_width", cutoff * 0.75)
+            if not 0 < beam <= cutoff < 180:
+                emitter.fail("needs 0 < beam_width <= cutoff_angle < 180 degrees")
+            axis = transform.vectors([[0.0, 0.0, 1.0]])[0]
+            self.lights.append({"kind": SPOT, "model": PHYSICAL,
+                                "position": transform.apply([0.0, 0.0, 0.0])[0],
+                                "direction": axis / np.linalg.norm(axis),
+                                "cos_inner": math.cos(math.radians(beam)),
+                                "cos_outer": math.cos(math.radians(cutoff)),
+                                "radiance": self._radiance(emitter, "intensity")})
+            self.notes.append("<emitter type=\"spot\">: its edge falls off as ptrace's spot "
+                              "does (smooth in the cosine; Mitsuba's: linear in the angle)")
+        elif kind == "directional":
+            direction = emitter.point("direction")
+            if direction is None:
+                direction = transform.vectors([[0.0, 0.0, 1.0]])[0]
+            if not np.linalg.norm(direction) > 0:
+                emitter.fail("direction is zero")
+            self.lights.append({"kind": DIRECTIONAL,
+                                "direction": -direction / np.linalg.norm(direction),
+                                "radiance": self._radiance(emitter, "irradiance")})
+        elif kind in ("constant", "envmap"):
+            if self.environment is not None:
+                emitter.fail("a second environment emitter (ptrace has one environment)")
+            self.environment = self._environment(emitter, transform)
+        elif kind == "area":
+            emitter.fail("an area emitter must sit inside a <shape>")
+        else:
+            emitter.fail(f"emitter type {kind!r} is not supported (ptrace reads area, point, "
+                         f"spot, directional, constant, envmap)")
+        self._unread(emitter)
+
+    def _environment(self, emitter, transform):
+        if emitter.type == "constant":
+            return Environment.constant(self._radiance(emitter, "radiance"))
+        name = emitter.string("filename")
+        if name is None:
+            emitter.fail("has no filename")
+        path = self.reader.resolve(emitter, name)
+        try:
+            pixels, _ = read_image_file(path, f"the environment map {name!r}", self.path)
+        except (BudgetError, SceneError):
+            raise
+        except Exception as error:      # noqa: BLE001 - OpenImageIO's failures
+            emitter.fail(f"cannot read the image {name!r}: {str(error)[:120]}")
+        if pixels.shape[2] < 3:
+            pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
+        scale = emitter.float("scale", 1.0)
+        image = latlong_from_mitsuba(np.asarray(pixels[:, :, :3], np.float64),
+                                     transform.matrix[:3, :3]) * scale
+        return Environment(np.maximum(image, 0.0), name=path)
+
+    # --- sensor and settings --------------------------------------------------------------
+
+    def _sensor(self, sensor):
+        if sensor.type not in ("perspective", "thinlens"):
+            sensor.fail(f"sensor type {sensor.type!r} is not supported (ptrace renders "
+                        f"perspective and thinlens)")
+        film = self._one(sensor, "film")
+        width, height = 768, 576
+        if film is not None:
+            width, height = film.integer("width", 768), film.integer("height", 576)
+            if not (width >= 1 and height >= 1):
+                film.fail("width and height must be at least 1")
+            self.settings["resolution"] = (width, height)
+            for child in film.children:
+                child._read.update(child.params)
+            film._read.update(film.params)
+        sampler = self._one(sensor, "sampler")
+        if sampler is not None:
+            self.settings["spp"] = sampler.integer("sample_count", 4)
+            sampler._read.update(sampler.params)
+        yfov = self._yfov(sensor, width / height)
+        matrix = sensor.transform("to_world").matrix
+        axes = matrix[:3, :3] @ np.diag([-1.0, 1.0, -1.0])    # Mitsuba: left, up, forward
+        lengths = np.linalg.norm(axes, axis=0)
+        axes = axes / lengths
+        if not np.allclose(axes.T @ axes, np.eye(3), atol=1e-4):
+            sensor.fail("to_world shears the camera (its axes are not at right angles)")
+        if np.linalg.det(axes) < 0:
+            sensor.fail("to_world mirrors the image (a negative scale); ptrace's cameras "
+                        "cannot")
+        near, far = sensor.float("near_clip", 0.01), sensor.float("far_clip", 10000.0)
+        if not 0 <= near < far:
+            sensor.fail(f"near_clip {near:g} and far_clip {far:g}: need 0 <= near < far")
+        if sensor.type == "thinlens":
+            radius = sensor.float("aperture_radius", 0.03)
+            distance = sensor.float("focus_distance", 0.0)
+            self.notes.append(f"<sensor type=\"thinlens\">: rendered as a pinhole unless given "
+                              f"-b {radius:g} -d {distance:g}")
+        self.cameras.append(FileCamera(
+            name=sensor.id or sensor.type, node=len(self.cameras), kind="perspective",
+            position=matrix[:3, 3].copy(), camera_to_world=axes, znear=near, zfar=far,
+            yfov=yfov, aspect=width / height))
+        self._unread(sensor)
+
+    def _yfov(self, sensor, aspect):
+        """The vertical field of view (degrees) of the sensor's fov on its fov_axis."""
+        axis = sensor.string("fov_axis", "x")
+        if sensor.has("focal_length"):
+            text = str(sensor.get("focal_length")).strip().removesuffix("mm")
+            try:
+                focal = float(text)
+            except ValueError:
+                sensor.fail(f"focal_length {text[:20]!r} is not a length in mm")
+            fov, axis = math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * focal))), \
+                "diagonal"
+        else:
+            fov = sensor.float("fov", None)
+            if fov is None:
+                sensor.fail("has neither fov nor focal_length")
+        if not 0 < fov < 180:
+            sensor.fail(f"fov {fov:g} is not between 0 and 180 degrees")
+        half = math.tan(math.radians(fov) / 2)
+        if axis == "smaller":
+            axis = "x" if aspect < 1 else "y"
+        elif axis == "larger":
+            axis = "x" if aspect > 1 else "y"
+        if axis == "x":
+            half /= aspect
+        elif axis == "diagonal":
+            half /= math.hypot(aspect, 1.0)
+        elif axis != "y":
+            sensor.fail(f"fov_axis {axis!r} is none of x, y, diagonal, smaller, larger")
+        return math.degrees(2 * math.atan(half))
+
+    def _integrator(self, integrator):
+        if integrator.type not in INTEGRATORS:
+            integrator.fail(f"integrator type {integrator.type!r} is not supported")
+        depth = integrator.integer("max_depth", -1)
+        if integrator.type == "direct":
+            depth = 2
+        elif integrator.type != "path":
+            self.notes.append(f"<integrator type=\"{integrator.type}\">: rendered by ptrace's "
+                              f"path tracer")
+        self.settings["max_depth"] = depth
+        if integrator.boolean("hide_emitters", False):
+            self.notes.append("<integrator>: hide_emitters ignored (ptrace shows emitters)")
+        integrator._read.update(integrator.params)
+
+    def _unread(self, plugin):
+        for name in plugin.unread():
+            self.notes.append(f"<{plugin.tag} type=\"{plugin.type}\">: parameter {name!r} "
+                              f"ignored")
+
+    # --- the scene ------------------------------------------------------------------------
+
+    def _finish(self):
+        vertices = np.concatenate(self.vertices) if self.vertices else np.zeros((0, 3))
+        faces = np.concatenate(self.faces) if self.faces else np.zeros((0, 3), np.int64)
+        normals = np.concatenate(self.normals) if self.normals else np.zeros((0, 3))
+        material_index = np.concatenate(self.tri_materials + [np.array(self.sphere_materials,
+                                                                       np.int32)])
+        uv = np.concatenate(self.uvs) if self.materials.textured and self.uvs else None
+        self._settings_note()
+        if not self.lights and self.environment is None and \
+                not any(r["kind"] == EMISSION for r in self.materials.records):
+            self.notes.append("no emitters in the scene: the image is black, as Mitsuba's")
+        if not len(faces) and not self.radii:
+            self.notes.append("no geometry in the scene")
+        scene = Scene(path=self.path,
+                      geometry=accel.Geometry(vertices=vertices, faces=faces,
+                                              centers=np.array(self.centres).reshape(-1, 3),
+                                              radii=np.array(self.radii, np.float64)),
+                      vertex_normals=normals, material_index=material_index.astype(np.int32),
+                      materials=Materials.from_records(self.materials.records),
+                      lights=Lights.from_records(self.lights), notes=self.notes, uv=uv,
+                      textures=Textures.from_images(self.pool.images, self.pool.wraps,
+                                                    self.pool.names),
+                      file_cameras=tuple(self.cameras))
+        if self.environment is not None:
+            scene = scene.with_environment(self.environment)
+        return scene
+
+    def _settings_note(self):
+        settings = self.settings
+        flags = []
+        if "resolution" in settings:
+            flags.append("-r {} {}".format(*settings["resolution"]))
+        if "spp" in settings:
+            flags.append(f"-s {settings['spp']}")
+        depth = settings.get("max_depth")
+        if depth is not None:
+            flags.append("-m 10000" if depth < 0 else f"-m {max(depth - 1, 0)}")
+        if flags:
+            self.notes.append(f"the file's film, sampler and integrator ask for "
+                              f"{' '.join(flags)}; ptrace renders what its flags say")
+
+
+def latlong_from_mitsuba(image, rotation):
+    """ptrace's lat-long image (ptrace.environment's mapping) of a Mitsuba envmap image under
+    the rotation of its to_world: each pixel's direction looked up, bilinearly, where Mitsuba
+    finds it (u = atan2(x, -z) / 2 pi, v = acos(y) / pi in the envmap's own frame)."""
+    rows, columns = image.shape[:2]
+    y, x = np.meshgrid((np.arange(rows) + 0.5) / rows, (np.arange(columns) + 0.5) / columns,
+                       indexing="ij")
+    theta, phi = y * np.pi, x * 2 * np.pi - np.pi    # ptrace: phi = atan2(-dz, dx)
+    d = np.stack([np.sin(theta) * np.cos(phi), np.cos(theta), -np.sin(theta) * np.sin(phi)],
+                 axis=-1)
+    local = d @ np.linalg.inv(rotation).T
+    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    u = (np.arctan2(local[..., 0], -local[..., 2]) / (2 * np.pi)) % 1.0
+    v = np.arccos(np.clip(local[..., 1], -1.0, 1.0)) / np.pi
+    fx, fy = u * columns - 0.5, np.clip(v * rows - 0.5, 0, rows - 1)
+    x0, y0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+    tx, ty = (fx - x0)[..., None], (fy - y0)[..., None]
+    x1, y1 = (x0 + 1) % columns, np.minimum(y0 + 1, rows - 1)
+    x0 %= columns
+    top = image[y0, x0] * (1 - tx) + image[y0, x1] * tx
+    bottom = image[y1, x0] * (1 - tx) + image[y1, x1] * tx
+    return top * (1 - ty) + bottom * ty

@@ -1,0 +1,343 @@
+"""Mitsuba BSDFs and bitmap textures as ptrace material records (docs/usage.md's table "Mitsuba
+scenes" says what each becomes).
+
+A BSDF ptrace renders as Mitsuba does becomes its kind with Mitsuba's values; one it renders
+with a different but close model (Schlick's Fresnel for glass, the Ashikhmin-Shirley glossy
+model for plastics, Beckmann for GGX) gets one note per kind; one that would give a wrong
+image (blends, bump and normal maps, rough glass of visible roughness, media) is refused in
+one line naming the file and the element.
+"""
+import math
+
+import numpy as np
+
+from ..budget import BudgetError
+from ..errors import SceneError
+from ..scene import (
+    BLEND_CUT,
+    CLAMP,
+    DIFFUSE,
+    GLASS,
+    GLOSSY,
+    GLTF_PBR,
+    MICROFACET,
+    MIRROR,
+    MIRROR_REPEAT,
+    REPEAT,
+)
+from .materials import MIN_ALPHA, conductor_from_colour, read_image_file
+from .mitsuba_xml import Colour, Plugin
+
+# Mitsuba 3's named indices of refraction (its ior.h table)
+IOR = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,
+       "carbon dioxide": 1.00045, "water": 1.3330, "acetone": 1.36, "ethanol": 1.361,
+       "carbon tetrachloride": 1.461, "glycerol": 1.4729, "benzene": 1.501,
+       "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+       "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
+       "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750, "diamond": 2.419}
+# Mitsuba 3's named conductors as its RGB variants (scalar_rgb) give them: (eta, k) per channel,
+# from the measured spectra its conductor plugin ships, converted to RGB by Mitsuba itself
+CONDUCTORS = {
+    "a-C": ((2.944, 2.2271, 1.9682), (0.88746, 0.7993, 0.81529)),
+    "Ag": ((0.15528, 0.11673, 0.13839), (4.8284, 3.1222, 2.1469)),
+    "Al": ((1.6575, 0.8804, 0.52124), (9.2238, 6.2695, 4.837)),
+    "AlAs": ((3.6053, 3.2329, 2.2163), (0.00067944, 0, 0.0075127)),
+    "AlSb": ((0, 4.1394, 4.6693), (0, 0.094009, 1.3006)),
+    "Au": ((0.14304, 0.37531, 1.442), (3.983, 2.3856, 1.6034)),
+    "Be": ((4.185, 3.185, 2.7841), (3.8355, 3.0101, 2.869)),
+    "Cr": ((4.3697, 2.9165, 1.6549), (5.2065, 4.2313, 3.7547)),
+    "CsI": ((2.1449, 1.7023, 1.6624), (0, 0, 0)),
+    "Cu": ((0.20101, 0.92375, 1.1022), (3.9133, 2.453, 2.1421)),
+    "Cu2O": ((3.5518, 2.9499, 2.7519), (0.11421, 0.1939, 0.60613)),
+    "CuO": ((3.2475, 2.4478, 2.2102), (0.52109, 0.57003, 0.72218)),
+    "d-C": ((2.7087, 2.3188, 2.2289), (0, 0, 0)),
+    "Hg": ((2.3989, 1.44, 0.90957), (6.3276, 4.3719, 3.4218)),
+    "HgTe": ((4.779, 3.2312, 2.6599), (1.6316, 1.5808, 1.7293)),
+    "Ir": ((3.0863, 2.0822, 1.6179), (5.5922, 4.0671, 3.2673)),
+    "K": ((0.064043, 0.04641, 0.038185), (2.1042, 1.3489, 0.91313)),
+    "Li": ((0.26579, 0.19562, 0.22095), (3.5402, 2.3111, 1.6686)),
+    "MgO": ((2.0896, 1.6507, 1.5949), (0, 0, 0)),
+    "Mo": ((4.484, 3.5251, 2.7763), (4.1114, 3.4208, 3.1506)),
+    "Na_palik": ((0.060269, 0.056141, 0.061988), (3.1793, 2.1125, 1.579)),
+    "Nb": ((3.4201, 2.7901, 2.3956), (3.4414, 2.7377, 2.5797)),
+    "Ni_palik": ((2.3673, 1.6634, 1.4671), (4.4988, 3.0502, 2.3454)),
+    "Rh": ((2.5858, 1.8602, 1.5543), (6.7823, 4.703, 3.9761)),
+    "Se-e": ((5.7228, 4.1657, 4.0813), (0.87114, 1.1052, 1.5653)),
+    "Se": ((4.0583, 2.8429, 2.8209), (0.75405, 0.63844, 0.52181)),
+    "SiC": ((3.1723, 2.526, 2.4794), (0, 0, 0)),
+    "SnTe": ((4.5242, 1.9816, 1.2816), (0, 0, 0)),
+    "Ta": ((2.0627, 2.3929, 2.6279), (2.4084, 1.7415, 1.947)),
+    "Te-e": ((7.5089, 4.2964, 2.37), (5.5839, 4.9472, 3.9976)),
+    "Te": ((7.3902, 4.4821, 2.6371), (3.256, 3.5271, 3.2921)),
+    "ThF4": ((1.8307, 1.4422, 1.3876), (0, 0, 0)),
+    "TiC": ((3.7005, 2.8374, 2.5823), (3.2656, 2.3516, 2.1728)),
+    "TiN": ((1.6484, 1.1505, 1.3798), (3.3683, 1.9435, 1.1021)),
+    "TiO2-e": ((3.1066, 2.5132, 2.5824), (0, 0, 0)),
+    "TiO2": ((3.4566, 2.8017, 2.9052), (0, 0, 0)),
+    "VC": ((3.6576, 2.7527, 2.5327), (3.0683, 2.1987, 1.9632)),
+    "VN": ((2.8656, 2.1192, 1.9401), (3.0322, 2.0561, 1.6163)),
+    "W": ((4.3708, 3.3002, 2.9984), (3.5006, 2.6049, 2.2732)),
+}
+WRAP = {"repeat": REPEAT, "mirror": MIRROR_REPEAT, "clamp": CLAMP}
+REFUSED = {"blendbsdf": "a blend of two BSDFs", "bumpmap": "a bump map",
+           "normalmap": "a normal map", "hair": "hair", "measured": "measured data",
+           "pplastic": "polarised plastic", "polarizer": "a polariser", "retarder": "a retarder",
+           "circular": "a polariser", "null": "a null BSDF (for media)"}
+ROUGH_GLASS_LIMIT = 0.1     # a roughdielectric up to this alpha is drawn smooth (noted)
+# principled's parameters that ptrace's glTF BRDF lacks, and their Mitsuba defaults
+PRINCIPLED_EXTRAS = {"anisotropic": 0.0, "sheen": 0.0, "sheen_tint": 0.0, "clearcoat": 0.0,
+                     "clearcoat_gloss": 0.0, "spec_tint": 0.0, "spec_trans": 0.0,
+                     "flatness": 0.0}
+
+
+class Materials:
+    """The material records of a scene: record(bsdf Plugin or None) gives an index."""
+
+    def __init__(self, reader, pool, notes):
+        self.reader, self.pool, self.notes = reader, pool, notes
+        self.records, self._index = [], {}
+        self.textured = False
+
+    def index(self, bsdf):
+        key = id(bsdf) if bsdf is not None else None
+        if key not in self._index:
+            record = {"kind": DIFFUSE, "albedo": (0.5, 0.5, 0.5), "name": "default"} \
+                if bsdf is None else self.record(bsdf)
+            self._index[key] = len(self.records)
+            self.records.append(record)
+        return self._index[key]
+
+    def emitter(self, radiance):
+        """The index of a new emission material of this radiance."""
+        from ..scene import EMISSION
+        self.records.append({"kind": EMISSION, "emission": tuple(radiance), "name": "emitter"})
+        return len(self.records) - 1
+
+    def note(self, plugin, text):
+        self.notes.append(f"<bsdf type=\"{plugin.type}\">: {text}")
+
+    def record(self, bsdf):
+        """The record of one <bsdf>."""
+        kind = bsdf.type
+        if kind in REFUSED:
+            bsdf.fail(f"{REFUSED[kind]} ({kind}) is not supported by ptrace: the image would be "
+                      f"wrong")
+        reader = getattr(self, "_" + kind, None)
+        if reader is None:
+            bsdf.fail(f"unknown or unsupported BSDF type {kind!r}")
+        record = reader(bsdf)
+        record.setdefault("name", bsdf.id or kind)
+        for name in bsdf.unread():
+            self.note(bsdf, f"parameter {name!r} ignored")
+        return record
+
+    def _nested(self, bsdf):
+        inner = [p for p in bsdf.children if p.tag == "bsdf"] + \
+            [v for v in bsdf.params.values() if isinstance(v, Plugin) and v.tag == "bsdf"]
+        if not inner:
+            bsdf.fail("has no nested <bsdf>")
+        return inner
+
+    def _twosided(self, bsdf):
+        inner = self._nested(bsdf)
+        if len(inner) > 1 and inner[0] is not inner[1]:
+            self.note(bsdf, "two different sides: ptrace's surfaces have one material, the "
+                            "front one is used on both")
+        bsdf._read.update(bsdf.params)
+        return dict(self.record(inner[0]))
+
+    def _mask(self, bsdf):
+        inner = self._nested(bsdf)
+        record = dict(self.record(inner[0]))
+        opacity = bsdf.colour("opacity", Colour((0.5,) * 3))
+        bsdf._read.update(k for k, v in bsdf.params.items() if isinstance(v, Plugin)
+                          and v.tag == "bsdf")
+        if isinstance(opacity, Plugin):
+            record.update(opacity=1.0, alpha_texture=self.texture(opacity, raw_default=False))
+        else:
+            record["opacity"] = float(np.mean(opacity))
+        record["cutoff"] = BLEND_CUT
+        return record
+
+    def _diffuse(self, bsdf):
+        record = {"kind": DIFFUSE}
+        self._albedo(bsdf, "reflectance", record, (0.5, 0.5, 0.5))
+        return record
+
+    def _albedo(self, bsdf, name, record, default):
+        value = bsdf.colour(name, Colour(default))
+        if isinstance(value, Plugin):
+            record.update(albedo=(1.0, 1.0, 1.0), albedo_texture=self.texture(value))
+        else:
+            record["albedo"] = self._bounded(bsdf, name, value)
+
+    def _bounded(self, bsdf, name, value, high=1.0):
+        if isinstance(value, Plugin):
+            bsdf.fail(f"a texture for {name!r} is not supported (only a colour)")
+        if min(value) < 0 or high is not None and max(value) > high:
+            bsdf.fail(f"{name} {' '.join(f'{v:g}' for v in value)} is out of range [0, {high}]")
+        return tuple(value)
+
+    def _ior(self, bsdf, name, default):
+        value = bsdf.get(name, default)
+        if isinstance(value, str):
+            if value.lower() not in IOR:
+                bsdf.fail(f"{name} {value!r} is not one of Mitsuba's named indices of "
+                          f"refraction ({', '.join(IOR)})")
+            return IOR[value.lower()]
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not value > 0:
+            bsdf.fail(f"{name} must be a positive number or a named index of refraction")
+        return float(value)
+
+    def _alpha(self, bsdf):
+        distribution = bsdf.string("distribution", "beckmann")
+        if distribution not in ("beckmann", "ggx"):
+            bsdf.fail(f"distribution {distribution!r} is neither beckmann nor ggx")
+        if distribution == "ggx":
+            self.note(bsdf, "GGX rendered as Beckmann of the same alpha (ptrace's microfacet "
+                            "distribution)")
+        bsdf.boolean("sample_visible", True)
+        if bsdf.has("alpha_u") or bsdf.has("alpha_v"):
+            au, av = bsdf.float("alpha_u", 0.1), bsdf.float("alpha_v", 0.1)
+            if au != av:
+                self.note(bsdf, "anisotropic roughness rendered isotropic (alpha "
+                                "sqrt(alpha_u alpha_v))")
+            alpha = math.sqrt(au * av)
+        else:
+            alpha = bsdf.float("alpha", 0.1)
+        if not alpha >= 0:
+            bsdf.fail(f"alpha {alpha:g} is negative")
+        return max(alpha, MIN_ALPHA)
+
+    def _conductor(self, bsdf, rough=False):
+        alpha = self._alpha(bsdf) if rough else MIN_ALPHA
+        reflectance = self._bounded(bsdf, "specular_reflectance",
+                                    bsdf.colour("specular_reflectance", Colour((1.0,) * 3)))
+        if bsdf.has("eta") or bsdf.has("k"):
+            eta = self._bounded(bsdf, "eta", bsdf.colour("eta", Colour((0.0,) * 3)), None)
+            k = self._bounded(bsdf, "k", bsdf.colour("k", Colour((1.0,) * 3)), None)
+        else:
+            name = bsdf.string("material", "none")
+            if name != "none" and name not in CONDUCTORS:
+                bsdf.fail(f"material {name!r} is not one of Mitsuba's named conductors")
+            if name == "none":      # Fresnel 1: the reflectance alone
+                if not rough:
+                    return {"kind": MIRROR, "albedo": reflectance}
+                eta, k = conductor_from_colour(reflectance)
+                return {"kind": MICROFACET, "alpha": alpha, "eta": tuple(eta), "k": tuple(k)}
+            eta, k = CONDUCTORS[name]
+        if not rough:
+            self.note(bsdf, f"a smooth conductor with Fresnel: Beckmann alpha {MIN_ALPHA} "
+                            f"(ptrace's mirror has no Fresnel)")
+        if reflectance != (1.0, 1.0, 1.0):
+            self.note(bsdf, "specular_reflectance with eta and k ignored (ptrace's microfacet "
+                            "has no reflectance factor)")
+        return {"kind": MICROFACET, "alpha": alpha, "eta": tuple(eta), "k": tuple(k)}
+
+    def _roughconductor(self, bsdf):
+        return self._conductor(bsdf, rough=True)
+
+    def _dielectric(self, bsdf, rough=False):
+        ior = self._ior(bsdf, "int_ior", "bk7") / self._ior(bsdf, "ext_ior", "air")
+        if rough:
+            alpha = self._alpha(bsdf)
+            if alpha > ROUGH_GLASS_LIMIT:
+                bsdf.fail(f"rough glass (alpha {alpha:g}) is not supported by ptrace (its glass "
+                          f"is smooth; up to alpha {ROUGH_GLASS_LIMIT} is drawn smooth)")
+            self.note(bsdf, f"rough glass of alpha up to {ROUGH_GLASS_LIMIT} drawn smooth")
+        self.note(bsdf, "Schlick's approximation of the dielectric Fresnel (Mitsuba: exact)")
+        return {"kind": GLASS, "ior": ior,
+                "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
+                    "specular_reflectance", Colour((1.0,) * 3))),
+                "transmittance": self._bounded(bsdf, "specular_transmittance", bsdf.colour(
+                    "specular_transmittance", Colour((1.0,) * 3)))}
+
+    def _roughdielectric(self, bsdf):
+        return self._dielectric(bsdf, rough=True)
+
+    def _thindielectric(self, bsdf):
+        ior = self._ior(bsdf, "int_ior", "bk7") / self._ior(bsdf, "ext_ior", "air")
+        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        reflect = 2.0 * r0 / (1.0 + r0)     # the slab's two faces, inter-reflected
+        tint = self._bounded(bsdf, "specular_transmittance",
+                             bsdf.colour("specular_transmittance", Colour((1.0,) * 3)))
+        if tint != (1.0, 1.0, 1.0):
+            bsdf.fail("a tinted thindielectric is not supported (ptrace passes rays through "
+                      "it unchanged)")
+        self.note(bsdf, "a mirror that rays pass through with the slab's transmittance at "
+                        "normal incidence (no change with angle)")
+        return {"kind": MIRROR, "cutoff": BLEND_CUT, "opacity": reflect,
+                "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
+                    "specular_reflectance", Colour((1.0,) * 3)))}
+
+    def _plastic(self, bsdf, rough=False):
+        ior = self._ior(bsdf, "int_ior", "polypropylene") / self._ior(bsdf, "ext_ior", "air")
+        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        specular = self._bounded(bsdf, "specular_reflectance",
+                                 bsdf.colour("specular_reflectance", Colour((1.0,) * 3)))
+        bsdf.boolean("nonlinear", False)
+        record = {"kind": GLOSSY, "alpha": self._alpha(bsdf) if rough else MIN_ALPHA,
+                  "specular": tuple(min(r0 * s, 1.0) for s in specular)}
+        self._albedo(bsdf, "diffuse_reflectance", record, (0.5, 0.5, 0.5))
+        self.note(bsdf, "ptrace's glossy model (Ashikhmin-Shirley's diffuse under a Beckmann "
+                        "coat) in place of Mitsuba's layered plastic")
+        return record
+
+    def _roughplastic(self, bsdf):
+        return self._plastic(bsdf, rough=True)
+
+    def _principled(self, bsdf):
+        roughness = bsdf.float("roughness", 0.5)
+        metallic = bsdf.float("metallic", 0.0)
+        for name, value in (("roughness", roughness), ("metallic", metallic)):
+            if not 0 <= value <= 1:
+                bsdf.fail(f"{name} {value:g} is out of range [0, 1]")
+        record = {"kind": GLTF_PBR, "metallic": metallic,
+                  "alpha": max(roughness * roughness, MIN_ALPHA ** 2)}
+        self._albedo(bsdf, "base_color", record, (0.5, 0.5, 0.5))
+        specular = bsdf.float("specular", 0.5)
+        if bsdf.has("eta"):
+            bsdf.float("eta")
+            self.note(bsdf, "eta ignored: glTF's dielectric reflects as ior 1.5 does")
+        if abs(specular - 0.5) > 1e-6:
+            self.note(bsdf, "specular other than 0.5 ignored: glTF's dielectric reflects 0.04")
+        extras = [name for name, default in PRINCIPLED_EXTRAS.items()
+                  if bsdf.float(name, default) != default]
+        if "spec_trans" in extras:
+            bsdf.fail("spec_trans (transmission) is not supported on a principled BSDF")
+        if extras:
+            self.note(bsdf, f"{', '.join(extras)} ignored (glTF's metallic-roughness BRDF "
+                            f"lacks them)")
+        return record
+
+    def texture(self, texture, raw_default=False):
+        """The pool index of a <texture type="bitmap">."""
+        if texture.type != "bitmap":
+            texture.fail(f"texture type {texture.type!r} is not supported (only bitmap)")
+        if texture.has("to_uv"):
+            texture.fail("to_uv (a transform of the texture coordinates) is not supported")
+        name = texture.string("filename")
+        if name is None:
+            texture.fail("has no filename")
+        path = self.reader.resolve(texture, name)
+        wrap = texture.string("wrap_mode", "repeat")
+        if wrap not in WRAP:
+            texture.fail(f"wrap_mode {wrap!r} is none of {', '.join(WRAP)}")
+        filtering = texture.string("filter_type", "bilinear")
+        if filtering not in ("bilinear", "nearest"):
+            texture.fail(f"filter_type {filtering!r} is neither bilinear nor nearest")
+        if filtering == "nearest":
+            self.notes.append(f"{texture.where}: filter_type nearest drawn bilinear")
+        raw = texture.boolean("raw", raw_default)
+        try:
+            pixels, encoded = read_image_file(path, f"the texture {name!r}", texture.path)
+            index = self.pool.add(pixels, srgb=not raw, wrap=(WRAP[wrap],) * 2, name=name,
+                                  key=(path, raw), encoded=encoded)
+        except (BudgetError, SceneError):
+            raise
+        except Exception as error:      # noqa: BLE001 - OpenImageIO's many failures
+            texture.fail(f"cannot read the image {name!r}: {str(error)[:120]}")
+        for unread in texture.unread():
+            self.notes.append(f"{texture.where}: parameter {unread!r} ignored")
+        self.textured = True
+        return index

@@ -1,0 +1,138 @@
+"""Mitsuba shapes as world-space triangles (or an analytic sphere): obj and ply through
+ptrace's own readers, rectangle, cube and disk built here, each placed by its to_world.
+
+A shape is (vertices (V, 3), faces (F, 3), uv (F, 3, 2) or None) in world space, faces wound
+so that the right-hand normal is Mitsuba's (flip_normals reverses them); uv is in ptrace's
+convention (v up: v = 1 - Mitsuba's v, whose v runs down the image). face_normals gives each
+triangle its own corners, so ptrace's smooth normals come out flat.
+"""
+import math
+
+import numpy as np
+
+from ..errors import SceneError
+from . import obj
+from .meshes import _drop_non_finite, _read_with_trimesh
+
+DISK_SIDES = 128
+BACKING = 1e-4     # how far behind an emitter its back lies, as a fraction of its size
+
+_SQUARE = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+_SQUARE_UV = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+_QUADS = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def rectangle():
+    """Mitsuba's rectangle: [-1, 1]^2 in the z = 0 plane, normal +z; its (u, v) run with x and y."""
+    uv = _SQUARE_UV[_QUADS]
+    return _SQUARE.copy(), _QUADS.copy(), uv
+
+
+def cube():
+    """Mitsuba's cube: [-1, 1]^3, 24 vertices (flat faces), normals outward."""
+    vertices, faces, uvs = [], [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            square = _SQUARE.copy()
+            if sign < 0:            # keep the right-hand normal outward
+                square[:, 0] *= -1
+            face = np.roll(square, axis + 1, axis=1)    # z -> the face's axis
+            face[:, axis] = sign
+            faces.append(_QUADS + len(vertices) * 4)
+            vertices.append(face)
+            uvs.append(_SQUARE_UV[_QUADS])
+    return np.concatenate(vertices), np.concatenate(faces), np.concatenate(uvs)
+
+
+def disk():
+    """Mitsuba's disk (radius 1 about the origin in z = 0, normal +z) as a polygon of
+    DISK_SIDES sides of the disk's area; (u, v) = (radius, angle / 2 pi) as Mitsuba's."""
+    step = 2 * math.pi / DISK_SIDES
+    radius = math.sqrt(step / math.sin(step))       # the polygon's area is pi
+    angles = np.arange(DISK_SIDES + 1) * step
+    rim = np.stack([radius * np.cos(angles), radius * np.sin(angles), 0 * angles], axis=1)
+    vertices = np.concatenate([[[0.0, 0.0, 0.0]], rim[:-1]])
+    i = np.arange(DISK_SIDES)
+    faces = np.stack([np.zeros(DISK_SIDES, np.int64), 1 + i, 1 + (i + 1) % DISK_SIDES], axis=1)
+    share = angles / (2 * math.pi)
+    uv = np.stack([np.stack([np.zeros(DISK_SIDES), 0.5 * (share[:-1] + share[1:])], axis=1),
+                   np.stack([np.ones(DISK_SIDES), share[:-1]], axis=1),
+                   np.stack([np.ones(DISK_SIDES), share[1:]], axis=1)], axis=1)
+    return vertices, faces, uv
+
+
+def mesh_file(shape, path, notes):
+    """(vertices, faces, uv or None) of an obj or ply file, uv as Mitsuba reads it (its v
+    runs down the image)."""
+    if shape.type == "obj":
+        parts = obj.read_obj(path)
+    else:
+        parts = _read_with_trimesh(path, ".ply")
+    parts = _drop_non_finite(path, parts)
+    if len(parts["faces"]) == 0:
+        raise SceneError(path, "the file contains no triangles")
+    kept = [n for n in parts["notes"] if "material" not in n.lower() and "mtl" not in n.lower()]
+    notes.extend(f"{shape.where}: {n}" for n in kept)
+    uv = parts["uv"]
+    if uv is not None:
+        uv = np.array(uv, dtype=np.float64)
+        # ptrace's readers give the file's v; Mitsuba flips an OBJ's (flip_tex_coords)
+        if shape.type == "obj" and shape.boolean("flip_tex_coords", True):
+            uv[..., 1] = 1.0 - uv[..., 1]
+    return np.asarray(parts["vertices"], np.float64), np.asarray(parts["faces"], np.int64), uv
+
+
+def placed(shape, vertices, faces, uv):
+    """The triangles placed by the shape's to_world, with flip_normals and face_normals; uv
+    (Mitsuba's) turned to ptrace's."""
+    transform = shape.transform("to_world")
+    vertices = transform.apply(vertices)
+    if not np.isfinite(vertices).all():
+        shape.fail("to_world places vertices at infinity")
+    faces = np.array(faces, dtype=np.int64)
+    if uv is not None:
+        uv = np.array(uv, dtype=np.float64)
+        uv[..., 1] = 1.0 - uv[..., 1]
+    if np.linalg.det(transform.matrix[:3, :3]) < 0:     # a mirror turns the winding
+        faces = faces[:, [0, 2, 1]]
+        uv = None if uv is None else uv[:, [0, 2, 1]]
+    if shape.boolean("flip_normals", False):
+        faces = faces[:, [0, 2, 1]]
+        uv = None if uv is None else uv[:, [0, 2, 1]]
+    if shape.boolean("face_normals", False):
+        vertices = vertices[faces].reshape(-1, 3)
+        faces = np.arange(len(faces) * 3, dtype=np.int64).reshape(-1, 3)
+    return vertices, faces, uv
+
+
+def sphere(shape):
+    """(centre, radius) in world space of a <shape type="sphere">; a to_world that does not
+    scale uniformly is refused (ptrace's spheres are round)."""
+    transform = shape.transform("to_world")
+    centre = shape.point("center", np.zeros(3))
+    radius = shape.float("radius", 1.0)
+    if not radius > 0:
+        shape.fail(f"radius {radius:g} must be positive")
+    linear = transform.matrix[:3, :3]
+    gram = linear.T @ linear
+    scale = math.sqrt(float(np.trace(gram)) / 3)
+    if not np.allclose(gram, scale * scale * np.eye(3), rtol=0, atol=1e-6 * scale * scale):
+        shape.fail("to_world scales the sphere unevenly (an ellipsoid); ptrace's spheres are "
+                   "round")
+    shape.boolean("flip_normals", False)
+    return transform.apply(centre)[0], radius * scale
+
+
+def backing(vertices, faces, uv):
+    """The back of a one-sided emitter: each triangle, unshared, moved BACKING of the shape's
+    size behind its front (along its own normal) and wound the other way, so that ptrace's
+    two-sided emission reaches only the front and the back reflects."""
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.divide(normals, lengths, out=np.zeros_like(normals), where=lengths > 0)
+    size = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    corners = corners - BACKING * size * normals[:, None, :]
+    behind = corners[:, [0, 2, 1]].reshape(-1, 3)
+    return behind, np.arange(len(behind), dtype=np.int64).reshape(-1, 3), \
+        None if uv is None else uv[:, [0, 2, 1]]

@@ -1,0 +1,500 @@
+"""Mitsuba's XML scene format, parsed into a tree of plugins (Plugin) with typed parameters.
+
+What this module promises: the file and every file it includes are read with a hardened XML
+parser (defusedxml: no entity declarations, no DTDs, no external references); `$name` in an
+attribute is replaced by its value from `-D name=value` (the `defines`) or the file's own
+`<default name=.. value=..>`; `<include>` and `<path>` read only inside the scene's folder;
+`<ref>` finds an `id` anywhere in the scene; every value element (`<float>`, `<integer>`,
+`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` of a constant, `<point>`, `<vector>`,
+`<transform>`) becomes a checked Python value. Files of version 0.4 to 0.6 are upgraded as
+Mitsuba 3 upgrades them: camelCase parameter names become snake_case, `<lookAt>` becomes
+`<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one SceneError naming
+the file and the element.
+"""
+import math
+import os
+import re
+
+import defusedxml
+import defusedxml.ElementTree as safe_xml
+import numpy as np
+
+from ..errors import SceneError
+from .files import require_regular_file
+
+OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler", "integrator",
+               "texture", "medium", "phase", "rfilter", "volume", "spectrum_plugin")
+VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector",
+              "transform", "srgb")
+TRANSFORM_TAGS = ("translate", "rotate", "scale", "matrix", "lookat")
+MAX_INCLUDE_DEPTH = 32
+MAX_NESTING = 64
+NAME = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
+
+
+class Transform:
+    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates."""
+
+    def __init__(self, matrix):
+        self.matrix = np.asarray(matrix, dtype=np.float64)
+
+    def apply(self, points):
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return points @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+
+    def vectors(self, vectors):
+        return np.asarray(vectors, dtype=np.float64).reshape(-1, 3) @ self.matrix[:3, :3].T
+
+    def normals(self, normals):
+        inverse = np.linalg.inv(self.matrix[:3, :3])
+        out = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ inverse
+        return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+class Colour(tuple):
+    """An RGB triple (linear) from <rgb>, <spectrum> or <srgb>."""
+
+
+class Plugin:
+    """One object of the scene: <shape type="obj" id=...>, its parameters by name (values, or
+    Plugins for named nested objects and references), its unnamed nested Plugins in file order
+    (children), the file it was read from, and how to name it in a message (where). A builder
+    takes each parameter it reads with the typed getters; unread() lists those it never took."""
+
+    def __init__(self, tag, kind, ident, path, where):
+        self.tag, self.type, self.id, self.path, self.where = tag, kind, ident, path, where
+        self.params, self.children, self._read = {}, [], set()
+
+    def fail(self, message):
+        raise SceneError(self.path, f"{self.where}: {message}")
+
+    def has(self, name):
+        return name in self.params
+
+    def get(self, name, default=None):
+        self._read.add(name)
+        return self.params.get(name, default)
+
+    def _typed(self, name, default, types, what):
+        value = self.get(name, None)
+        if value is None:
+            return default
+        if not isinstance(value, types) or isinstance(value, bool) and bool not in types:
+            self.fail(f"parameter {name!r} must be {what}, not {_kind_of(value)}")
+        return value
+
+    def float(self, name, default=None):
+        value = self._typed(name, default, (float, int), "a number (<float>)")
+        return None if value is None else float(value)
+
+    def integer(self, name, default=None):
+        return self._typed(name, default, (int,), "a whole number (<integer>)")
+
+    def boolean(self, name, default=False):
+        return self._typed(name, default, (bool,), "<boolean>")
+
+    def string(self, name, default=None):
+        return self._typed(name, default, (str,), "<string>")
+
+    def transform(self, name="to_world"):
+        value = self._typed(name, None, (Transform,), "a <transform>")
+        return Transform(np.eye(4)) if value is None else value
+
+    def point(self, name, default=None):
+        value = self._typed(name, default, (np.ndarray,), "a <point> or <vector>")
+        return None if value is None else np.asarray(value, dtype=np.float64)
+
+    def colour(self, name, default=None):
+        """An RGB colour (a <rgb>, constant <spectrum> or <float>), or a texture Plugin."""
+        value = self._typed(name, default, (Colour, float, int, Plugin),
+                            "a colour (<rgb>, <spectrum>, <float>) or a <texture>")
+        if isinstance(value, (float, int)):
+            return Colour((float(value),) * 3)
+        if isinstance(value, Plugin) and value.tag != "texture":
+            self.fail(f"parameter {name!r} is a <{value.tag}>, not a colour or a <texture>")
+        return value
+
+    def unread(self):
+        return sorted(set(self.params) - self._read)
+
+
+def _kind_of(value):
+    for types, what in ((bool, "a <boolean>"), (int, "an <integer>"), (float, "a <float>"),
+                        (str, "a <string>"), (Colour, "a colour"), (Transform, "a <transform>"),
+                        (np.ndarray, "a <point>")):
+        if isinstance(value, types):
+            return what
+    return f"a <{value.tag}>" if isinstance(value, Plugin) else type(value).__name__
+
+
+def describe(element):
+    """'<shape type="obj" id="wall">': an element and its naming attributes."""
+    words = [element.tag] + [f'{key}="{element.get(key)[:60]}"' for key in
+                             ("type", "id", "name", "filename") if element.get(key) is not None]
+    return "<" + " ".join(words) + ">"
+
+
+def camel_to_snake(name):
+    """Mitsuba 3's rule: '_' before an upper-case letter that follows a lower-case one, then
+    lower case (intIOR -> int_ior, toWorld -> to_world)."""
+    return re.sub(r"(?<=[a-z])(?=[A-Z])", "_", name).lower()
+
+
+class Reader:
+    """Reads a scene file and its includes into a Plugin tree: read()."""
+
+    def __init__(self, path, defines=None):
+        self.path = str(path)
+        self.folder = os.path.dirname(os.path.realpath(self.path))
+        self.search = [self.folder]
+        self.params = {str(k): str(v) for k, v in (defines or {}).items()}
+        self.ids, self.refs, self.including = {}, [], []
+        self.upgrade = False
+        self.version = None
+
+    # --- files ----------------------------------------------------------------------------
+
+    def read(self):
+        """The <scene> Plugin of the file, its references resolved."""
+        root = self._parse_file(self.path, None)
+        self.version = self._version(root)
+        scene = Plugin("scene", "scene", None, self.path, "<scene>")
+        self._children(root, scene, self.path, 0)
+        for holder, name, element, ident, path in self.refs:
+            if ident not in self.ids:
+                raise SceneError(path, f"{describe(element)}: no object has id {ident!r}")
+            if name is None:
+                holder.children.append(self.ids[ident])
+            else:
+                holder.params[name] = self.ids[ident]
+        return scene
+
+    def _parse_file(self, path, element):
+        real = os.path.realpath(path)
+        if real in self.including:
+            chain = " -> ".join(os.path.basename(p) for p in self.including + [real])
+            raise SceneError(path, f"{describe(element)}: includes itself ({chain})")
+        if len(self.including) >= MAX_INCLUDE_DEPTH:
+            raise SceneError(path, f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+        require_regular_file(path)
+        try:
+            with open(path, "rb") as stream:
+                data = stream.read()
+        except OSError as error:
+            raise SceneError(path, f"cannot read the file: {error.strerror or error}") from None
+        try:
+            root = safe_xml.fromstring(data)
+        except defusedxml.DefusedXmlException as error:
+            raise SceneError(path, f"refused unsafe XML ({type(error).__name__}: entity "
+                                   f"declarations, DTDs and external references are not "
+                                   f"allowed)") from None
+        except safe_xml.ParseError as error:
+            raise SceneError(path, f"not well-formed XML: {error}") from None
+        except (LookupError, ValueError, UnicodeError) as error:
+            raise SceneError(path, f"not readable as XML: {error}") from None
+        if root.tag != "scene":
+            raise SceneError(path, f"not a Mitsuba scene: the root element is <{root.tag}>, "
+                                   f"not <scene>")
+        return root
+
+    def _version(self, root):
+        text = root.get("version")
+        if text is None:
+            raise SceneError(self.path, "<scene> has no version attribute (Mitsuba requires "
+                                        "one, e.g. version=\"3.0.0\")")
+        numbers = re.fullmatch(r"\s*(\d+)\.(\d+)(?:\.(\d+))?\s*", text)
+        major, minor = (int(numbers[1]), int(numbers[2])) if numbers else (None, None)
+        if major in (2, 3):
+            return text
+        if major == 0 and 4 <= minor <= 6:
+            self.upgrade = True
+            return text
+        raise SceneError(self.path, f'<scene version="{text[:20]}">: ptrace reads Mitsuba '
+                                    f"scenes of versions 0.4 to 0.6 (upgraded) and 2.x to 3.x")
+
+    def resolve(self, plugin, name):
+        """The real path of the file `name` that a Plugin names, inside the scene's folder."""
+        return self._resolve(plugin.where, plugin.path, name)
+
+    def _resolve(self, where, path, name):
+        """The real path of a file named in `path` at `where`, inside the scene's folder (as
+        named, from the naming file's folder or a <path> folder)."""
+        if not name or "\x00" in name:
+            raise SceneError(path, f"{where}: an empty or invalid file name")
+        name = name.replace("\\", "/")
+        for folder in ([os.path.dirname(os.path.realpath(path))] + self.search):
+            candidate = os.path.realpath(os.path.join(folder, name))
+            if os.path.commonpath([self.folder, candidate]) != self.folder:
+                continue
+            if os.path.exists(candidate):
+                return candidate
+        candidate = os.path.realpath(os.path.join(self.folder, name))
+        if os.path.commonpath([self.folder, candidate]) != self.folder:
+            raise SceneError(path, f"{where}: {name!r} is outside the scene's folder; ptrace "
+                                   f"reads only files inside it")
+        raise SceneError(path, f"{where}: file {name!r} not found")
+
+    # --- elements -------------------------------------------------------------------------
+
+    def attribute(self, element, key, path, default=None):
+        """An attribute with every $name replaced; an unknown name is an error."""
+        text = element.get(key)
+        if text is None:
+            return default
+
+        def value(match):
+            name = match.group(1)
+            if name not in self.params:
+                raise SceneError(path, f"{describe(element)}: ${name} has no value (no "
+                                       f'<default name="{name}"> before it and no -D '
+                                       f"{name}=...)")
+            return self.params[name]
+        return NAME.sub(value, text)
+
+    def _required(self, element, key, path):
+        value = self.attribute(element, key, path)
+        if value is None:
+            raise SceneError(path, f"{describe(element)} has no {key} attribute")
+        return value
+
+    def _children(self, element, holder, path, depth):
+        if depth > MAX_NESTING:
+            raise SceneError(path, f"{describe(element)}: nested more than {MAX_NESTING} deep")
+        for child in element:
+            if not isinstance(child.tag, str):      # comments, processing instructions
+                continue
+            tag = child.tag
+            if self.upgrade and tag == "lookAt":
+                tag = child.tag = "lookat"
+            if tag == "default":
+                name = self._required(child, "name", path)
+                self.params.setdefault(name, self._required(child, "value", path))
+            elif tag == "include":
+                self._include(child, holder, path, depth)
+            elif tag == "path":
+                self.search.append(self._resolve(describe(child), path,
+                                                 self._required(child, "value", path)))
+            elif tag == "alias":
+                ident = self._required(child, "id", path)
+                if ident not in self.ids:
+                    raise SceneError(path, f"{describe(child)}: no object has id {ident!r}")
+                self.ids[self._required(child, "as", path)] = self.ids[ident]
+            elif tag == "ref":
+                ident = self._required(child, "id", path)
+                self.refs.append((holder, self._name(child, path), child, ident, path))
+            elif tag in VALUE_TAGS:
+                name = self._name(child, path)
+                if name is None:
+                    raise SceneError(path, f"{describe(child)} has no name attribute")
+                holder.params[name] = self._value(child, tag, path, depth)
+            elif tag in OBJECT_TAGS and tag != "scene":
+                self._object(child, holder, path, depth)
+            else:
+                raise SceneError(path, f"{describe(child)}: unknown element <{tag}> in "
+                                       f"{holder.where}")
+
+    def _name(self, element, path):
+        name = self.attribute(element, "name", path)
+        return camel_to_snake(name) if (self.upgrade and name is not None) else name
+
+    def _include(self, element, holder, path, depth):
+        target = self._resolve(describe(element), path,
+                               self._required(element, "filename", path))
+        root = None
+        self.including.append(os.path.realpath(path))
+        try:
+            root = self._parse_file(target, element)
+            self._children(root, holder, target, depth + 1)
+        finally:
+            self.including.pop()
+
+    def _object(self, element, holder, path, depth):
+        kind = self._required(element, "type", path)
+        ident = self.attribute(element, "id", path)
+        plugin = Plugin(element.tag, kind, ident, path, describe(element))
+        self._children(element, plugin, path, depth + 1)
+        if ident is not None:
+            if ident in self.ids:
+                raise SceneError(path, f"{describe(element)}: the id {ident!r} is given twice")
+            self.ids[ident] = plugin
+        name = self._name(element, path)
+        if name is None:
+            holder.children.append(plugin)
+        else:
+            holder.params[name] = plugin
+
+    # --- values ---------------------------------------------------------------------------
+
+    def numbers(self, element, path, text, what="value"):
+        words = [w for w in re.split(r"[,\s]+", text.strip()) if w]
+        try:
+            values = np.array([float(w) for w in words], dtype=np.float64)
+        except ValueError:
+            bad = next(w for w in words if not _is_float(w))
+            raise SceneError(path, f"{describe(element)}: {bad[:40]!r} in its {what} is not a "
+                                   f"number") from None
+        if not np.isfinite(values).all():
+            raise SceneError(path, f"{describe(element)}: its {what} is NaN or infinite")
+        return values
+
+    def _value(self, element, tag, path, depth):
+        attr = lambda key, default=None: self.attribute(element, key, path, default)
+        if tag == "transform":
+            return self._transform(element, path)
+        if tag == "string":
+            return self._required(element, "value", path)
+        text = self._required(element, "value", path) if tag not in ("point", "vector") \
+            else attr("value")
+        if tag == "boolean":
+            word = text.strip().lower()
+            if word not in ("true", "false"):
+                raise SceneError(path, f"{describe(element)}: {text[:40]!r} is neither true "
+                                       f"nor false")
+            return word == "true"
+        if tag == "integer":
+            try:
+                return int(text.strip())
+            except ValueError:
+                raise SceneError(path, f"{describe(element)}: {text[:40]!r} is not a whole "
+                                       f"number") from None
+        if tag in ("point", "vector"):
+            if text is not None:
+                values = self.numbers(element, path, text)
+            else:
+                values = np.array([float(self.numbers(element, path, attr(k, "0"), k)[0])
+                                   for k in "xyz"])
+            if values.size != 3:
+                raise SceneError(path, f"{describe(element)}: needs 3 numbers, has "
+                                       f"{values.size}")
+            return values
+        if tag == "spectrum" and ":" in text:
+            raise SceneError(path, f"{describe(element)}: a spectrum of wavelength:value pairs "
+                                   f"is not supported yet (give an <rgb>)")
+        if tag == "rgb" and text.strip().startswith("#"):
+            raise SceneError(path, f"{describe(element)}: hexadecimal colours are not "
+                                   f"supported (give three numbers)")
+        values = self.numbers(element, path, text)
+        if tag == "float":
+            if values.size != 1:
+                raise SceneError(path, f"{describe(element)}: needs one number, has "
+                                       f"{values.size}")
+            return float(values[0])
+        if values.size not in (1, 3) or tag == "spectrum" and values.size != 1:
+            raise SceneError(path, f"{describe(element)}: needs one number or three, has "
+                                   f"{values.size}")
+        values = np.resize(values, 3)
+        if tag == "srgb":   # 0.x files: an sRGB-encoded colour
+            values = np.where(values <= 0.04045, values / 12.92,
+                              ((values + 0.055) / 1.055) ** 2.4)
+        return Colour(float(v) for v in values)
+
+    def _transform(self, element, path):
+        matrix = np.eye(4)
+        for step in element:
+            if not isinstance(step.tag, str):
+                continue
+            tag = "lookat" if self.upgrade and step.tag == "lookAt" else step.tag
+            if tag not in TRANSFORM_TAGS:
+                raise SceneError(path, f"{describe(step)}: unknown transform <{tag}> in "
+                                       f"{describe(element)} (known: "
+                                       f"{', '.join(TRANSFORM_TAGS)})")
+            matrix = self._step(step, tag, path) @ matrix
+        if not np.isfinite(matrix).all():
+            raise SceneError(path, f"{describe(element)}: the matrix overflows to infinity")
+        linear = matrix[:3, :3]
+        size = float(np.abs(linear).max())
+        if not size > 0 or abs(np.linalg.det(linear / size)) < 1e-12 or \
+                np.any(matrix[3] != (0, 0, 0, 1)) and abs(np.linalg.det(matrix)) < 1e-300:
+            raise SceneError(path, f"{describe(element)}: the transform is not invertible "
+                                   f"(it flattens space: determinant 0)")
+        return Transform(matrix)
+
+    def _vector3(self, step, path, default):
+        text = self.attribute(step, "value", path)
+        if text is not None:
+            values = self.numbers(step, path, text)
+            if values.size == 1 and step.tag == "scale":
+                return np.repeat(values, 3)
+            if values.size != 3:
+                raise SceneError(path, f"{describe(step)}: value needs 3 numbers, has "
+                                       f"{values.size}")
+            return values
+        return np.array([float(self.numbers(step, path, self.attribute(step, k, path,
+                                                                       str(default)), k)[0])
+                         for k in "xyz"])
+
+    def _step(self, step, tag, path):
+        out = np.eye(4)
+        if tag == "translate":
+            out[:3, 3] = self._vector3(step, path, 0.0)
+        elif tag == "scale":
+            out[:3, :3] = np.diag(self._vector3(step, path, 1.0))
+        elif tag == "rotate":
+            axis = self._vector3(step, path, 0.0)
+            angle = self.numbers(step, path, self._required(step, "angle", path), "angle")
+            length = float(np.linalg.norm(axis))
+            if not length > 0 or angle.size != 1:
+                raise SceneError(path, f"{describe(step)}: needs a non-zero axis and one angle")
+            out[:3, :3] = rotation(axis / length, math.radians(float(angle[0])))
+        elif tag == "matrix":
+            values = self.numbers(step, path, self._required(step, "value", path))
+            if values.size == 16:
+                out = values.reshape(4, 4)
+            elif values.size == 9:
+                out[:3, :3] = values.reshape(3, 3)
+            else:
+                raise SceneError(path, f"{describe(step)}: needs 16 (or 9) numbers, has "
+                                       f"{values.size}")
+        else:
+            out = self._lookat(step, path)
+        return out
+
+    def _lookat(self, step, path):
+        points = {}
+        for key in ("origin", "target", "up"):
+            text = self.attribute(step, key, path)
+            if text is None and key != "up":
+                raise SceneError(path, f"{describe(step)} has no {key} attribute")
+            if text is not None:
+                points[key] = self.numbers(step, path, text, key)
+                if points[key].size != 3:
+                    raise SceneError(path, f"{describe(step)}: {key} needs 3 numbers")
+        return lookat(points["origin"], points["target"], points.get("up"),
+                      lambda message: SceneError(path, f"{describe(step)}: {message}"))
+
+
+def rotation(axis, angle):
+    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis."""
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array([[t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+                     [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+                     [t * x * z - s * y, t * y * z + s * x, t * z * z + c]])
+
+
+def lookat(origin, target, up, error):
+    """Mitsuba's look-at matrix: columns left, up, forward (target - origin) and origin. No up:
+    one at right angles to the view, as Mitsuba picks it."""
+    forward = np.asarray(target, float) - np.asarray(origin, float)
+    if not np.linalg.norm(forward) > 0:
+        raise error("origin and target are the same point: no direction to look in")
+    forward = forward / np.linalg.norm(forward)
+    if up is None:
+        up = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    left = np.cross(up, forward)
+    if not np.linalg.norm(left) > 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
+        raise error("up is zero or parallel to the view direction")
+    left = left / np.linalg.norm(left)
+    out = np.eye(4)
+    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = left, np.cross(forward, left), forward, \
+        origin
+    return out
+
+
+def _is_float(word):
+    try:
+        float(word)
+        return True
+    except ValueError:
+        return False
