@@ -83,6 +83,16 @@ def positive_float(name):
     return parse
 
 
+def define(text):
+    """-D's NAME=VALUE: a Mitsuba scene's $NAME and its value, as (name, value)."""
+    import re
+    name, equals, value = text.partition("=")
+    if not equals or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
+        raise argparse.ArgumentTypeError(f"-D must be NAME=VALUE with NAME a name of letters, "
+                                         f"digits and _, got {text!r}")
+    return name, value
+
+
 def size(text):
     """A memory size such as 4G or 512M, in bytes (ptrace.budget.parse_size)."""
     from ..budget import parse_size
@@ -199,6 +209,10 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
              "textures, environment map and image buffers are estimated to need more is "
              "refused before they are allocated (default: half the machine's memory, or 3/4 of "
              "what a ulimit -v leaves)")
+    add("-D", dest="defines", action="append", type=define, default=None,
+        metavar="NAME=VALUE",
+        help="a Mitsuba scene's $NAME is VALUE, ahead of the file's <default> (as mitsuba's "
+             "-D); may be given more than once")
     add("--info", action="store_true", help="print a JSON summary of the scene and exit")
     add("-q", "--quiet", action="store_true",
         help="no progress bar, compile notice or notes of what the loader ignored or assumed")
@@ -296,7 +310,8 @@ def scene_and_camera(args, budget):
     from .. import load
     from .cli_camera import camera_from_flags, check_pointing
     check_pointing(args)
-    scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget)
+    scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget,
+                 defines=dict(getattr(args, "defines", None) or ()))
     if args.environment is not None:
         from ..environment import load_environment
         scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
