@@ -1,0 +1,385 @@
+"""Mitsuba XML scenes (ptrace.io.mitsuba): parsing, shapes, materials, emitters, the sensor,
+every refusal as one line and exit 2, and a render whose mean agrees with Mitsuba 3's own
+render of the same file. Every scene is written here, into tmp_path."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+import ptrace
+from ptrace.app.cli import main
+from ptrace.image import read_image
+from ptrace.io.mitsuba_materials import CONDUCTORS, IOR
+from ptrace.io.mitsuba_xml import Reader
+from ptrace.scene import (
+    BLEND_CUT,
+    DIFFUSE,
+    DIRECTIONAL,
+    EMISSION,
+    GLASS,
+    GLOSSY,
+    GLTF_PBR,
+    MICROFACET,
+    MIRROR,
+    POINT,
+    SPOT,
+)
+
+
+def write(tmp_path, body, name="scene.xml", version="3.0.0"):
+    path = tmp_path / name
+    path.write_text(f'<scene version="{version}">\n{body}\n</scene>\n', encoding="utf-8")
+    return path
+
+
+def to_world(tmp_path, steps):
+    """The to_world matrix the reader parses from these transform steps."""
+    path = write(tmp_path, f'<shape type="rectangle"><transform name="to_world">{steps}'
+                           f'</transform></shape>')
+    return Reader(path).read().children[0].params["to_world"].matrix
+
+
+# --- parsing --------------------------------------------------------------------------------
+
+def test_transform_steps_compose_left_to_right(tmp_path):
+    # scale 2, then a quarter turn about +z, then a translation: T R S
+    m = to_world(tmp_path, '<scale value="2"/><rotate z="1" angle="90"/>'
+                           '<translate x="1" y="2" z="3"/>')
+    expected = np.array([[0, -2, 0, 1], [2, 0, 0, 2], [0, 0, 2, 3], [0, 0, 0, 1]], float)
+    np.testing.assert_allclose(m, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("steps, linear, offset", [
+    ('<scale x="2" y="3"/>', np.diag([2.0, 3.0, 1.0]), (0, 0, 0)),
+    ('<scale value="1, 2 3"/>', np.diag([1.0, 2.0, 3.0]), (0, 0, 0)),
+    ('<translate value="4 5 6"/>', np.eye(3), (4, 5, 6)),
+    ('<rotate value="0 1 0" angle="180"/>', np.diag([-1.0, 1.0, -1.0]), (0, 0, 0)),
+    ('<rotate x="1" angle="90"/>', np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float),
+     (0, 0, 0)),
+    ('<matrix value="0 0 1 5  0 1 0 6  -1 0 0 7  0 0 0 1"/>',
+     np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], float), (5, 6, 7)),
+    # Mitsuba's look-at: columns left, up, forward and the origin
+    ('<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>',
+     np.array([[-1, 0, 0], [0, 1, 0], [0, 0, -1]], float), (0, 0, 5)),
+])
+def test_each_transform_step(tmp_path, steps, linear, offset):
+    m = to_world(tmp_path, steps)
+    np.testing.assert_allclose(m[:3, :3], linear, atol=1e-12)
+    np.testing.assert_allclose(m[:3, 3], offset, atol=1e-12)
+
+
+def test_defaults_and_defines(tmp_path):
+    path = write(tmp_path, '<default name="r" value="0.25"/><default name="kind" value="sphere"/>'
+                           '<shape type="$kind"><float name="radius" value="$r"/></shape>')
+    assert ptrace.load(path).geometry.radii.tolist() == [0.25]
+    assert ptrace.load(path, defines={"r": "2"}).geometry.radii.tolist() == [2.0]
+
+
+def test_values_and_references(tmp_path):
+    path = write(tmp_path, '<bsdf type="diffuse" id="grey"><rgb name="reflectance" value="0.3"/>'
+                           '</bsdf><bsdf type="diffuse" id="red"><spectrum name="reflectance" '
+                           'value="0.6"/></bsdf>'
+                           '<shape type="rectangle"><ref id="grey"/></shape>'
+                           '<shape type="cube"><ref id="red" name="bsdf"/></shape>')
+    scene = ptrace.load(path)
+    albedo = scene.materials.albedo[scene.material_index]
+    np.testing.assert_allclose(albedo[0], [0.3] * 3)
+    np.testing.assert_allclose(albedo[-1], [0.6] * 3)
+
+
+def test_include_reads_the_included_scene(tmp_path):
+    (tmp_path / "parts").mkdir()
+    write(tmp_path / "parts", '<shape type="sphere"><float name="radius" value="3"/></shape>',
+          name="ball.xml")
+    path = write(tmp_path, '<include filename="parts/ball.xml"/>')
+    assert ptrace.load(path).geometry.radii.tolist() == [3.0]
+
+
+def test_version_0_6_is_upgraded(tmp_path):
+    path = write(tmp_path, '<sensor type="perspective"><float name="fov" value="30"/>'
+                           '<string name="fovAxis" value="y"/><transform name="toWorld">'
+                           '<lookAt origin="0 0 4" target="0 0 0" up="0 1 0"/></transform>'
+                           '</sensor><shape type="sphere"><bsdf type="dielectric">'
+                           '<string name="intIOR" value="diamond"/></bsdf></shape>',
+                 version="0.6.0")
+    scene = ptrace.load(path)
+    camera = scene.file_cameras[0]
+    assert camera.yfov == pytest.approx(30.0)
+    np.testing.assert_allclose(camera.position, [0, 0, 4])
+    assert scene.materials.ior[0] == pytest.approx(IOR["diamond"] / IOR["air"])
+    assert any("upgraded" in note for note in scene.notes)
+
+
+# --- shapes ---------------------------------------------------------------------------------
+
+def test_rectangle_vertices_and_normal(tmp_path):
+    path = write(tmp_path, '<shape type="rectangle"><transform name="to_world">'
+                           '<scale value="2"/><rotate x="1" angle="-90"/><translate y="-1"/>'
+                           '</transform></shape>')
+    scene = ptrace.load(path)
+    vertices = scene.geometry.vertices
+    corners = {tuple(np.round(v, 9) + 0.0) for v in vertices}
+    assert corners == {(-2.0, -1.0, 2.0), (2.0, -1.0, 2.0), (2.0, -1.0, -2.0),
+                       (-2.0, -1.0, -2.0)}
+    for a, b, c in scene.geometry.faces:    # +z turned by -90 degrees about x is +y
+        normal = np.cross(vertices[b] - vertices[a], vertices[c] - vertices[a])
+        np.testing.assert_allclose(normal / np.linalg.norm(normal), [0, 1, 0], atol=1e-12)
+
+
+def test_cube_faces_out_and_flip_normals_turns_them_in(tmp_path):
+    for flip, sign in (("false", 1), ("true", -1)):
+        path = write(tmp_path, f'<shape type="cube"><boolean name="flip_normals" '
+                               f'value="{flip}"/></shape>')
+        geometry = ptrace.load(path).geometry
+        corners = geometry.vertices[geometry.faces]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        assert len(corners) == 12
+        assert (sign * np.einsum("ij,ij->i", normals, corners.mean(axis=1)) > 0).all()
+
+
+def test_disk_keeps_its_area_and_sphere_its_placement(tmp_path):
+    path = write(tmp_path, '<shape type="disk"><transform name="to_world"><scale value="0.5"/>'
+                           '</transform></shape><shape type="sphere"><point name="center" '
+                           'x="1" y="0" z="0"/><transform name="to_world"><scale value="3"/>'
+                           '<translate z="1"/></transform></shape>')
+    geometry = ptrace.load(path).geometry
+    corners = geometry.vertices[geometry.faces]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1).sum()
+    assert area == pytest.approx(math.pi * 0.25, rel=1e-9)
+    np.testing.assert_allclose(geometry.centers, [[3, 0, 1]])
+    np.testing.assert_allclose(geometry.radii, [3])
+
+
+def test_obj_and_ply_shapes_are_read_by_ptrace_readers(tmp_path):
+    (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    (tmp_path / "tri.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x"
+                                      "\nproperty float y\nproperty float z\nelement face 1\n"
+                                      "property list uchar int vertex_indices\nend_header\n"
+                                      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    path = write(tmp_path, '<shape type="obj"><string name="filename" value="quad.obj"/>'
+                           '<transform name="to_world"><translate z="5"/></transform></shape>'
+                           '<shape type="ply"><string name="filename" value="tri.ply"/></shape>'
+                           '<shape type="obj"><string name="filename" value="quad.obj"/>'
+                           '<boolean name="face_normals" value="true"/></shape>')
+    scene = ptrace.load(path)
+    assert scene.triangle_count == 2 + 1 + 2
+    first = scene.geometry.vertices[scene.geometry.faces[:2]]
+    assert np.all(first[..., 2] == 5.0)
+    # face_normals: the last quad's triangles share no vertex
+    assert len(np.unique(scene.geometry.faces[-2:])) == 6
+
+
+# --- materials ------------------------------------------------------------------------------
+
+def material_of(tmp_path, bsdf):
+    scene = ptrace.load(write(tmp_path, f'<shape type="sphere">{bsdf}</shape>'))
+    index = scene.material_index[0]
+    return scene.materials, index, scene.notes
+
+
+def test_diffuse_and_twosided(tmp_path):
+    materials, i, _ = material_of(tmp_path, '<bsdf type="twosided"><bsdf type="diffuse">'
+                                            '<rgb name="reflectance" value="0.1 0.2 0.3"/>'
+                                            '</bsdf></bsdf>')
+    assert materials.kind[i] == DIFFUSE
+    np.testing.assert_allclose(materials.albedo[i], [0.1, 0.2, 0.3])
+
+
+def test_conductors(tmp_path):
+    materials, i, _ = material_of(tmp_path, '<bsdf type="conductor"><rgb name="specular_'
+                                            'reflectance" value="0.9 0.8 0.7"/></bsdf>')
+    assert materials.kind[i] == MIRROR
+    np.testing.assert_allclose(materials.albedo[i], [0.9, 0.8, 0.7])
+    materials, i, _ = material_of(tmp_path, '<bsdf type="roughconductor"><string name="'
+                                            'material" value="Au"/><float name="alpha" '
+                                            'value="0.2"/></bsdf>')
+    assert materials.kind[i] == MICROFACET and materials.alpha[i] == 0.2
+    np.testing.assert_allclose(materials.eta[i], CONDUCTORS["Au"][0])
+    np.testing.assert_allclose(materials.k[i], CONDUCTORS["Au"][1])
+
+
+def test_dielectrics_plastic_principled(tmp_path):
+    materials, i, notes = material_of(tmp_path, '<bsdf type="dielectric"><float name="int_ior" '
+                                                'value="1.5"/><float name="ext_ior" '
+                                                'value="1.25"/></bsdf>')
+    assert materials.kind[i] == GLASS and materials.ior[i] == pytest.approx(1.2)
+    assert sum("Schlick" in note for note in notes) == 1
+    materials, i, _ = material_of(tmp_path, '<bsdf type="thindielectric"/>')
+    r0 = ((IOR["bk7"] / IOR["air"] - 1) / (IOR["bk7"] / IOR["air"] + 1)) ** 2
+    assert materials.kind[i] == MIRROR and materials.cutoff[i] == BLEND_CUT
+    assert materials.opacity[i] == pytest.approx(2 * r0 / (1 + r0))
+    materials, i, _ = material_of(tmp_path, '<bsdf type="roughplastic"><rgb name="diffuse_'
+                                            'reflectance" value="0.4"/><float name="alpha" '
+                                            'value="0.3"/><float name="int_ior" value="1.5"/>'
+                                            '<float name="ext_ior" value="1"/></bsdf>')
+    assert materials.kind[i] == GLOSSY and materials.alpha[i] == 0.3
+    np.testing.assert_allclose(materials.specular[i], [0.04] * 3)
+    np.testing.assert_allclose(materials.albedo[i], [0.4] * 3)
+    materials, i, _ = material_of(tmp_path, '<bsdf type="principled"><rgb name="base_color" '
+                                            'value="0.8 0.1 0.1"/><float name="roughness" '
+                                            'value="0.5"/><float name="metallic" value="1"/>'
+                                            '</bsdf>')
+    assert materials.kind[i] == GLTF_PBR and materials.alpha[i] == pytest.approx(0.25)
+    assert materials.metallic[i] == 1.0
+
+
+def test_one_note_per_kind_through_the_cli(tmp_path, capsys):
+    glass = '<bsdf type="dielectric"/>'
+    path = write(tmp_path, f'<shape type="sphere">{glass}</shape><shape type="sphere">'
+                           f'<point name="center" x="3" y="0" z="0"/>{glass}</shape>'
+                           '<shape type="sphere"><bsdf type="diffuse"><float name="bogus" '
+                           'value="1"/></bsdf></shape>')
+    assert main(["--info", str(path)]) == 0
+    notes = "\n".join(json.loads(capsys.readouterr().out)["notes"])
+    assert notes.count("Schlick") == 1
+    assert "'bogus' ignored" in notes
+
+
+# --- emitters and the sensor ----------------------------------------------------------------
+
+def test_emitters(tmp_path):
+    path = write(tmp_path, '<emitter type="point"><point name="position" x="1" y="2" z="3"/>'
+                           '<rgb name="intensity" value="5"/></emitter>'
+                           '<emitter type="spot"><transform name="to_world"><lookat '
+                           'origin="0 4 0" target="0 0 0" up="0 0 1"/></transform>'
+                           '<float name="cutoff_angle" value="30"/></emitter>'
+                           '<emitter type="directional"><vector name="direction" x="0" y="-2" '
+                           'z="0"/><rgb name="irradiance" value="2"/></emitter>'
+                           '<emitter type="constant"><rgb name="radiance" value="0.5"/>'
+                           '</emitter><shape type="rectangle"><emitter type="area"><rgb '
+                           'name="radiance" value="7"/></emitter></shape>')
+    scene = ptrace.load(path)
+    lights = scene.lights
+    point, spot, directional = (list(lights.kind).index(k) for k in (POINT, SPOT, DIRECTIONAL))
+    np.testing.assert_allclose(lights.position[point], [1, 2, 3])
+    np.testing.assert_allclose(lights.radiance[point], [5, 5, 5])
+    np.testing.assert_allclose(lights.direction[spot], [0, -1, 0])
+    assert lights.cos_outer[spot] == pytest.approx(math.cos(math.radians(30)))
+    assert lights.cos_inner[spot] == pytest.approx(math.cos(math.radians(22.5)))
+    np.testing.assert_allclose(lights.direction[directional], [0, 1, 0])   # toward the light
+    np.testing.assert_allclose(scene.environment.image, 0.5)
+    emitting = scene.materials.kind[scene.material_index] == EMISSION
+    assert emitting.sum() == 2 and (scene.materials.emission[scene.material_index[emitting]]
+                                    == 7).all()
+
+
+@pytest.mark.parametrize("axis, expected", [
+    ("x", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 48 / 64))),
+    ("y", 60.0),
+    ("diagonal", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 48 / 80))),
+])
+def test_sensor(tmp_path, axis, expected):
+    path = write(tmp_path, f'<sensor type="perspective"><float name="fov" value="60"/>'
+                           f'<string name="fov_axis" value="{axis}"/><float name="near_clip" '
+                           f'value="0.5"/><transform name="to_world"><lookat origin="1 2 3" '
+                           f'target="1 2 0" up="0 1 0"/></transform><film type="hdrfilm">'
+                           f'<integer name="width" value="64"/><integer name="height" '
+                           f'value="48"/></film></sensor><shape type="sphere"/>')
+    camera = ptrace.load(path).file_cameras[0]
+    assert camera.yfov == pytest.approx(expected)
+    assert camera.znear == 0.5 and camera.aspect == pytest.approx(64 / 48)
+    np.testing.assert_allclose(camera.position, [1, 2, 3])
+    np.testing.assert_allclose(camera.camera_to_world, np.eye(3), atol=1e-12)
+
+
+# --- refusals: one line naming the file and the element, exit 2 -----------------------------
+
+REFUSALS = {
+    "missing_file": ('<shape type="obj"><string name="filename" value="gone.obj"/></shape>',
+                     "file 'gone.obj' not found"),
+    "unknown_plugin": ('<shape type="teapot"/>', "shape type 'teapot' is not supported"),
+    "unknown_ref": ('<shape type="sphere"><ref id="nothing"/></shape>',
+                    "no object has id 'nothing'"),
+    "include_cycle": ('<include filename="scene.xml"/>', "includes itself"),
+    "undefined_name": ('<shape type="sphere"><float name="radius" value="$size"/></shape>',
+                       "$size has no value"),
+    "singular_transform": ('<shape type="cube"><transform name="to_world"><scale z="0"/>'
+                           '</transform></shape>', "not invertible"),
+    "outside_folder": ('<include filename="../other.xml"/>', "outside the scene's folder"),
+    "blend": ('<shape type="sphere"><bsdf type="blendbsdf"/></shape>', "blendbsdf"),
+    "bump": ('<shape type="sphere"><bsdf type="bumpmap"/></shape>', "bumpmap"),
+    "medium": ('<shape type="sphere"><medium type="homogeneous" name="interior"/></shape>',
+               "participating media"),
+    "entity": (None, "refused unsafe XML"),
+    "old_version": ("version 1.0", "versions 0.4 to 0.6"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(REFUSALS))
+def test_refusals_are_one_line_and_exit_2(tmp_path, capsys, case):
+    body, fragment = REFUSALS[case]
+    if case == "entity":
+        path = tmp_path / "scene.xml"
+        path.write_text('<?xml version="1.0"?><!DOCTYPE scene [<!ENTITY a "aaaa">]>'
+                        '<scene version="3.0.0">&a;</scene>')
+    elif case == "old_version":
+        path = write(tmp_path, "", version="1.0.0")
+    else:
+        path = write(tmp_path, body)
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert fragment in str(caught.value) and "scene.xml" in str(caught.value)
+    assert main(["-q", "-r", "4", "3", "-f", str(tmp_path / "out.png"), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("ptrace: error: ") and fragment in err
+    assert "Traceback" not in err
+
+
+def test_defines_on_the_command_line(tmp_path, capsys):
+    path = write(tmp_path, '<shape type="sphere"><float name="radius" value="$size"/></shape>')
+    assert main(["--info", "-D", "size=4", str(path)]) == 0
+    bounds = json.loads(capsys.readouterr().out)["bounds"]
+    assert bounds[1] == pytest.approx([4, 4, 4])
+
+
+# --- the same file, rendered by both --------------------------------------------------------
+
+BOX = """
+<default name="spp" value="64"/>
+<integrator type="path"><integer name="max_depth" value="5"/></integrator>
+<sensor type="perspective">
+  <float name="fov" value="40"/>
+  <transform name="to_world"><lookat origin="0, 0, 3.9" target="0, 0, 0" up="0, 1, 0"/>
+  </transform>
+  <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+  <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="24"/>
+  </film>
+</sensor>
+<bsdf type="twosided" id="white"><bsdf type="diffuse"><rgb name="reflectance" value="0.7"/>
+</bsdf></bsdf>
+<bsdf type="diffuse" id="red"><rgb name="reflectance" value="0.6 0.1 0.1"/></bsdf>
+<bsdf type="diffuse" id="green"><rgb name="reflectance" value="0.1, 0.6, 0.1"/></bsdf>
+<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/>
+  <translate y="-1"/></transform><ref id="white"/></shape>
+<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="90"/>
+  <translate y="1"/></transform><ref id="white"/></shape>
+<shape type="rectangle"><transform name="to_world"><translate z="-1"/></transform>
+  <ref id="white"/></shape>
+<shape type="rectangle"><transform name="to_world"><rotate y="1" angle="90"/>
+  <translate x="-1"/></transform><ref id="red"/></shape>
+<shape type="rectangle"><transform name="to_world"><rotate y="1" angle="-90"/>
+  <translate x="1"/></transform><ref id="green"/></shape>
+<shape type="cube"><transform name="to_world"><scale value="0.3"/><rotate y="1" angle="20"/>
+  <translate x="-0.3" y="-0.7" z="-0.2"/></transform><ref id="white"/></shape>
+<shape type="sphere"><point name="center" x="0.4" y="-0.6" z="0.3"/>
+  <float name="radius" value="0.35"/><ref id="white"/></shape>
+<shape type="rectangle">
+  <transform name="to_world"><scale x="0.25" y="0.25"/><rotate x="1" angle="90"/>
+    <translate y="0.99"/></transform>
+  <emitter type="area"><rgb name="radiance" value="15"/></emitter>
+</shape>
+"""
+
+
+@pytest.mark.slow
+def test_cornell_box_mean_agrees_with_mitsuba(tmp_path):
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    path = write(tmp_path, BOX)
+    reference = np.array(mi.render(mi.load_file(str(path)), spp=256))[:, :, :3]
+    out = tmp_path / "box.exr"
+    assert main(["-q", "-r", "32", "24", "-s", "64", "-m", "4", "-f", str(out), str(path)]) == 0
+    ratio = float(read_image(out)[:, :, :3].mean() / reference.mean())
+    assert ratio == pytest.approx(1.0, abs=0.03), ratio
