@@ -17,8 +17,8 @@ import tempfile
 # The wait the first-run notice announces: a small render's compile time with an empty cache on
 # the 2-core development machine, rounded (the commit that last set it gives the command and
 # the runs; re-measure it when the kernels change much).
-COLD_COMPILE_SECONDS = 130
-# the same for the wavefront prototype (--loop wavefront: ptrace.kernel), its stages alone
+COLD_COMPILE_SECONDS = 130      # the megakernel (--loop megakernel: ptrace.integrator)
+# the same for the wavefront (the default loop: ptrace.kernel), its stages alone
 # (benchmarks/results/wavefront_gate.md)
 WAVEFRONT_COMPILE_SECONDS = 55
 
@@ -184,14 +184,22 @@ def _guard_cache_files():
 _DEPENDENCY_FOLDERS = []
 
 
+# ptrace's subpackages that hold no compiled code and that no kernel reads from (the loaders,
+# the commands and viewer, the render job): an edit there recompiles nothing
+# (tests/ptrace/test_layout.py checks both)
+KERNEL_FREE = ("io", "app", "rendering")
+
+
 def _folders_digest(folders):
     """sha256 over the contents of every .py file under the folders (by path relative to its
-    folder), so that any edit to any of them changes it."""
+    folder) but those in its KERNEL_FREE subfolders, so that any edit to any of them changes
+    it."""
     import hashlib
     digest = hashlib.sha256()
     for folder in folders:
         for root, dirs, files in os.walk(folder):
-            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__" and not (
+                os.path.samefile(root, folder) and d in KERNEL_FREE))
             for name in sorted(files):
                 if name.endswith(".py"):
                     path = os.path.join(root, name)

@@ -1,6 +1,7 @@
 """The package layout: the commands in ptrace.app, the render job in ptrace.rendering, and the
 modules' old names (ptrace.cli, ptrace.settings, ...) still importable, as the same module
 objects, with one DeprecationWarning each that names the new path."""
+import ast
 import json
 import subprocess
 import sys
@@ -109,11 +110,65 @@ def test_the_console_script_and_python_m_call_the_same_main():
 
 
 def test_the_kernel_cache_key_covers_the_subpackages(tmp_path):
-    """jit keys cached kernels on every source under ptrace/: an edit in a subfolder (as
-    ptrace/rendering/) changes the key too."""
+    """jit keys cached kernels on every source under a kernels' folder: an edit in a subfolder
+    (as ptrace/kernel/) changes the key too."""
     (tmp_path / "sub").mkdir()
     (tmp_path / "a.py").write_text("x = 1\n")
     (tmp_path / "sub" / "b.py").write_text("y = 1\n")
     before = jit._folders_digest([str(tmp_path)])
     (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    assert jit._folders_digest([str(tmp_path)]) != before
+
+
+COMPILERS = {"njit", "jit", "cfunc", "vectorize", "guvectorize", "generated_jit"}
+
+
+def compiled(function):
+    """Whether an ast function definition carries a numba decorator (njit, numba.njit(...))."""
+    for decorator in function.decorator_list:
+        target = decorator.func if isinstance(decorator, ast.Call) else decorator
+        name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+        if name in COMPILERS:
+            return True
+    return False
+
+
+def test_an_edit_where_no_kernel_lives_recompiles_nothing(tmp_path):
+    """jit.KERNEL_FREE (ptrace/io, app, rendering) stays out of the cache key, so an edit to a
+    loader or the command line loads the cached kernels: right only while no compiled function
+    is defined there and no compiled function elsewhere reads a name imported from there."""
+    package = ROOT / "ptrace"
+    free = [package / name for name in jit.KERNEL_FREE]
+    for folder in free:
+        for path in folder.rglob("*.py"):
+            defined = [node.name for node in ast.walk(ast.parse(path.read_text()))
+                       if isinstance(node, ast.FunctionDef) and compiled(node)]
+            assert not defined, f"{path} defines compiled {defined}"
+    kernel_sources = [path for folder in (package, ROOT / "accel") for path in folder.rglob("*.py")
+                      if not any(folder in path.parents for folder in free)]
+    read = 0
+    for path in kernel_sources:
+        tree = ast.parse(path.read_text())
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                parts = node.module.split(".")
+                inside = parts[0] in jit.KERNEL_FREE if node.level else (
+                    parts[0] == "ptrace" and len(parts) > 1 and parts[1] in jit.KERNEL_FREE)
+                if inside:
+                    imported |= {alias.asname or alias.name for alias in node.names}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.FunctionDef) and compiled(node):
+                used = {name.id for name in ast.walk(node) if isinstance(name, ast.Name)}
+                assert not used & imported, f"{path}: {node.name} reads {used & imported}"
+                read += 1
+    assert read > 100     # the compiled functions were found
+    for name in jit.KERNEL_FREE + ("kernel",):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "a.py").write_text("x = 1\n")
+    before = jit._folders_digest([str(tmp_path)])
+    for name in jit.KERNEL_FREE:
+        (tmp_path / name / "a.py").write_text("x = 2\n")
+    assert jit._folders_digest([str(tmp_path)]) == before
+    (tmp_path / "kernel" / "a.py").write_text("x = 2\n")
     assert jit._folders_digest([str(tmp_path)]) != before
