@@ -1,4 +1,5 @@
-"""Where a render's wall time goes, now that the path loop is one compiled kernel.
+"""Where a render's wall time goes in the megakernel (--loop megakernel), whose path loop is one
+compiled kernel.
 
     python -m benchmarks.profile_render [--quick] [--repeats N] [--threads T]
                                         [--resolution WxH] [--only NAME ...] [--output NAME]
@@ -181,10 +182,13 @@ class Run:
 
 
 def timed_render(scene, threads, **options):
-    """ptrace.render(scene, threads=threads, **options) with render_pixels timed."""
+    """ptrace.render(scene, threads=threads, **options) with render_pixels timed: the
+    megakernel's (loop="megakernel" unless options say otherwise), whose one compiled loop is
+    what this profile splits."""
     import ptrace
     import ptrace.rendering.tiles
     clock, stats = KernelClock(), {}
+    options = dict(options, loop=options.get("loop", "megakernel"))
     tiles = ptrace.rendering.tiles
     with patched(tiles, "render_pixels", clock.wrap(tiles.render_pixels)):
         start = time.perf_counter()

@@ -20,7 +20,9 @@ import ptrace.rendering.timing
 from benchmarks import profile_render as pr
 from benchmarks import report
 
-TINY = dict(spp=2, light_samples=2, max_depth=4, integrator="path", resolution=(24, 18))
+# the profile splits the megakernel's loop (benchmarks.profile_render.timed_render)
+TINY = dict(spp=2, light_samples=2, max_depth=4, integrator="path", resolution=(24, 18),
+            loop="megakernel")
 PIXELS = 24 * 18
 REPO = pathlib.Path(__file__).resolve().parents[1]
 

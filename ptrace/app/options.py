@@ -189,10 +189,10 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
         help="with --accel bvh: mean (split at the mean centroid; default) or sah "
              "(binned surface area heuristic)")
-    add("--loop", choices=LOOPS, default="megakernel",
-        help="the path loop: megakernel (one compiled loop per path; default) or wavefront "
-             "(waves of paths through small stage kernels: a prototype for everything but -H; "
-             "the same image)")
+    add("--loop", choices=LOOPS, default="wavefront",
+        help="the path loop: wavefront (waves of paths through small stage kernels, compiled "
+             "only for what the scene uses; default) or megakernel (one compiled loop per "
+             "path, compiled whole); the same image")
     add("--seed", type=int_range("seed (--seed)", "seed"), default=0,
         help=f"random seed, {range_text('seed')} (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",

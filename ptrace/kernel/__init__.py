@@ -1,6 +1,6 @@
-"""The wavefront path loop (a prototype beside ptrace.integrator's megakernel, chosen with
---loop wavefront): paths live in structure-of-arrays waves (layout), and small compiled stages
+"""The wavefront path loop (the default; ptrace.integrator's megakernel is the other, chosen with
+--loop megakernel): paths live in structure-of-arrays waves (layout), and small compiled stages
 run over queues of them (stages: camera rays, hits and the emission they find, light found by
 shadow rays, per-pixel sums; trace: the backend's closest and any hit over a queue; shading: one
 kernel per material kind, made only for the kinds a scene has). wavefront drives them from
-Python, once per stage and bounce, and says which scenes it can render so far."""
+Python, once per stage and bounce."""

@@ -17,7 +17,7 @@ LIGHT_SAMPLERS = ("auto", "all", "power", "bvh")   # --light-sampler
 LIGHT_SAMPLER_CODES = {"auto": codes.LIGHTS_AUTO, "all": codes.LIGHTS_ALL,
                        "power": codes.LIGHTS_POWER, "bvh": codes.LIGHTS_BVH}
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
-LOOPS = ("megakernel", "wavefront")   # --loop: the path loop (ptrace.integrator, ptrace.kernel)
+LOOPS = ("wavefront", "megakernel")   # --loop: the path loop (ptrace.kernel, ptrace.integrator)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
 # take them as int64; within these ranges every sample has its own random numbers: the Sobol
@@ -61,9 +61,9 @@ class Settings:
     alone); sampler: "sobol" (Owen-scrambled Sobol', stratified) or "independent" (the course's
     uniform random numbers); bvh_split: the BVH's split, "mean" (at the mean centroid, the course's
     suggestion) or "sah" (binned surface area heuristic); only with accel="bvh". loop:
-    "megakernel" (one compiled loop carries each path to its end: ptrace.integrator) or
-    "wavefront" (waves of paths through small stage kernels, ptrace.kernel; a prototype that
-    renders the path integrator without -H, the same image bit for bit).
+    "wavefront" (waves of paths through small stage kernels compiled only for what the scene
+    uses: ptrace.kernel) or "megakernel" (one compiled loop carries each path to its end:
+    ptrace.integrator); the same image bit for bit.
     light_sampler: "all" (at each vertex -l samples of every light, one of each point or
     directional light: the course's estimator), "power" (-l samples at each vertex, each of one
     light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or
@@ -86,7 +86,7 @@ class Settings:
     sampler: str = "sobol"
     bvh_split: str = "mean"
     light_sampler: str = "auto"
-    loop: str = "megakernel"
+    loop: str = "wavefront"
 
     def __post_init__(self):
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):

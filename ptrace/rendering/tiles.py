@@ -19,6 +19,8 @@ from accel.compiled import new_scratch
 
 from ..integrator import camera_record, render_pixels, scene_records
 from ..jit import COLD_COMPILE_SECONDS, WAVEFRONT_COMPILE_SECONDS, is_cold
+from ..kernel import wavefront
+from ..kernel.trace import closest_stage
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
@@ -153,8 +155,7 @@ class RenderJob:
         self.rays_traced = 0
         self.build_seconds = self.records_seconds = 0.0
         self.wavefront = None
-        if settings.loop == "wavefront":    # imported only when asked for: a prototype
-            from ..kernel import wavefront
+        if settings.loop == "wavefront":
             self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
                                                  wavefront.used_kinds(scene),
                                                  wavefront.simple(scene),
@@ -173,7 +174,6 @@ class RenderJob:
         if notice is not None:
             cold, seconds = is_cold(accel.record_class(settings.accel)), COLD_COMPILE_SECONDS
             if settings.loop == "wavefront":
-                from ..kernel.trace import closest_stage
                 cold = is_cold(accel.record_class(settings.accel), closest_stage)
                 seconds = WAVEFRONT_COMPILE_SECONDS
             if cold:

@@ -190,16 +190,19 @@ def test_ctrl_c_writes_what_was_rendered(tmp_path):
 
 def _cache_without_the_render_kernel(cache_dir):
     """A numba cache folder (laid out as NUMBA_CACHE_DIR lays it out) holding this process's
-    cached kernels of ptrace and accel except the render kernel itself: the render kernel is
-    what ptrace's cold check looks for, so a render with it prints the cold notice and
-    compiles only that kernel (its callees load from the cache), not the whole loop again."""
+    cached kernels of ptrace and accel except the wavefront's closest-hit stage: that stage is
+    what ptrace's cold check looks for (the default loop's kernel compiled once per backend), so
+    a render without it prints the cold notice and compiles only that stage (its callees load
+    from the cache), not every kernel again."""
     import shutil
 
     from numba.core.caching import UserProvidedCacheLocator
 
     import accel.bvh
     import ptrace.integrator
+    import ptrace.kernel.trace
     for module, dispatcher in ((ptrace.integrator, ptrace.integrator.render_pixels),
+                               (ptrace.kernel.trace, ptrace.kernel.trace.closest_stage),
                                (accel.bvh, accel.bvh._build)):
         source = dispatcher._cache._cache_path
         target = cache_dir / UserProvidedCacheLocator.get_suitable_cache_subpath(module.__file__)
@@ -207,7 +210,7 @@ def _cache_without_the_render_kernel(cache_dir):
         if os.path.isdir(source):
             for name in os.listdir(source):
                 if name.endswith((".nbi", ".nbc")) and not name.startswith(
-                        "integrator.render_pixels-"):
+                        "trace.closest_stage-"):
                     shutil.copy2(os.path.join(source, name), target / name)
 
 
