@@ -10,6 +10,7 @@ import pytest
 import ptrace
 from ptrace.app.cli import main
 from ptrace.image import read_image
+from ptrace.io.mitsuba import spot_inner
 from ptrace.io.mitsuba_materials import CONDUCTORS, IOR
 from ptrace.io.mitsuba_xml import Reader
 from ptrace.scene import (
@@ -257,12 +258,25 @@ def test_emitters(tmp_path):
     np.testing.assert_allclose(lights.radiance[point], [5, 5, 5])
     np.testing.assert_allclose(lights.direction[spot], [0, -1, 0])
     assert lights.cos_outer[spot] == pytest.approx(math.cos(math.radians(30)))
-    assert lights.cos_inner[spot] == pytest.approx(math.cos(math.radians(22.5)))
+    assert lights.cos_inner[spot] == pytest.approx(spot_inner(22.5, 30.0))
     np.testing.assert_allclose(lights.direction[directional], [0, 1, 0])   # toward the light
     np.testing.assert_allclose(scene.environment.image, 0.5)
     emitting = scene.materials.kind[scene.material_index] == EMISSION
     assert emitting.sum() == 2 and (scene.materials.emission[scene.material_index[emitting]]
                                     == 7).all()
+
+
+@pytest.mark.parametrize("beam, cutoff", [(15.0, 20.0), (1.0, 60.0), (30.0, 30.0)])
+def test_spot_sends_out_the_power_of_mitsubas(beam, cutoff):
+    """ptrace's spot falloff (quadratic in the cosine) over the ramp spot_inner gives, against
+    Mitsuba's (linear in the angle from beam to cutoff), integrated numerically over the sphere."""
+    theta = np.linspace(0.0, math.pi, 400001)
+    mitsuba = np.clip((math.radians(cutoff) - theta) /
+                      max(math.radians(cutoff - beam), 1e-12), 0.0, 1.0)
+    cos_inner, cos_outer = spot_inner(beam, cutoff), math.cos(math.radians(cutoff))
+    ramp = np.clip((np.cos(theta) - cos_outer) / max(cos_inner - cos_outer, 1e-12), 0.0, 1.0)
+    power = [np.trapezoid(f * np.sin(theta), theta) for f in (mitsuba, ramp ** 2)]
+    assert power[1] == pytest.approx(power[0], rel=1e-4)
 
 
 @pytest.mark.parametrize("axis, expected", [
