@@ -64,8 +64,9 @@ def disk():
 def mesh_file(shape, path, notes):
     """(vertices, faces, uv or None) of an obj or ply file, uv as Mitsuba reads it (its v
     runs down the image)."""
-    if shape.type == "obj":
+    if shape.type == "obj":     # the file's texture coordinates, whatever its .mtl says
         parts = obj.read_obj(path)
+        parts["uv"] = parts.get("file_uv", parts["uv"])
     else:
         parts = _read_with_trimesh(path, ".ply")
     parts = _drop_non_finite(path, parts)

@@ -90,6 +90,7 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
     records, keys, built = [], {}, {}
     material_index = np.zeros(len(faces), np.int32)
     defaulted = 0
+    file_uv = uv if has_uv.any() else None    # as the file gives them (Mitsuba's obj reads)
     uv = uv.copy()
     for key in sorted(set(zip(material_of_face.tolist(), has_uv.tolist()))):
         material, with_uv = key
@@ -135,7 +136,7 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
     textured = any(r.get("albedo_texture", -1) >= 0 or r.get("emission_texture", -1) >= 0
                    for r in records)
     return {"vertices": vertices, "faces": faces, "material_index": material_index,
-            "materials": records, "uv": uv if textured else None,
+            "materials": records, "uv": uv if textured else None, "file_uv": file_uv,
             "vertex_colours": vertex_colours, "textures": pool, "notes": notes, "lights": [],
             "defaulted": defaulted}
 

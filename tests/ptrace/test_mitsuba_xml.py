@@ -172,6 +172,36 @@ def test_obj_and_ply_shapes_are_read_by_ptrace_readers(tmp_path):
     assert len(np.unique(scene.geometry.faces[-2:])) == 6
 
 
+def test_texture_coordinates_follow_mitsuba(tmp_path):
+    """Mitsuba's v runs down the image, ptrace's up: a rectangle's corner (-1, -1) has
+    Mitsuba's (u, v) = (0, 0), so ptrace's (0, 1); an OBJ's vt (0, 0), which Mitsuba flips
+    (flip_tex_coords), keeps ptrace's (0, 0)."""
+    write_texture(tmp_path / "tex.exr")
+    (tmp_path / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\n"
+                                       "vt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n")
+    textured = ('<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string '
+                'name="filename" value="tex.exr"/></texture></bsdf>')
+    for shape in ('<shape type="rectangle">', '<shape type="obj"><string name="filename" '
+                                               'value="quad.obj"/>'):
+        scene = ptrace.load(write(tmp_path, f"{shape}{textured}</shape>"))
+        corners = scene.geometry.vertices[scene.geometry.faces]
+        lower_left = np.all(np.isclose(corners, [-1, -1, 0]), axis=-1)
+        expected = [0, 1] if "rectangle" in shape else [0, 0]
+        np.testing.assert_allclose(scene.uv[lower_left], [expected] * lower_left.sum())
+        assert scene.materials.albedo_texture[scene.material_index[0]] == 0
+
+
+def write_texture(path):
+    """An 8 x 8 EXR: red grows to the right, green down the image."""
+    import OpenImageIO as oiio
+    y, x = np.mgrid[0:8, 0:8]
+    pixels = np.stack([x / 7, y / 7, np.full((8, 8), 0.2)], axis=-1).astype(np.float32)
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(8, 8, 3, oiio.FLOAT))
+    out.write_image(pixels)
+    out.close()
+
+
 # --- materials ------------------------------------------------------------------------------
 
 def material_of(tmp_path, bsdf):
