@@ -11,7 +11,6 @@ Mitsuba 3 upgrades them: camelCase parameter names become snake_case, `<lookAt>`
 `<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one SceneError naming
 the file and the element.
 """
-import math
 import os
 import re
 
@@ -21,34 +20,15 @@ import numpy as np
 
 from ..errors import SceneError
 from .files import require_regular_file
+from .mitsuba_transforms import Transform, describe, parse_transform
 
 OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler", "integrator",
                "texture", "medium", "phase", "rfilter", "volume", "spectrum_plugin")
 VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector",
               "transform", "srgb")
-TRANSFORM_TAGS = ("translate", "rotate", "scale", "matrix", "lookat")
 MAX_INCLUDE_DEPTH = 32
 MAX_NESTING = 64
 NAME = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
-
-
-class Transform:
-    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates."""
-
-    def __init__(self, matrix):
-        self.matrix = np.asarray(matrix, dtype=np.float64)
-
-    def apply(self, points):
-        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return points @ self.matrix[:3, :3].T + self.matrix[:3, 3]
-
-    def vectors(self, vectors):
-        return np.asarray(vectors, dtype=np.float64).reshape(-1, 3) @ self.matrix[:3, :3].T
-
-    def normals(self, normals):
-        inverse = np.linalg.inv(self.matrix[:3, :3])
-        out = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ inverse
-        return out / np.linalg.norm(out, axis=1, keepdims=True)
 
 
 class Colour(tuple):
@@ -125,13 +105,6 @@ def _kind_of(value):
         if isinstance(value, types):
             return what
     return f"a <{value.tag}>" if isinstance(value, Plugin) else type(value).__name__
-
-
-def describe(element):
-    """'<shape type="obj" id="wall">': an element and its naming attributes."""
-    words = [element.tag] + [f'{key}="{element.get(key)[:60]}"' for key in
-                             ("type", "id", "name", "filename") if element.get(key) is not None]
-    return "<" + " ".join(words) + ">"
 
 
 def camel_to_snake(name):
@@ -251,7 +224,7 @@ class Reader:
             return self.params[name]
         return NAME.sub(value, text)
 
-    def _required(self, element, key, path):
+    def required(self, element, key, path):
         value = self.attribute(element, key, path)
         if value is None:
             raise SceneError(path, f"{describe(element)} has no {key} attribute")
@@ -267,20 +240,20 @@ class Reader:
             if self.upgrade and tag == "lookAt":
                 tag = child.tag = "lookat"
             if tag == "default":
-                name = self._required(child, "name", path)
-                self.params.setdefault(name, self._required(child, "value", path))
+                name = self.required(child, "name", path)
+                self.params.setdefault(name, self.required(child, "value", path))
             elif tag == "include":
                 self._include(child, holder, path, depth)
             elif tag == "path":
                 self.search.append(self._resolve(describe(child), path,
-                                                 self._required(child, "value", path)))
+                                                 self.required(child, "value", path)))
             elif tag == "alias":
-                ident = self._required(child, "id", path)
+                ident = self.required(child, "id", path)
                 if ident not in self.ids:
                     raise SceneError(path, f"{describe(child)}: no object has id {ident!r}")
-                self.ids[self._required(child, "as", path)] = self.ids[ident]
+                self.ids[self.required(child, "as", path)] = self.ids[ident]
             elif tag == "ref":
-                ident = self._required(child, "id", path)
+                ident = self.required(child, "id", path)
                 self.refs.append((holder, self._name(child, path), child, ident, path))
             elif tag in VALUE_TAGS:
                 name = self._name(child, path)
@@ -299,7 +272,7 @@ class Reader:
 
     def _include(self, element, holder, path, depth):
         target = self._resolve(describe(element), path,
-                               self._required(element, "filename", path))
+                               self.required(element, "filename", path))
         root = None
         self.including.append(os.path.realpath(path))
         try:
@@ -309,7 +282,7 @@ class Reader:
             self.including.pop()
 
     def _object(self, element, holder, path, depth):
-        kind = self._required(element, "type", path)
+        kind = self.required(element, "type", path)
         ident = self.attribute(element, "id", path)
         plugin = Plugin(element.tag, kind, ident, path, describe(element))
         self._children(element, plugin, path, depth + 1)
@@ -340,10 +313,10 @@ class Reader:
     def _value(self, element, tag, path, depth):
         attr = lambda key, default=None: self.attribute(element, key, path, default)
         if tag == "transform":
-            return self._transform(element, path)
+            return parse_transform(self, element, path)
         if tag == "string":
-            return self._required(element, "value", path)
-        text = self._required(element, "value", path) if tag not in ("point", "vector") \
+            return self.required(element, "value", path)
+        text = self.required(element, "value", path) if tag not in ("point", "vector") \
             else attr("value")
         if tag == "boolean":
             word = text.strip().lower()
@@ -387,110 +360,6 @@ class Reader:
             values = np.where(values <= 0.04045, values / 12.92,
                               ((values + 0.055) / 1.055) ** 2.4)
         return Colour(float(v) for v in values)
-
-    def _transform(self, element, path):
-        matrix = np.eye(4)
-        for step in element:
-            if not isinstance(step.tag, str):
-                continue
-            tag = "lookat" if self.upgrade and step.tag == "lookAt" else step.tag
-            if tag not in TRANSFORM_TAGS:
-                raise SceneError(path, f"{describe(step)}: unknown transform <{tag}> in "
-                                       f"{describe(element)} (known: "
-                                       f"{', '.join(TRANSFORM_TAGS)})")
-            matrix = self._step(step, tag, path) @ matrix
-        if not np.isfinite(matrix).all():
-            raise SceneError(path, f"{describe(element)}: the matrix overflows to infinity")
-        linear = matrix[:3, :3]
-        size = float(np.abs(linear).max())
-        if not size > 0 or abs(np.linalg.det(linear / size)) < 1e-12 or \
-                np.any(matrix[3] != (0, 0, 0, 1)) and abs(np.linalg.det(matrix)) < 1e-300:
-            raise SceneError(path, f"{describe(element)}: the transform is not invertible "
-                                   f"(it flattens space: determinant 0)")
-        return Transform(matrix)
-
-    def _vector3(self, step, path, default):
-        text = self.attribute(step, "value", path)
-        if text is not None:
-            values = self.numbers(step, path, text)
-            if values.size == 1 and step.tag == "scale":
-                return np.repeat(values, 3)
-            if values.size != 3:
-                raise SceneError(path, f"{describe(step)}: value needs 3 numbers, has "
-                                       f"{values.size}")
-            return values
-        return np.array([float(self.numbers(step, path, self.attribute(step, k, path,
-                                                                       str(default)), k)[0])
-                         for k in "xyz"])
-
-    def _step(self, step, tag, path):
-        out = np.eye(4)
-        if tag == "translate":
-            out[:3, 3] = self._vector3(step, path, 0.0)
-        elif tag == "scale":
-            out[:3, :3] = np.diag(self._vector3(step, path, 1.0))
-        elif tag == "rotate":
-            axis = self._vector3(step, path, 0.0)
-            angle = self.numbers(step, path, self._required(step, "angle", path), "angle")
-            length = float(np.linalg.norm(axis))
-            if not length > 0 or angle.size != 1:
-                raise SceneError(path, f"{describe(step)}: needs a non-zero axis and one angle")
-            out[:3, :3] = rotation(axis / length, math.radians(float(angle[0])))
-        elif tag == "matrix":
-            values = self.numbers(step, path, self._required(step, "value", path))
-            if values.size == 16:
-                out = values.reshape(4, 4)
-            elif values.size == 9:
-                out[:3, :3] = values.reshape(3, 3)
-            else:
-                raise SceneError(path, f"{describe(step)}: needs 16 (or 9) numbers, has "
-                                       f"{values.size}")
-        else:
-            out = self._lookat(step, path)
-        return out
-
-    def _lookat(self, step, path):
-        points = {}
-        for key in ("origin", "target", "up"):
-            text = self.attribute(step, key, path)
-            if text is None and key != "up":
-                raise SceneError(path, f"{describe(step)} has no {key} attribute")
-            if text is not None:
-                points[key] = self.numbers(step, path, text, key)
-                if points[key].size != 3:
-                    raise SceneError(path, f"{describe(step)}: {key} needs 3 numbers")
-        return lookat(points["origin"], points["target"], points.get("up"),
-                      lambda message: SceneError(path, f"{describe(step)}: {message}"))
-
-
-def rotation(axis, angle):
-    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis."""
-    x, y, z = axis
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return np.array([[t * x * x + c, t * x * y - s * z, t * x * z + s * y],
-                     [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
-                     [t * x * z - s * y, t * y * z + s * x, t * z * z + c]])
-
-
-def lookat(origin, target, up, error):
-    """Mitsuba's look-at matrix: columns left, up, forward (target - origin) and origin. No up:
-    one at right angles to the view, as Mitsuba picks it."""
-    forward = np.asarray(target, float) - np.asarray(origin, float)
-    if not np.linalg.norm(forward) > 0:
-        raise error("origin and target are the same point: no direction to look in")
-    forward = forward / np.linalg.norm(forward)
-    if up is None:
-        up = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    left = np.cross(up, forward)
-    if not np.linalg.norm(left) > 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
-        raise error("up is zero or parallel to the view direction")
-    left = left / np.linalg.norm(left)
-    out = np.eye(4)
-    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = left, np.cross(forward, left), forward, \
-        origin
-    return out
-
 
 def _is_float(word):
     try:

@@ -1,0 +1,147 @@
+"""Mitsuba's <transform>: its steps (translate, rotate, scale, matrix, lookat) composed in
+file order into one invertible 4 x 4 matrix, each checked (one SceneError naming the file and
+the step)."""
+import math
+
+import numpy as np
+
+from ..errors import SceneError
+
+TRANSFORM_TAGS = ("translate", "rotate", "scale", "matrix", "lookat")
+
+
+def describe(element):
+    """'<shape type="obj" id="wall">': an element and its naming attributes."""
+    words = [element.tag] + [f'{key}="{element.get(key)[:60]}"' for key in
+                             ("type", "id", "name", "filename") if element.get(key) is not None]
+    return "<" + " ".join(words) + ">"
+
+
+class Transform:
+    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates."""
+
+    def __init__(self, matrix):
+        self.matrix = np.asarray(matrix, dtype=np.float64)
+
+    def apply(self, points):
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return points @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+
+    def vectors(self, vectors):
+        return np.asarray(vectors, dtype=np.float64).reshape(-1, 3) @ self.matrix[:3, :3].T
+
+    def normals(self, normals):
+        inverse = np.linalg.inv(self.matrix[:3, :3])
+        out = np.asarray(normals, dtype=np.float64).reshape(-1, 3) @ inverse
+        return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def parse_transform(reader, element, path):
+    """The Transform of a <transform> element: each step left-multiplies what came before (the
+    first step is applied first); reader gives the steps' attributes ($name substituted)."""
+    matrix = np.eye(4)
+    for step in element:
+        if not isinstance(step.tag, str):
+            continue
+        tag = "lookat" if reader.upgrade and step.tag == "lookAt" else step.tag
+        if tag not in TRANSFORM_TAGS:
+            raise SceneError(path, f"{describe(step)}: unknown transform <{tag}> in "
+                                   f"{describe(element)} (known: "
+                                   f"{', '.join(TRANSFORM_TAGS)})")
+        matrix = _step(reader, step, tag, path) @ matrix
+    if not np.isfinite(matrix).all():
+        raise SceneError(path, f"{describe(element)}: the matrix overflows to infinity")
+    linear = matrix[:3, :3]
+    size = float(np.abs(linear).max())
+    if np.any(matrix[3] != (0, 0, 0, 1)):
+        raise SceneError(path, f"{describe(element)}: a projective matrix (its last row is not "
+                               f"0 0 0 1) is not supported")
+    if not size > 0 or abs(np.linalg.det(linear / size)) < 1e-12:
+        raise SceneError(path, f"{describe(element)}: the transform is not invertible "
+                               f"(it flattens space: determinant 0)")
+    return Transform(matrix)
+
+
+def _vector3(reader, step, path, default):
+    text = reader.attribute(step, "value", path)
+    if text is not None:
+        values = reader.numbers(step, path, text)
+        if values.size == 1 and step.tag == "scale":
+            return np.repeat(values, 3)
+        if values.size != 3:
+            raise SceneError(path, f"{describe(step)}: value needs 3 numbers, has "
+                                   f"{values.size}")
+        return values
+    return np.array([float(reader.numbers(step, path, reader.attribute(step, k, path,
+                                                                   str(default)), k)[0])
+                     for k in "xyz"])
+
+
+def _step(reader, step, tag, path):
+    out = np.eye(4)
+    if tag == "translate":
+        out[:3, 3] = _vector3(reader, step, path, 0.0)
+    elif tag == "scale":
+        out[:3, :3] = np.diag(_vector3(reader, step, path, 1.0))
+    elif tag == "rotate":
+        axis = _vector3(reader, step, path, 0.0)
+        angle = reader.numbers(step, path, reader.required(step, "angle", path), "angle")
+        length = float(np.linalg.norm(axis))
+        if not length > 0 or angle.size != 1:
+            raise SceneError(path, f"{describe(step)}: needs a non-zero axis and one angle")
+        out[:3, :3] = rotation(axis / length, math.radians(float(angle[0])))
+    elif tag == "matrix":
+        values = reader.numbers(step, path, reader.required(step, "value", path))
+        if values.size == 16:
+            out = values.reshape(4, 4)
+        elif values.size == 9:
+            out[:3, :3] = values.reshape(3, 3)
+        else:
+            raise SceneError(path, f"{describe(step)}: needs 16 (or 9) numbers, has "
+                                   f"{values.size}")
+    else:
+        out = _lookat(reader, step, path)
+    return out
+
+
+def _lookat(reader, step, path):
+    points = {}
+    for key in ("origin", "target", "up"):
+        text = reader.attribute(step, key, path)
+        if text is None and key != "up":
+            raise SceneError(path, f"{describe(step)} has no {key} attribute")
+        if text is not None:
+            points[key] = reader.numbers(step, path, text, key)
+            if points[key].size != 3:
+                raise SceneError(path, f"{describe(step)}: {key} needs 3 numbers")
+    return lookat(points["origin"], points["target"], points.get("up"),
+                  lambda message: SceneError(path, f"{describe(step)}: {message}"))
+
+
+def rotation(axis, angle):
+    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis."""
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array([[t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+                     [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+                     [t * x * z - s * y, t * y * z + s * x, t * z * z + c]])
+
+
+def lookat(origin, target, up, error):
+    """Mitsuba's look-at matrix: columns left, up, forward (target - origin) and origin. No up:
+    one at right angles to the view, as Mitsuba picks it."""
+    forward = np.asarray(target, float) - np.asarray(origin, float)
+    if not np.linalg.norm(forward) > 0:
+        raise error("origin and target are the same point: no direction to look in")
+    forward = forward / np.linalg.norm(forward)
+    if up is None:
+        up = np.array([0.0, 1.0, 0.0]) if abs(forward[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    left = np.cross(up, forward)
+    if not np.linalg.norm(left) > 1e-9 * max(float(np.linalg.norm(up)), 1e-300):
+        raise error("up is zero or parallel to the view direction")
+    left = left / np.linalg.norm(left)
+    out = np.eye(4)
+    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = left, np.cross(forward, left), forward, \
+        origin
+    return out
