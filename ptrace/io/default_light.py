@@ -48,10 +48,16 @@ def emitter_share(vertices, faces, material_index, materials, uv, textures):
     scene's bounding box: 0 without emitters, inf for a box of no area that has emitters."""
     triangles, luminance, area = emitter_triangles(vertices, faces, material_index, materials,
                                                    uv, textures)
-    weight = luminance * area
+    # the weights (luminance x area) over their largest factors, each in [0, 1]: their sum
+    # cannot overflow, nor can the probabilities the rays are picked by; the power is finite
+    # for a file's numbers (within ptrace.io.limits.LIMIT), and inf at worst, never NaN
+    scales = [float(np.max(x)) if len(x) else 0.0 for x in (luminance, area)]
+    if not (scales[0] > 0.0 and scales[1] > 0.0 and np.isfinite(scales).all()):
+        return math.inf if scales[0] > 0.0 and scales[1] > 0.0 else 0.0
+    weight = (luminance / scales[0]) * (area / scales[1])
     if not weight.sum() > 0.0:
         return 0.0
-    power = 2.0 * math.pi * float(weight.sum())      # both faces
+    power = 2.0 * math.pi * scales[0] * scales[1] * float(weight.sum())      # both faces
     used = vertices[faces.reshape(-1)]
     lower, upper = used.min(axis=0), used.max(axis=0)
     reference = ambient_power(lower, upper)
@@ -60,7 +66,7 @@ def emitter_share(vertices, faces, material_index, materials, uv, textures):
     reflecting = np.ones(len(faces), bool)
     reflecting[triangles] = False
     landed = landed_fraction(vertices, faces, triangles, weight, reflecting, lower, upper)
-    return power * landed / reference
+    return power * landed / reference if landed > 0.0 else 0.0
 
 
 def ambient_power(lower, upper):

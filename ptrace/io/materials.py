@@ -11,6 +11,8 @@ import numpy as np
 
 from .. import budget
 from ..scene import REPEAT
+from .limits import LIMIT, LIMIT_WORDS
+from .quiet import library_output
 
 MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has no density)
 DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (docs/usage.md says so)
@@ -116,16 +118,20 @@ def read_image_file(path, what="", model=None):
     any pixel is decoded, passes the memory budget. The caller has checked that path is a
     regular file inside the model's folder."""
     import OpenImageIO as oiio
-    buffer = oiio.ImageBuf(path)
-    if buffer.has_error:
-        raise ValueError(buffer.geterror().strip() or "not a readable image")
-    spec = buffer.spec()
+    with library_output() as printed:     # libpng's own lines: folded into the message
+        buffer = oiio.ImageBuf(path)
+        error = buffer.geterror() if buffer.has_error else None
+        spec = buffer.spec()
+    if error is not None:
+        raise ValueError(printed.one_line(error) or "not a readable image")
     if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
         raise ValueError("the image has no pixels")
     budget.current().image(model or path, spec.width, spec.height, what or repr(path))
-    pixels = buffer.get_pixels(oiio.FLOAT)
-    if buffer.has_error:
-        raise ValueError(buffer.geterror().strip() or "its pixels could not be decoded")
+    with library_output() as printed:
+        pixels = buffer.get_pixels(oiio.FLOAT)
+        error = buffer.geterror() if buffer.has_error else None
+    if error is not None:
+        raise ValueError(printed.one_line(error) or "its pixels could not be decoded")
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width,
                                                           spec.nchannels)
     encoded = spec.format.basetype in (oiio.UINT8, oiio.UINT16, oiio.INT8, oiio.INT16)
@@ -144,8 +150,9 @@ def conductor_from_colour(colour):
 
 def check_numbers(values, what, low=None, high=None):
     """The values as floats, or a message (str) saying what is wrong with them: a value that is
-    NaN, infinite, or outside [low, high] has no meaning a renderer could guess, so the
-    caller refuses the file with this message rather than render a wrong or black image."""
+    NaN, infinite, of magnitude above ptrace.io.limits.LIMIT, or outside [low, high] has no
+    meaning a renderer could guess, so the caller refuses the file with this message rather
+    than render a wrong or black image (or overflow)."""
     numbers = []
     for value in values:
         try:
@@ -155,6 +162,8 @@ def check_numbers(values, what, low=None, high=None):
     for value in numbers:
         if not math.isfinite(value):
             return f"{what} has a NaN or infinite value ({_listed(numbers)})"
+        if abs(value) > LIMIT:     # finite, but its products would overflow (ptrace.io.limits)
+            return f"{what} {_listed(numbers)}: {value:g} is {LIMIT_WORDS}"
         if low is not None and value < low or high is not None and value > high:
             span = (f"[{low:g}, {high:g}]" if low is not None and high is not None else
                     f"at least {low:g}" if low is not None else f"at most {high:g}")

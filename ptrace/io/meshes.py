@@ -30,6 +30,7 @@ from ..scene import (
 )
 from . import files, gltf, gltf_cameras, gltf_materials, obj, ply
 from .default_light import default_lights
+from .limits import LIMIT, LIMIT_WORDS
 from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl")
@@ -59,6 +60,7 @@ def load_mesh(path, default_light=True):
     parts = obj.read_obj(path) if extension == ".obj" else _read_with_trimesh(path, extension)
     parts = _drop_non_finite(path, parts)
     vertices, faces = parts["vertices"], parts["faces"]
+    _check_magnitudes(path, vertices)
     if len(faces) == 0:
         why = parts.get("why_empty")
         raise SceneError(path, "the file contains no triangles" + (f": {why}" if why else ""))
@@ -128,6 +130,18 @@ def _drop_non_finite(path, parts):
                  vertex_colours=(parts["vertex_colours"][used]
                                  if parts["vertex_colours"] is not None else None))
     return parts
+
+
+def _check_magnitudes(path, vertices):
+    """Refuse vertices (as placed by the file's transforms) with a coordinate of magnitude
+    above ptrace.io.limits.LIMIT: finite, but the default camera's distance, the bounds' area
+    and the emitters' power would overflow (the OBJ reader names the line itself)."""
+    with np.errstate(invalid="ignore"):
+        big = ~(np.abs(vertices) <= LIMIT)
+    if big.any():
+        k, axis = np.argwhere(big)[0]
+        raise SceneError(path, f"vertex {k + 1} (as placed by the file's nodes): its "
+                               f"{'xyz'[axis]} {vertices[k, axis]:g} is {LIMIT_WORDS}")
 
 
 def _read_with_trimesh(path, extension):

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import SceneError
 from . import files, mtl
+from .limits import LIMIT, LIMIT_WORDS
 
 IGNORED = {"o", "g", "mg", "vp", "lod", "shadow_obj", "trace_obj", "maplib",
            "usemap", "bevel", "c_interp", "d_interp", "call", "csh"}
@@ -62,6 +63,7 @@ def read_obj(path):
                                    f"which is no OBJ statement, and there are no vertices")
         raise SceneError(path, "the file contains no triangles (no face statements)")
     vertices, colours = _vertex_rows(path, state["v"])
+    _check_magnitudes(path, state, vertices)
     uv_rows = _uv_rows(path, state["vt"])
     corner_v, corner_vt, corner_vn, counts = _corners(path, state, len(vertices),
                                                       len(uv_rows))
@@ -250,6 +252,17 @@ def _vertex_rows(path, rows):
             colours = np.ones((len(rows), 3))
             colours[coloured] = flat[starts[coloured, None] + np.arange(3, 6)]
     return positions, colours
+
+
+def _check_magnitudes(path, state, positions):
+    """Refuse a vertex coordinate that is finite but of magnitude above ptrace.io.limits.LIMIT,
+    naming its line (a NaN or infinite one is dropped with its faces and noted instead)."""
+    with np.errstate(invalid="ignore"):
+        big = np.isfinite(positions) & ~(np.abs(positions) <= LIMIT)
+    if big.any():
+        k, axis = np.argwhere(big)[0]
+        raise SceneError(path, f"vertex {k + 1} (line {_line_number(state, 'v', k)}): its "
+                               f"{'xyz'[axis]} {positions[k, axis]:g} is {LIMIT_WORDS}")
 
 
 def _uv_rows(path, rows):
