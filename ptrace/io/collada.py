@@ -9,7 +9,7 @@ from ..scene import Lights, Materials, Scene, area_weighted_normals
 from .collada_dialect import check_dialect
 from .collada_document import ColladaDocument
 from .collada_geometry import read_mesh, sphere_radius
-from .collada_shading import MaterialTable, apply, read_camera, read_light
+from .collada_shading import MaterialTable, apply, placed, read_camera, read_light
 
 # Pre-multiplied onto the whole scene so that the renderer works Y-up (docs/course.md#up-axis).
 UP_AXIS_MATRICES = {
@@ -182,9 +182,8 @@ class SceneBuilder:
                 self._meshes[geometry] = read_mesh(document, mesh)
             positions, faces = self._meshes[geometry]
             world_positions = positions @ world[:3, :3].T + world[:3, 3]
-            if not np.isfinite(world_positions).all():
-                document.fail(f"{document.describe(node)}: transformed positions of "
-                              f"{document.describe(geometry)} overflow to infinity")
+            placed(document, document.describe(node), world_positions,
+                   f"the transformed positions of {document.describe(geometry)}")
             self.vertex_blocks.append(world_positions)
             self.face_blocks.append(faces + self.vertex_count)
             self.normal_blocks.append(area_weighted_normals(world_positions, faces))
@@ -196,8 +195,8 @@ class SceneBuilder:
             document.fail(f"{document.describe(geometry)} has neither a <mesh> nor a CGL <sphere>")
         scale = float(np.linalg.norm(world[:3, :3] @ np.array([1.0, 0.0, 0.0])))
         center = apply(world, (0, 0, 0))
-        if not (np.isfinite(center).all() and np.isfinite(radius * scale)):
-            document.fail(f"{document.describe(node)}: sphere placement overflows to infinity")
+        placed(document, document.describe(node), np.append(center, radius * scale),
+               f"the placement of the sphere {document.describe(geometry)}")
         self.centers.append(center)
         self.radii.append(radius * scale)
         self.sphere_materials.append(material)

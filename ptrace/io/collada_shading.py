@@ -20,6 +20,7 @@ from ..scene import (
     CameraSpec,
 )
 from .collada_geometry import cgl_techniques
+from .limits import problem
 
 DEFAULT_ALBEDO = (0.5, 0.5, 0.5)
 COMMON_SHADERS = ("phong", "lambert", "blinn")
@@ -37,10 +38,27 @@ def colour(document, element, what):
     transmittance and conductor eta and k of the dialect): a negative one is refused rather than
     rendered as light taken away."""
     values = document.vector(element, 3, what)
+    _within_limits(document, element, values, what)
     if (values < 0).any():
         document.fail(f"{document.describe(element)}: negative {what} "
                       f"({' '.join(f'{v:g}' for v in values)}); it must be at least 0")
     return tuple(values)
+
+
+def _within_limits(document, element, values, what):
+    """Refuse numbers of magnitude above ptrace.io.limits.LIMIT (finite, but what follows from
+    them would overflow), naming the element."""
+    words = problem(values)
+    if words is not None:
+        document.fail(f"{document.describe(element)}: {what}: {words}")
+
+
+def placed(document, where, values, what):
+    """Refuse a placement (world positions, a light's or camera's frame, a sphere) whose
+    numbers pass ptrace.io.limits.LIMIT or overflow to infinity, naming `where`."""
+    words = problem(values)
+    if words is not None:
+        document.fail(f"{where}: {what} would overflow: {words}")
 
 
 def _rgb(document, parent, tag):
@@ -55,6 +73,7 @@ SCALAR_RULES = {"ior": (0.0, False), "roughness": (0.0, True), "alpha": (0.0, Fa
 def _number(document, parent, tag):
     element = document.require_child(parent, tag)
     value = document.scalar(element, tag)
+    _within_limits(document, element, value, tag)
     low, inclusive = SCALAR_RULES[tag]
     if not (value >= low if inclusive else value > low):
         document.fail(f"{document.describe(element)}: {tag} {value:g} must be "
@@ -199,8 +218,7 @@ def read_light(document, light, node, world):
         document.notes.append(f"{document.describe(node)}: a spot light contributes no light "
                               f"(as in the course, whose spot lights return nothing)")
     values = np.concatenate([np.ravel(value) for key, value in record.items() if key != "kind"])
-    if not np.isfinite(values).all():
-        document.fail(f"{document.describe(node)}: light placement overflows to infinity")
+    placed(document, document.describe(node), values, "light placement")
     return record
 
 
@@ -240,7 +258,7 @@ def read_camera(document, camera, world):
                           f"0 and 180 degrees")
     view_point = apply(world, (0, 0, -1))
     position = apply(world, (0, 0, 0))
-    if not (np.isfinite(view_point).all() and np.isfinite(position).all()):
-        document.fail(f"{document.describe(camera)}: camera placement overflows to infinity")
+    placed(document, document.describe(camera), np.concatenate([view_point, position]),
+           "camera placement")
     return CameraSpec(view_point=view_point, position=position, hfov=hfov, vfov=vfov,
                       znear=znear, zfar=zfar)
