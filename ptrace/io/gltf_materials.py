@@ -132,6 +132,15 @@ def material_record(index, material, document, missing, pool, notes, path):
             t = texture("baseColorTexture", pbr.get("baseColorTexture"), alpha, False, "alpha")
             if t is not None:
                 record["alpha_texture"] = t
+        cutoff = values["cutoff"]     # MASK: an alpha at or above it is opaque
+        if mode == "MASK" and cutoff > 1.0:
+            notes.append(f"<{where}>: alphaMode MASK with alphaCutoff {cutoff:g}, above 1 "
+                         f"(the largest alpha): every texel is cut away, so the material is "
+                         f"invisible")
+        elif mode == "MASK" and "alpha_texture" not in record and values["opacity"] < cutoff:
+            notes.append(f"<{where}>: alphaMode MASK with its alpha {values['opacity']:g} "
+                         f"(baseColorFactor) below alphaCutoff {cutoff:g}: it is cut away "
+                         f"everywhere, so the material is invisible")
         if mode == "BLEND":
             notes.append(f"<{where}>: alphaMode BLEND rendered as stochastic transparency (a "
                          f"ray passes with probability 1 - alpha: the mean is the blend)")
