@@ -23,6 +23,8 @@ from numba import njit
 
 from . import budget
 from .errors import PtraceError, require_regular_file
+from .io.limits import problem
+from .io.quiet import library_output
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 FLOOR = 1e-3          # of the table's mean: the density's lower bound (see the docstring)
@@ -43,6 +45,9 @@ class Environment:
         if not np.isfinite(image).all() or (image < 0).any():
             raise PtraceError(f"{self.name}: the environment has negative, NaN or infinite "
                               f"pixels")
+        words = problem(image)    # finite, but every sample it lights would overflow
+        if words is not None:
+            raise PtraceError(f"{self.name}: the environment's radiance: {words}")
         self.image = np.ascontiguousarray(image)
 
     @classmethod
@@ -66,16 +71,26 @@ def load_environment(spec, max_memory=None):
         values = None
     if values is not None and len(values) in (1, 3):
         return Environment.constant(values * 3 if len(values) == 1 else values)
+    if not text.strip():     # OpenImageIO asserts on an empty name (on stderr) before failing
+        raise PtraceError("the environment map's file name is empty")
     require_regular_file(text, "environment map")
     import OpenImageIO as oiio
-    buffer = oiio.ImageBuf(text)
-    if buffer.has_error:
-        raise PtraceError(f"{text}: cannot read the environment map ({buffer.geterror()})")
-    spec = buffer.spec()
+    with library_output() as printed:      # libpng's and OpenImageIO's own lines: folded in
+        buffer = oiio.ImageBuf(text)
+        error = buffer.geterror() if buffer.has_error else None
+        spec = buffer.spec()
+    if error is not None:
+        raise PtraceError(f"{text}: cannot read the environment map "
+                          f"({printed.one_line(error) or 'not a readable image'})")
     pixels = spec.width * spec.height
     budget.Budget.of(max_memory).charge(
         text, f"the {spec.width}x{spec.height} environment map", pixels * budget.ENVIRONMENT_BYTES)
-    pixels = buffer.get_pixels(oiio.FLOAT)
+    with library_output() as printed:
+        pixels = buffer.get_pixels(oiio.FLOAT)
+        error = buffer.geterror() if buffer.has_error else None
+    if error is not None:
+        raise PtraceError(f"{text}: cannot read the environment map "
+                          f"({printed.one_line(error) or 'its pixels could not be decoded'})")
     if pixels is None or pixels.ndim != 3 or pixels.shape[2] < 3:
         channels = None if pixels is None else pixels.shape[-1]
         raise PtraceError(f"{text}: an environment map needs 3 colour channels, found {channels}")
