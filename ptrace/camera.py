@@ -13,6 +13,7 @@ import numpy as np
 from numba import njit, prange
 
 from .errors import PtraceError, SceneError, require_regular_file
+from .io.limits import LIMIT, problem
 
 BASE_WIDTH, BASE_HEIGHT = 800, 600
 # how far a camera's axes may be from unit length and right angles (a file's rounding; the
@@ -38,12 +39,12 @@ class Camera:
 
     def __post_init__(self):
         radius, distance = float(self.lens_radius), float(self.focal_distance)
-        if not radius >= 0.0 or not np.isfinite(radius):
-            raise PtraceError(f"the lens radius (-b) must be a finite number >= 0, got "
+        if not 0.0 <= radius <= LIMIT:
+            raise PtraceError(f"the lens radius (-b) must be a number from 0 to {LIMIT:g}, got "
                               f"{self.lens_radius!r}")
-        if not distance > 0.0 or not np.isfinite(distance):
-            raise PtraceError(f"the focal distance (-d) must be a finite number > 0, got "
-                              f"{self.focal_distance!r}")
+        if not 0.0 < distance <= LIMIT:
+            raise PtraceError(f"the focal distance (-d) must be a number greater than 0 and at "
+                              f"most {LIMIT:g}, got {self.focal_distance!r}")
         rotation = np.asarray(self.camera_to_world, dtype=np.float64)
         if rotation.shape != (3, 3) or not np.isfinite(rotation).all() or not np.allclose(
                 rotation.T @ rotation, np.eye(3), atol=ROTATION_TOLERANCE) \
@@ -52,8 +53,9 @@ class Camera:
                               "three unit axes at right angles, right-handed (a degenerate one "
                               "gives no rays)")
         for name in ("position", "target"):
-            if not np.isfinite(np.asarray(getattr(self, name), dtype=np.float64)).all():
-                raise PtraceError(f"the camera's {name} must be finite")
+            words = problem(getattr(self, name))
+            if words is not None:
+                raise PtraceError(f"the camera's {name}: {words}")
         if not 0 < float(self.screen_dist) < np.inf:
             raise PtraceError(f"the camera's screen distance must be a finite number > 0, got "
                               f"{self.screen_dist!r}")
@@ -187,8 +189,11 @@ def load_camera_settings(path, width, height):
         raise PtraceError(f"{path}: camera settings need at least 28 numbers "
                           f"(hFov vFov aspect near far / pos target / phi theta r minR maxR / "
                           f"3x3 rotation / screenW screenH screenDist), found {numbers.size}")
-    if not np.isfinite(numbers[:28]).all():
+    if not np.isfinite(numbers[:30]).all():
         raise PtraceError(f"{path}: camera settings contain NaN or infinite numbers")
+    words = problem(numbers[:30])
+    if words is not None:
+        raise PtraceError(f"{path}: camera settings: {words}")
     near, far = numbers[3], numbers[4]
     position, target = numbers[5:8], numbers[8:11]
     rotation = numbers[16:25].reshape(3, 3)

@@ -83,6 +83,24 @@ def positive_float(name):
     return parse
 
 
+def length(name, positive):
+    """A parser of a length for the flag `name`: a finite number > 0 (positive) or >= 0, of at
+    most ptrace.io.limits.LIMIT (larger ones overflow what the camera's rays are made of)."""
+    from ..io.limits import LIMIT
+
+    def parse(text):
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
+        if not (value > 0 if positive else value >= 0) or not value <= LIMIT:
+            raise argparse.ArgumentTypeError(
+                f"{name} must be a number {'greater than' if positive else 'from'} 0 "
+                f"{'and at most' if positive else 'to'} {LIMIT:g}, got {text}")
+        return value
+    return parse
+
+
 def define(text):
     """-D's NAME=VALUE: a Mitsuba scene's $NAME and its value, as (name, value)."""
     import re
@@ -177,10 +195,12 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     add("--no-default-light", action="store_true",
         help="never give a mesh file without lights the default ambient light (by default it "
              "gets one unless its emissive surfaces light it)")
-    add("-b", "--lens-radius", type=float, default=None, metavar="R",
+    add("-b", "--lens-radius", type=length("the lens radius (-b)", positive=False),
+        default=None, metavar="R",
         help="thin-lens aperture radius (the course's 3-2 -b; default 0: a pinhole, or the -c "
              "file's lensRadius)")
-    add("-d", "--focal-distance", type=float, default=None, metavar="D",
+    add("-d", "--focal-distance", type=length("the focal distance (-d)", positive=True),
+        default=None, metavar="D",
         help="thin-lens focal distance along the view axis (the course's -d; default 4.7, or "
              "the -c file's focalDistance, or for --eye and a mesh file's default camera the "
              "distance to the point looked at)")
@@ -232,11 +252,36 @@ def parse(parser, argv):
     two words read as (batch, tolerance)."""
     from .cli_camera import attach_negative_vectors
     args = parser.parse_args(attach_negative_vectors(argv))
+    check_numbers(args)
     if args.adaptive is not None:
         batch = int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
         tolerance = positive_float("adaptive tolerance")(args.adaptive[1])
         args.adaptive = (batch, tolerance)
     return args
+
+
+def check_numbers(args):
+    """Refuse, in one line naming the flag, a vector flag (--eye, --look-at, --up) or -e's
+    colour whose numbers are finite but beyond ptrace.io.limits.LIMIT (the camera's distance
+    and every sample would overflow: a black image), and -e's empty file name."""
+    from ..io.limits import problem
+    for flag, name in (("--eye", "eye"), ("--look-at", "look_at"), ("--up", "up")):
+        value = getattr(args, name, None)
+        words = None if value is None else problem(value)
+        if words is not None:
+            raise UsageError(f"{flag} {','.join(f'{v:g}' for v in value)}: {words}")
+    text = getattr(args, "environment", None)
+    if text is None:
+        return
+    if not text.strip():
+        raise UsageError("-e: the environment is empty: give an image file or a colour R,G,B")
+    try:
+        colour = [float(part) for part in text.split(",")]
+    except ValueError:
+        return   # a file name
+    words = problem(colour)
+    if words is not None:
+        raise UsageError(f"-e {text}: the environment's colour: {words}")
 
 
 # --- from the arguments to a render --------------------------------------------------------
