@@ -1,14 +1,20 @@
 """Image output through OpenImageIO: the course's 8-bit PNG curve, or linear float EXR.
 
 Files are written whole or not at all: into a temporary file beside the target, checked (the
-writer's error state, fsync, the file read back), then renamed.
+writer's error state, fsync, the file read back), then renamed. A temporary file's name carries
+the host and the process id of its writer (.ptrace-HOST-PID-XXXXXXXX.exr), so that a run killed
+before it could remove its own (kill -9) does not leave it for good: the next write into that
+folder removes the temporary files of this host's processes that have ended.
 """
 import os
+import re
+import socket
 import tempfile
 
 import numpy as np
 
 from .errors import PtraceError
+from .io.quiet import library_output
 
 FORMATS = (".png", ".exr")
 
@@ -54,13 +60,60 @@ def check_output_path(path):
     if os.path.lexists(path) and not os.path.islink(path) and not os.path.isfile(path):
         raise PtraceError(f"cannot write {path}: it exists and is not a regular file")
     try:
-        handle, probe = tempfile.mkstemp(prefix=".ptrace-probe-", dir=directory)
+        handle, probe = tempfile.mkstemp(prefix=_temporary_prefix() + "probe-", dir=directory)
         os.close(handle)
         os.remove(probe)
     except OSError as error:
         raise PtraceError(f"cannot write {path}: cannot create a file in {directory} "
                           f"({_reason(error)})") from None
     return extension
+
+
+def _host():
+    """This machine's name as a temporary file's name may hold it (no '-' or '/')."""
+    return re.sub(r"[^A-Za-z0-9_.]", "_", socket.gethostname() or "host")[:64]
+
+
+def _temporary_prefix():
+    """.ptrace-HOST-PID-: how this process's temporary files start."""
+    return f".ptrace-{_host()}-{os.getpid()}-"
+
+
+TEMPORARY = re.compile(r"\.ptrace-(?P<host>[A-Za-z0-9_.]+)-(?P<pid>\d+)-")
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, OSError):
+        return True     # another user's process (or a pid the system cannot take): kept
+    return True
+
+
+def remove_dead_temporaries(directory):
+    """Remove the temporary files in `directory` that this host's ptrace processes left when
+    they were killed before they could (their process has ended); best effort, and never a
+    file of a process still running, of another host or of another user. Returns their names."""
+    removed = []
+    host = _host()
+    try:
+        names = os.listdir(directory)
+    except OSError:
+        return removed
+    for name in names:
+        match = TEMPORARY.match(name)
+        if match is None or match["host"] != host or _alive(int(match["pid"])):
+            continue
+        path = os.path.join(directory, name)
+        try:
+            if os.lstat(path).st_uid == os.getuid():
+                os.remove(path)
+                removed.append(name)
+        except OSError:
+            pass
+    return removed
 
 
 def _reason(error):
@@ -161,15 +214,17 @@ def write_images(images):
             pixels, pixel_type, names = _pixels(path, extension, image.get("radiance"),
                                                 image.get("eight_bit"), image.get("extra", ()))
             directory = os.path.dirname(os.path.abspath(path))
+            remove_dead_temporaries(directory)
             try:
-                handle, temporary = tempfile.mkstemp(prefix=".ptrace-", suffix=extension,
-                                                     dir=directory)
+                handle, temporary = tempfile.mkstemp(prefix=_temporary_prefix(),
+                                                     suffix=extension, dir=directory)
                 os.close(handle)
             except OSError as error:
                 raise _failure(path, directory, error) from None
             staged.append((temporary, path))
             try:
-                _write_temporary(temporary, pixels, pixel_type, names)
+                with library_output():    # the writers' own lines: their errors are read
+                    _write_temporary(temporary, pixels, pixel_type, names)   # from OIIO's state
                 os.chmod(temporary, 0o644)
             except (OSError, _WriteFailed) as error:
                 raise _failure(path, directory, error) from None
