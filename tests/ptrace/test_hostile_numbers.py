@@ -1,0 +1,328 @@
+"""Extreme numbers from flags and files (issue 43, item 1), library text on stderr (item 2) and
+a killed render's temporary file (item 3).
+
+Every number from a flag or a file is finite and within ptrace.io.limits.LIMIT (1e30: its
+products stay finite in float64), or it is refused in one line naming the flag, or the file
+and the element, with exit code 2: never a traceback, never a message about another flag, never
+numpy's own warnings. A value the format allows but that makes nothing visible gets a note.
+What OpenImageIO and libpng print themselves is folded into ptrace's one line. A render killed
+while it writes leaves a temporary file that the next write into the folder removes; the old
+output stays intact."""
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from files_by_hand import QUAD, QUAD_FACES, QUAD_UV_GLTF, gltf
+
+import ptrace
+from ptrace.app import cli
+from ptrace.image import read_image, write_image
+from ptrace.io.limits import LIMIT
+
+from console import SHIPPED, ptrace_command
+
+TINY = ["-r", 32, 24, "-s", 1, "-m", 1, "-t", 1]
+
+
+def one_line(capsys, *args):
+    """(exit code, the one stderr line) of the CLI run in this process; fails on more lines."""
+    code = cli.main([str(a) for a in args])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1, lines
+    return code, lines[0]
+
+
+def in_a_process(*args, cwd=None):
+    """(exit code, stderr lines, stdout) of the console script: what C libraries write to file
+    descriptor 2 is seen here, which capsys cannot see."""
+    result = subprocess.run(ptrace_command() + [str(a) for a in args], capture_output=True,
+                            text=True, timeout=300, cwd=cwd, stdin=subprocess.DEVNULL)
+    return result.returncode, result.stderr.strip().splitlines(), result.stdout
+
+
+# --- numbers from files ---------------------------------------------------------------------
+
+def emissive_obj(folder, ke="1e308 1e308 1e308"):
+    """A lamp quad (Ke) above a floor, its material in lamp.mtl."""
+    (folder / "lamp.mtl").write_text(f"newmtl lamp\nKe {ke}\nnewmtl floor\nKd 0.5 0.5 0.5\n")
+    path = folder / "lamp.obj"
+    path.write_text("mtllib lamp.mtl\nv -1 1 -1\nv 1 1 -1\nv 1 1 1\nv -1 1 1\n"
+                    "v -5 -1 -5\nv 5 -1 -5\nv 5 -1 5\nv -5 -1 5\n"
+                    "usemtl lamp\nf 1 3 2\nf 1 4 3\nusemtl floor\nf 5 6 7\nf 5 7 8\n")
+    return path
+
+
+def emissive_gltf(path, strength):
+    material = {"name": "glow", "emissiveFactor": [1.0, 1.0, 1.0],
+                "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": strength}}}
+    gltf(path, [dict(positions=QUAD, indices=QUAD_FACES.reshape(-1), uv=QUAD_UV_GLTF,
+                     material=0)], materials=[material],
+         document={"extensionsUsed": ["KHR_materials_emissive_strength"]})
+    return path
+
+
+def test_an_mtl_emission_of_1e308_is_refused_naming_the_mtl_and_the_material(tmp_path, capsys):
+    """It used to crash the default-light check (its emitter weights overflowed to inf, and
+    numpy's choice raised 'Probabilities contain NaN'): a traceback from a finite value."""
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", emissive_obj(tmp_path))
+    assert code == 2 and line.startswith("ptrace: error: ") and "lamp.mtl" in line, line
+    assert "material 'lamp'" in line and "Ke" in line and "1e+308" in line, line
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_a_gltf_emissive_strength_of_1e308_is_refused_naming_the_file(tmp_path, capsys):
+    path = emissive_gltf(tmp_path / "glow.gltf", 1e308)
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+    assert code == 2 and "glow.gltf" in line and "material 'glow'" in line, line
+    assert "emissiveStrength" in line and "1e+308" in line, line
+
+
+def test_emission_at_the_limit_loads_and_its_share_is_finite(tmp_path):
+    """The largest emission taken still gives the default-light rule a number, not a NaN."""
+    scene = ptrace.load(emissive_obj(tmp_path, ke=f"{LIMIT:g} {LIMIT:g} {LIMIT:g}"))
+    assert any("emissive surfaces light it" in note for note in scene.notes), scene.notes
+
+
+def test_the_default_light_rule_survives_an_overflowing_emission():
+    """Called with an emission whose luminance x area overflows (not from a file: the loaders
+    refuse it), the rule still answers: the emitters light the file."""
+    from ptrace.io.default_light import default_lights
+    from ptrace.scene import DIFFUSE, EMISSION, Materials
+    materials = Materials.from_records([{"kind": EMISSION, "emission": (1e308,) * 3},
+                                        {"kind": DIFFUSE, "albedo": (0.5,) * 3}])
+    vertices = np.array([[-1, 1, -1], [1, 1, -1], [1, 1, 1], [-1, 1, 1], [-5, -1, -5],
+                         [5, -1, -5], [5, -1, 5], [-5, -1, 5]], float) * 1e3
+    faces = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7]])
+    lights, note = default_lights(vertices, faces, np.array([0, 0, 1, 1]), materials,
+                                  np.zeros((0, 3, 2)), None)
+    assert lights == [] and "light it" in note, note
+
+
+@pytest.mark.parametrize("coordinate", ["1e308", "-1e308", "1e31"])
+def test_an_obj_vertex_beyond_the_limit_is_refused_naming_the_file_and_line(tmp_path, capsys,
+                                                                             coordinate):
+    """It used to print numpy's overflow warnings, then blame -d (never given): the default
+    camera's distance had overflowed."""
+    path = tmp_path / "huge.obj"
+    path.write_text(f"v -1 -1 0\nv 1 -1 0\nv {coordinate} 1 {coordinate}\nf 1 2 3\n")
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+    assert code == 2 and "huge.obj" in line and "vertex 3 (line 3)" in line, line
+    assert "-d" not in line and "warning" not in line and "1e+30" in line, line
+
+
+def test_a_gltf_vertex_beyond_the_limit_is_refused_naming_the_file(tmp_path, capsys):
+    """glTF's float32 positions reach 3.4e38, past the limit."""
+    path = tmp_path / "huge.glb"
+    gltf(path, [dict(positions=QUAD * 1e38, indices=QUAD_FACES.reshape(-1))])
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+    assert code == 2 and "huge.glb" in line and "vertex" in line and "1e+30" in line, line
+
+
+def test_a_collada_sphere_of_radius_1e308_is_refused_naming_the_file_and_node(
+        tmp_path, capsys, course_scene):
+    """It used to end in an error about the camera's rotation, naming no file."""
+    text = course_scene("sky/CBspheres.dae").read_text(encoding="utf-8")
+    assert "<radius>.3</radius>" in text
+    path = tmp_path / "spheres.dae"
+    path.write_text(text.replace("<radius>.3</radius>", "<radius>1e308</radius>", 1))
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+    assert code == 2 and "spheres.dae" in line and "<node" in line and "sphere" in line, line
+    assert "rotation" not in line and "1e+308" in line, line
+
+
+def test_a_collada_colour_beyond_the_limit_is_refused_naming_the_element(tmp_path,
+                                                                       course_scene):
+    text = (course_scene("simple/plane.dae")).read_text(encoding="utf-8")
+    old = '<color sid="color">1 1 1</color>'
+    assert old in text
+    path = tmp_path / "bright.dae"
+    path.write_text(text.replace(old, '<color sid="color">1e31 1 1</color>', 1))
+    with pytest.raises(ptrace.SceneError, match=r"bright\.dae: <color.*1e\+31 is beyond"):
+        ptrace.load(path)
+
+
+def test_a_camera_file_beyond_the_limit_is_refused_naming_the_file(tmp_path, capsys):
+    numbers = [73.7, 60, 4 / 3, 0.01, 100, 1e308, 0, 0, 0, 0, 0, 1.5708, 1.5708, 5, 1, 50,
+               1, 0, 0, 0, 1, 0, 0, 0, 1, 800, 600, 519.6, 5, 0]
+    path = tmp_path / "cam.txt"
+    path.write_text(" ".join(str(x) for x in numbers))
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", "-c", path, SHIPPED)
+    assert code == 2 and "cam.txt" in line and "1e+308" in line, line
+
+
+# --- numbers from flags ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("args, flag", [
+    (["--eye", "1e308,1e308,1e308"], "--eye"),
+    (["--eye", "1,2,3", "--look-at", "0,1e31,0"], "--look-at"),
+    (["--eye", "1,2,3", "--up", "0,1e308,0"], "--up"),
+    (["-b", "1e308"], "-b"),
+    (["-b", "nan"], "-b"),
+    (["-d", "1e308"], "-d"),
+    (["-d", "inf"], "-d"),
+    (["-e", "1e308,1e308,1e308"], "-e"),
+    (["-e", "1e31"], "-e"),
+])
+def test_a_flag_beyond_the_limit_is_refused_in_one_line_naming_it(tmp_path, capsys, args,
+                                                                  flag):
+    """Each used to render a black image with exit code 0 and no word (the viewer refused the
+    same --eye; -e's samples were all dropped as non-finite)."""
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", *args, SHIPPED)
+    assert code == 2 and line.startswith("ptrace: error: ") and flag in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_python_api_refuses_the_same_numbers():
+    scene = ptrace.load(SHIPPED)
+    camera = ptrace.course_camera(scene, 8, 6)
+    for lens in (dict(lens_radius=1e308), dict(focal_distance=1e308)):
+        with pytest.raises(ptrace.PtraceError, match="1e\\+30"):
+            camera.with_lens(**lens)
+    from ptrace.environment import Environment, load_environment
+    with pytest.raises(ptrace.PtraceError, match="beyond"):
+        Environment.constant((1e308, 1e308, 1e308))
+    with pytest.raises(ptrace.PtraceError, match="empty"):
+        load_environment("")
+
+
+def test_flags_at_the_limit_are_taken():
+    """The limit itself is not refused (the render's image is another matter: see the notes)."""
+    args = cli.parse(cli.build_parser(), ["-b", f"{LIMIT:g}", "-d", f"{LIMIT:g}", "-e",
+                                          f"{LIMIT:g},0,0", "--eye", f"{-LIMIT:g},0,0",
+                                          str(SHIPPED)])
+    assert args.lens_radius == LIMIT and args.focal_distance == LIMIT
+
+
+# --- a value that makes nothing visible: a note ------------------------------------------------
+
+SUN = {"extensions": {"KHR_lights_punctual": {"lights": [{"type": "directional",
+                                                          "intensity": 2.0}]}},
+       "extensionsUsed": ["KHR_lights_punctual"]}
+
+
+def cut_quad_over_a_floor(path, cutoff):
+    """A white quad (alphaMode MASK, alphaCutoff `cutoff`) over a red floor the sun lights."""
+    floor = dict(positions=QUAD * [2.0, 2.0, 0.0] + [0.0, 0.0, -1.0],
+                 indices=QUAD_FACES.reshape(-1), uv=QUAD_UV_GLTF, material=0)
+    front = dict(positions=QUAD, indices=QUAD_FACES.reshape(-1), uv=QUAD_UV_GLTF, material=1)
+    red = {"name": "floor", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1.0],
+                                                     "metallicFactor": 0.0}}
+    white = {"name": "front", "alphaMode": "MASK", "alphaCutoff": cutoff,
+             "pbrMetallicRoughness": {"metallicFactor": 0.0}}
+    gltf(path, [floor, front], materials=[red, white],
+         nodes=[{"mesh": 0}, {"mesh": 1}, {"extensions": {"KHR_lights_punctual": {"light": 0}}}],
+         extensions=SUN)
+    return path
+
+
+def test_an_alpha_cutoff_above_one_is_noted_once_and_the_rest_still_renders(tmp_path, capsys):
+    """alphaCutoff 2 is valid glTF, but no alpha reaches it: every texel is cut away. It used
+    to render so without a word."""
+    path = cut_quad_over_a_floor(tmp_path / "cut.gltf", 2.0)
+    output = tmp_path / "x.exr"
+    code = cli.main([str(a) for a in TINY + ["-f", output, path]])
+    err = capsys.readouterr().err.strip().splitlines()
+    said = [line for line in err if "alphaCutoff" in line]
+    assert code == 0 and len(said) == 1, err
+    assert said[0].startswith("ptrace: note: <material 'front'>") and "invisible" in said[0]
+    assert read_image(output)[..., 0].max() > 0   # the floor, seen where the quad was
+
+
+def test_an_alpha_cutoff_within_range_has_no_such_note(tmp_path):
+    scene = ptrace.load(cut_quad_over_a_floor(tmp_path / "fine.gltf", 0.5))
+    assert not any("alphaCutoff" in note for note in scene.notes), scene.notes
+
+
+# --- library text on stderr --------------------------------------------------------------------
+
+def test_an_empty_environment_name_is_one_line_without_openimageio_s_assertion(tmp_path):
+    code, err, _ = in_a_process(*TINY, "-f", tmp_path / "x.png", "-e", "", SHIPPED)
+    assert code == 2 and len(err) == 1 and err[0].startswith("ptrace: error: -e"), err
+
+
+def truncated_png():
+    import io
+
+    import PIL.Image
+    noise = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    stream = io.BytesIO()
+    PIL.Image.fromarray(noise).save(stream, "PNG")
+    data = stream.getvalue()
+    return data[:len(data) // 2]   # cut in its pixel data (IDAT)
+
+
+def test_a_truncated_png_texture_is_one_note_line_without_libpng_s(tmp_path):
+    (tmp_path / "cut.png").write_bytes(truncated_png())
+    (tmp_path / "scene.mtl").write_text("newmtl m\nKd 1 1 1\nmap_Kd cut.png\n")
+    path = tmp_path / "scene.obj"
+    path.write_text("mtllib scene.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\n"
+                    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n")
+    code, err, out = in_a_process("--info", path)
+    assert code == 0 and err == [], err     # nothing from libpng on the terminal
+    import json
+    notes = [n for n in json.loads(out)["notes"] if "cut.png" in n]
+    assert len(notes) == 1 and "\n" not in notes[0] and "libpng" not in notes[0], notes
+    assert "could not be read as an image" in notes[0], notes
+
+
+def test_a_truncated_png_environment_is_one_error_line(tmp_path):
+    (tmp_path / "sky.png").write_bytes(truncated_png())
+    code, err, _ = in_a_process(*TINY, "-f", tmp_path / "x.png", "-e", tmp_path / "sky.png",
+                                SHIPPED)
+    assert code == 2 and len(err) == 1 and "sky.png" in err[0], err
+    assert "libpng" not in err[0], err
+
+
+# --- a render killed while it writes -------------------------------------------------------
+
+KILLED_WRITER = textwrap.dedent("""
+    import sys, time
+    import numpy as np
+    import ptrace.image as image
+
+    def stuck(temporary, *args):     # the temporary file exists, empty, as when killed
+        print("writing", flush=True)
+        time.sleep(600)
+    image._write_temporary = stuck
+    image.write_image(sys.argv[1], np.zeros((4, 5, 3)))
+""")
+
+
+def test_a_render_killed_while_it_writes_leaves_nothing_after_the_next_write(tmp_path):
+    """kill -9 while the image is written: the old file stays whole; the 0-byte temporary
+    file the killed process could not remove is removed by the next write into the folder."""
+    target = tmp_path / "out.exr"
+    write_image(target, np.full((4, 5, 3), 0.25))
+    before = target.read_bytes()
+    child = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(target)],
+                             stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "writing"   # its readiness signal
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=60)
+    left = [p.name for p in tmp_path.iterdir() if p.name != "out.exr"]
+    assert len(left) == 1 and left[0].startswith(".ptrace-") and str(child.pid) in left[0]
+    assert target.read_bytes() == before
+    write_image(tmp_path / "other.png", np.full((4, 5, 3), 0.5))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.png", "out.exr"]
+    assert target.read_bytes() == before
+
+
+def test_only_temporaries_of_ended_processes_of_this_host_are_removed(tmp_path):
+    from ptrace.image import _host, remove_dead_temporaries
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)
+    dead = int(ended.stdout)
+    names = {f".ptrace-{_host()}-{dead}-abc.exr": False,        # removed
+             f".ptrace-{_host()}-{os.getpid()}-abc.exr": True,  # this process: running
+             f".ptrace-{_host()}x-{dead}-abc.exr": True,         # another host's
+             ".ptrace-abc.exr": True, "picture.exr": True}
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+    assert remove_dead_temporaries(tmp_path) == [f".ptrace-{_host()}-{dead}-abc.exr"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(n for n, k in names.items() if k)
