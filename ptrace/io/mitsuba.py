@@ -263,8 +263,8 @@ class Builder:
     def _yfov(self, sensor, aspect):
         """The vertical field of view (degrees) of the sensor's fov on its fov_axis."""
         axis = sensor.string("fov_axis", "x")
-        if sensor.has("focal_length"):
-            text = str(sensor.get("focal_length")).strip().removesuffix("mm")
+        if sensor.has("focal_length") or not sensor.has("fov"):     # Mitsuba's default: 50mm
+            text = str(sensor.get("focal_length", "50mm")).strip().removesuffix("mm")
             try:
                 focal = float(text)
             except ValueError:
@@ -272,9 +272,7 @@ class Builder:
             fov, axis = math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * focal))), \
                 "diagonal"
         else:
-            fov = sensor.float("fov", None)
-            if fov is None:
-                sensor.fail("has neither fov nor focal_length")
+            fov = sensor.float("fov")
         if not 0 < fov < 180:
             sensor.fail(f"fov {fov:g} is not between 0 and 180 degrees")
         half = math.tan(math.radians(fov) / 2)

@@ -129,7 +129,7 @@ class Reader:
 
     def read(self):
         """The <scene> Plugin of the file, its references resolved."""
-        root = self._parse_file(self.path, None)
+        root = self._parse_file(self.path)
         self.version = self._version(root)
         scene = Plugin("scene", "scene", None, self.path, "<scene>")
         self._children(root, scene, self.path, 0)
@@ -142,13 +142,7 @@ class Reader:
                 holder.params[name] = self.ids[ident]
         return scene
 
-    def _parse_file(self, path, element):
-        real = os.path.realpath(path)
-        if real in self.including:
-            chain = " -> ".join(os.path.basename(p) for p in self.including + [real])
-            raise SceneError(path, f"{describe(element)}: includes itself ({chain})")
-        if len(self.including) >= MAX_INCLUDE_DEPTH:
-            raise SceneError(path, f"includes nested more than {MAX_INCLUDE_DEPTH} deep")
+    def _parse_file(self, path):
         require_regular_file(path)
         try:
             with open(path, "rb") as stream:
@@ -271,13 +265,21 @@ class Reader:
         return camel_to_snake(name) if (self.upgrade and name is not None) else name
 
     def _include(self, element, holder, path, depth):
+        """The children of the included file's <scene>, read into holder. An include of a
+        file that is including it (itself, however indirectly) is refused in the file that
+        closes the cycle."""
         target = self._resolve(describe(element), path,
                                self.required(element, "filename", path))
-        root = None
+        chain = self.including + [os.path.realpath(path)]
+        if target in chain:
+            names = " -> ".join(os.path.basename(p) for p in chain + [target])
+            raise SceneError(path, f"{describe(element)}: includes itself ({names})")
+        if len(chain) > MAX_INCLUDE_DEPTH:
+            raise SceneError(path, f"{describe(element)}: includes nested more than "
+                                   f"{MAX_INCLUDE_DEPTH} deep")
         self.including.append(os.path.realpath(path))
         try:
-            root = self._parse_file(target, element)
-            self._children(root, holder, target, depth + 1)
+            self._children(self._parse_file(target), holder, target, depth + 1)
         finally:
             self.including.pop()
 

@@ -347,6 +347,14 @@ REFUSALS = {
     "medium": ('<shape type="sphere"><medium type="homogeneous" name="interior"/></shape>',
                "participating media"),
     "entity": (None, "refused unsafe XML"),
+    "wrong_type": ('<shape type="sphere"><string name="radius" value="big"/></shape>',
+                   "parameter 'radius' must be a number"),
+    "not_a_number": ('<shape type="sphere"><float name="radius" value="1e999"/></shape>',
+                     "NaN or infinite"),
+    "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
+                        '</transform></sensor>', "mirrors the image"),
+    "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
+                       'value="400:0.1, 700:0.5"/></bsdf></shape>', "wavelength:value"),
     "old_version": ("version 1.0", "versions 0.4 to 0.6"),
 }
 
@@ -369,6 +377,33 @@ def test_refusals_are_one_line_and_exit_2(tmp_path, capsys, case):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("ptrace: error: ") and fragment in err
     assert "Traceback" not in err
+
+
+def test_an_include_cycle_is_refused_in_the_file_that_closes_it(tmp_path):
+    write(tmp_path, '<include filename="scene.xml"/>', name="part.xml")
+    path = write(tmp_path, '<include filename="part.xml"/>')
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert caught.value.path.endswith("part.xml")
+    assert "scene.xml -> part.xml -> scene.xml" in caught.value.message
+
+
+@pytest.mark.parametrize("sensor", [
+    "",                                                     # Mitsuba's default: 50mm
+    '<string name="focal_length" value="35mm"/>',
+    '<float name="fov" value="50"/><string name="fov_axis" value="smaller"/>',
+    '<float name="fov" value="50"/><string name="fov_axis" value="larger"/>',
+])
+def test_field_of_view_as_mitsuba_reads_it(tmp_path, sensor):
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    path = write(tmp_path, f'<sensor type="perspective">{sensor}<film type="hdrfilm"><integer '
+                           f'name="width" value="48"/><integer name="height" value="64"/>'
+                           f'</film></sensor><shape type="sphere"/>')
+    x_fov = mi.traverse(mi.load_file(str(path)).sensors()[0])["x_fov"]
+    x_fov = float(x_fov[0] if hasattr(x_fov, "__len__") else x_fov)
+    yfov = math.degrees(2 * math.atan(math.tan(math.radians(x_fov) / 2) * 64 / 48))
+    assert ptrace.load(path).file_cameras[0].yfov == pytest.approx(yfov, rel=1e-6)
 
 
 def test_defines_on_the_command_line(tmp_path, capsys):
