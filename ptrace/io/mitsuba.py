@@ -229,6 +229,10 @@ class Builder:
             if not (width >= 1 and height >= 1):
                 film.fail("width and height must be at least 1")
             self.settings["resolution"] = (width, height)
+            if any(film.has(k) for k in ("crop_offset_x", "crop_offset_y", "crop_width",
+                                         "crop_height")):
+                self.notes.append("<film>: its crop window ignored: ptrace renders the whole "
+                                  "image (-p crops)")
             for child in film.children:
                 child._read.update(child.params)
             film._read.update(film.params)

@@ -97,6 +97,7 @@ class Materials:
         self.reader, self.pool, self.notes = reader, pool, notes
         self.records, self._index = [], {}
         self.textured = False
+        self.sided = False      # reading the BSDF inside a twosided
 
     def index(self, bsdf):
         key = id(bsdf) if bsdf is not None else None
@@ -140,11 +141,15 @@ class Materials:
 
     def _twosided(self, bsdf):
         inner = self._nested(bsdf)
+        self.sided = True
         if len(inner) > 1 and inner[0] is not inner[1]:
             self.note(bsdf, "two different sides: ptrace's surfaces have one material, the "
                             "front one is used on both")
         bsdf._read.update(bsdf.params)
-        return dict(self.record(inner[0]))
+        try:
+            return dict(self.record(inner[0]))
+        finally:
+            self.sided = False
 
     def _mask(self, bsdf):
         inner = self._nested(bsdf)
@@ -160,6 +165,9 @@ class Materials:
         return record
 
     def _diffuse(self, bsdf):
+        if not self.sided:
+            self.note(bsdf, "outside a twosided: ptrace's reflects on both sides, where "
+                            "Mitsuba's is black from behind")
         record = {"kind": DIFFUSE}
         self._albedo(bsdf, "reflectance", record, (0.5, 0.5, 0.5))
         return record
@@ -275,7 +283,8 @@ class Materials:
         r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
         specular = self._bounded(bsdf, "specular_reflectance",
                                  bsdf.colour("specular_reflectance", Colour((1.0,) * 3)))
-        bsdf.boolean("nonlinear", False)
+        if bsdf.boolean("nonlinear", False):
+            self.note(bsdf, "nonlinear ignored (ptrace's glossy base is linear in its colour)")
         record = {"kind": GLOSSY, "alpha": self._alpha(bsdf) if rough else MIN_ALPHA,
                   "specular": tuple(min(r0 * s, 1.0) for s in specular)}
         self._albedo(bsdf, "diffuse_reflectance", record, (0.5, 0.5, 0.5))
@@ -314,8 +323,10 @@ class Materials:
         """The pool index of a <texture type="bitmap">."""
         if texture.type != "bitmap":
             texture.fail(f"texture type {texture.type!r} is not supported (only bitmap)")
-        if texture.has("to_uv"):
-            texture.fail("to_uv (a transform of the texture coordinates) is not supported")
+        for name in ("to_uv", "uscale", "vscale", "uoffset", "voffset"):
+            if texture.has(name):
+                texture.fail(f"{name} (a transform of the texture coordinates) is not "
+                             f"supported")
         name = texture.string("filename")
         if name is None:
             texture.fail("has no filename")

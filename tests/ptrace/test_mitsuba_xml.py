@@ -266,6 +266,14 @@ def test_one_note_per_kind_through_the_cli(tmp_path, capsys):
     notes = "\n".join(json.loads(capsys.readouterr().out)["notes"])
     assert notes.count("Schlick") == 1
     assert "'bogus' ignored" in notes
+    assert notes.count("outside a twosided") == 1
+
+
+def test_a_twosided_diffuse_is_not_noted_as_one_sided(tmp_path):
+    scene = ptrace.load(write(tmp_path, '<shape type="sphere"><bsdf type="twosided"><bsdf '
+                                        'type="diffuse"/></bsdf></shape><shape type="cube">'
+                                        '<bsdf type="diffuse"/></shape>'))
+    assert sum("outside a twosided" in note for note in scene.notes) == 1
 
 
 # --- emitters and the sensor ----------------------------------------------------------------
@@ -353,6 +361,9 @@ REFUSALS = {
                      "NaN or infinite"),
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
+    "uv_scale": ('<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" '
+                 'name="reflectance"><string name="filename" value="t.png"/><float '
+                 'name="uscale" value="4"/></texture></bsdf></shape>', "uscale"),
     "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
                        'value="400:0.1, 700:0.5"/></bsdf></shape>', "wavelength:value"),
     "old_version": ("version 1.0", "versions 0.4 to 0.6"),
