@@ -33,9 +33,10 @@ from . import mitsuba_shapes as shapes
 from .files import describe_failure
 from .materials import TexturePool, read_image_file
 from .mitsuba_materials import Materials as MaterialTable
+from .mitsuba_serialized import read_serialized
 from .mitsuba_xml import Colour, Plugin, Reader
 
-SHAPES = ("obj", "ply", "rectangle", "cube", "disk", "sphere")
+SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 INTEGRATORS = ("path", "volpath", "volpathmis", "direct", "ptracer", "moment", "aov")
 
 
@@ -113,6 +114,13 @@ class Builder:
                 shape.fail("has no filename")
             vertices, faces, uv = shapes.mesh_file(shape, self.reader.resolve(shape, name),
                                                    self.notes)
+        elif shape.type == "serialized":
+            name = shape.string("filename")
+            if name is None:
+                shape.fail("has no filename")
+            vertices, faces, uv, flat = read_serialized(self.reader.resolve(shape, name),
+                                                        shape.integer("shape_index", 0))
+            shape.params.setdefault("face_normals", flat)
         else:
             vertices, faces, uv = getattr(shapes, shape.type)()
         vertices, faces, uv = shapes.placed(shape, vertices, faces, uv)

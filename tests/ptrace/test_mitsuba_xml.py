@@ -3,6 +3,8 @@ every refusal as one line and exit 2, and a render whose mean agrees with Mitsub
 render of the same file. Every scene is written here, into tmp_path."""
 import json
 import math
+import struct
+import zlib
 
 import numpy as np
 import pytest
@@ -200,6 +202,69 @@ def write_texture(path):
     out.open(str(path), oiio.ImageSpec(8, 8, 3, oiio.FLOAT))
     out.write_image(pixels)
     out.close()
+
+
+def serialized(meshes, version=4):
+    """The bytes of a Mitsuba serialized file of these (vertices, faces, uv or None) meshes,
+    single precision, written from the format's description."""
+    chunks, offsets, at = [], [], 0
+    for vertices, faces, uv in meshes:
+        flags = 0x1000 | (0x0002 if uv is not None else 0)
+        body = struct.pack("<I", flags) + (b"part\0" if version == 4 else b"")
+        body += struct.pack("<QQ", len(vertices), len(faces))
+        body += np.asarray(vertices, "<f4").tobytes()
+        body += b"" if uv is None else np.asarray(uv, "<f4").tobytes()
+        body += np.asarray(faces, "<u4").tobytes()
+        chunk = struct.pack("<HH", 0x041C, version) + zlib.compress(body)
+        offsets.append(at)
+        chunks.append(chunk)
+        at += len(chunk)
+    width = "<Q" if version == 4 else "<I"
+    return b"".join(chunks) + b"".join(struct.pack(width, o) for o in offsets) + \
+        struct.pack("<I", len(meshes))
+
+
+@pytest.mark.parametrize("version", [3, 4])
+def test_serialized_meshes_read_as_mitsuba_reads_them(tmp_path, version):
+    square = ([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]],
+              [[0, 0], [1, 0], [1, 1], [0, 1]])
+    triangle = ([[0, 0, 1], [2, 0, 1], [0, 3, 1]], [[0, 1, 2]], None)
+    (tmp_path / "parts.serialized").write_bytes(serialized([square, triangle], version))
+    path = write(tmp_path, '<shape type="serialized"><string name="filename" '
+                           'value="parts.serialized"/><integer name="shape_index" value="1"/>'
+                           '<transform name="to_world"><translate x="5"/></transform></shape>')
+    geometry = ptrace.load(path).geometry
+    np.testing.assert_allclose(geometry.vertices[geometry.faces[0]],
+                               [[5, 0, 1], [7, 0, 1], [5, 3, 1]])
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    shape = mi.load_file(str(path)).shapes()[0]
+    theirs = np.array(mi.traverse(shape)["vertex_positions"]).reshape(-1, 3)
+    np.testing.assert_allclose(np.sort(theirs, axis=0), np.sort(geometry.vertices, axis=0))
+
+
+@pytest.mark.parametrize("lie, fragment", [
+    ("count", "more than its"),
+    ("index", "past its 3 vertices"),
+    ("table", "table of meshes claims"),
+])
+def test_a_serialized_file_that_lies_about_its_sizes(tmp_path, capsys, lie, fragment):
+    vertices, faces = [[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]
+    if lie == "index":
+        faces = [[0, 1, 7]]
+    data = serialized([(vertices, faces, None)])
+    if lie == "count":      # a header claiming a billion vertices over the same data
+        body = zlib.decompress(data[4:-12])
+        body = body[:9] + struct.pack("<Q", 10 ** 9) + body[17:]
+        data = data[:4] + zlib.compress(body) + struct.pack("<QI", 0, 1)
+    if lie == "table":
+        data = data[:-4] + struct.pack("<I", 10 ** 6)
+    (tmp_path / "m.serialized").write_bytes(data)
+    path = write(tmp_path, '<shape type="serialized"><string name="filename" '
+                           'value="m.serialized"/></shape>')
+    assert main(["-q", "-r", "4", "3", "-f", str(tmp_path / "o.png"), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err and "m.serialized" in err
 
 
 # --- materials ------------------------------------------------------------------------------
