@@ -361,7 +361,50 @@ def scene_and_camera(args, budget):
         from ..environment import load_environment
         scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
     width, height = args.resolution
-    return scene, camera_from_flags(scene, args, width, height)
+    camera = camera_from_flags(scene, args, width, height)
+    note = sight_note(scene, camera)
+    if note is not None:
+        scene.notes.append(note)
+    return scene, camera
+
+
+# how many times the scene's size a camera (or its lens's edge) may be from it: float64 rounds
+# a hit point that far away by 1e-4 of the scene's size (its 2^-53 relative precision), beyond
+# which nothing of it can be rendered faithfully
+FARTHEST = 1e12
+
+
+def sight_note(scene, camera):
+    """A note when the camera shows nothing of the scene although every number is within
+    range: the scene's bounds all behind it, all outside the image, or spanning less than a
+    pixel; or the camera (or its lens's edge) more than FARTHEST times the bounds' size away.
+    None when the scene is in view (or has no bounds)."""
+    bounds = scene.bounds()
+    if bounds is None:
+        return None
+    lower, upper = (np.asarray(b, dtype=np.float64) for b in bounds)
+    corners = np.array([[(lower, upper)[i >> k & 1][k] for k in range(3)] for i in range(8)])
+    size = float(np.linalg.norm(upper - lower))
+    distance = float(np.linalg.norm(corners - camera.position, axis=1).max())
+    reach = max(distance, float(camera.lens_radius))
+    what = "the camera shows nothing of the scene"
+    if size > 0 and reach > FARTHEST * size:
+        by = "its lens's edge is" if camera.lens_radius > distance else "it is"
+        return (f"{what}: {by} {reach:.3g} from the scene's bounds, {reach / size:.2g} times "
+                f"their size (more than {FARTHEST:g} times: float64 cannot place hits that "
+                f"far faithfully)")
+    px, py, depth = camera.project(corners)
+    if not (depth > 0).any():
+        return f"{what}: the scene's bounds are all behind the camera"
+    if not (depth > 0).all():
+        return None    # the camera among the bounds: something is in view
+    if px.max() < 0 or px.min() > camera.width or py.max() < 0 or py.min() > camera.height:
+        return f"{what}: the scene's bounds are all outside the image"
+    span = max(px.max() - px.min(), py.max() - py.min())
+    if span < 1.0:
+        return (f"{what}: its bounds span {span:.2g} of a pixel in the image ({distance:.3g} "
+                f"away, {size:.3g} across)")
+    return None
 
 
 # --- the end of a command ------------------------------------------------------------------
