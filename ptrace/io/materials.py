@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import budget
 from ..scene import REPEAT
-from .limits import LIMIT, LIMIT_WORDS
+from .limits import LIMIT, LIMIT_WORDS, problem
 from .quiet import library_output
 
 MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has no density)
@@ -106,6 +106,9 @@ def linear_rgb(image, srgb, encoded=None):
         values = converted.get_pixels(oiio.FLOAT).reshape(values.shape)
     if not np.isfinite(values).all():
         raise ValueError("the image has NaN or infinite values")
+    words = problem(values)      # finite, but an emission it scales would overflow
+    if words is not None:
+        raise ValueError(f"the image's values: {words}")
     return values.astype(np.float32)
 
 
