@@ -237,6 +237,59 @@ def test_an_alpha_cutoff_within_range_has_no_such_note(tmp_path):
     assert not any("alphaCutoff" in note for note in scene.notes), scene.notes
 
 
+def small_obj(folder):
+    path = folder / "small.obj"
+    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nf 1 2 3\n")
+    return path
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--eye", "1e6,1e6,1e6"], "of a pixel"),
+    (["--eye", "1e29,1e29,1e29"], "float64"),
+    (["-b", "1e29"], "lens's edge"),
+    (["--eye", "0,0,5", "--look-at", "0,0,10"], "behind the camera"),
+    (["--eye", "20,0,5", "--look-at", "20,0,0"], "outside the image"),
+])
+def test_a_camera_that_shows_nothing_of_the_scene_is_noted_once(tmp_path, capsys, args,
+                                                                 words):
+    """Numbers within range that still show nothing (the scene far smaller than a pixel, a
+    lens or an eye so far that float64 cannot place the hits, the scene behind the camera or
+    beside the image) used to give a black image without a word."""
+    code = cli.main([str(a) for a in TINY + ["-f", tmp_path / "x.png"] + args
+                     + [small_obj(tmp_path)]])
+    err = capsys.readouterr().err.strip().splitlines()
+    said = [line for line in err if "shows nothing" in line]
+    assert code == 0 and len(said) == 1 and words in said[0], err
+    assert said[0].startswith("ptrace: note: the camera shows nothing of the scene: ")
+
+
+@pytest.mark.parametrize("args", [[], ["--eye", "0,0,5"], ["--eye", "0.5,0,0.5"],
+                                  ["-b", "0.1"]])
+def test_a_camera_that_shows_the_scene_has_no_such_note(tmp_path, capsys, args):
+    code = cli.main([str(a) for a in TINY + ["-f", tmp_path / "x.png"] + args
+                     + [small_obj(tmp_path)]])
+    err = capsys.readouterr().err
+    assert code == 0 and "shows nothing" not in err, err
+
+
+def test_a_texture_beyond_the_limit_is_a_note_and_not_applied(tmp_path):
+    """A float image's 3e38 (finite in float32) would make an emission of inf."""
+    import OpenImageIO as oiio
+    image = str(tmp_path / "hot.exr")
+    out = oiio.ImageOutput.create(image)
+    out.open(image, oiio.ImageSpec(4, 4, 3, oiio.FLOAT))
+    out.write_image(np.full((4, 4, 3), 3e38, np.float32))
+    out.close()
+    (tmp_path / "hot.mtl").write_text("newmtl m\nKe 1 1 1\nmap_Ke hot.exr\n")
+    path = tmp_path / "hot.obj"
+    path.write_text("mtllib hot.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nvt 0 0\nvt 1 0\nvt 1 1\n"
+                    "usemtl m\nf 1/1 2/2 3/3\n")
+    scene = ptrace.load(path)
+    notes = [n for n in scene.notes if "hot.exr" in n]
+    assert len(notes) == 1 and "3e+38 is beyond" in notes[0], scene.notes
+    assert scene.textures.names == [] or "hot.exr" not in scene.textures.names
+
+
 # --- library text on stderr --------------------------------------------------------------------
 
 def test_an_empty_environment_name_is_one_line_without_openimageio_s_assertion(tmp_path):
