@@ -99,6 +99,7 @@ class Builder:
         material = self.materials.index(bsdf)
         if shape.type == "sphere":
             centre, radius = shapes.sphere(shape)
+            material = self.materials.untextured(material, "<shape type=\"sphere\">")
             if radiance is not None:
                 material = self.materials.emitter(radiance)
                 self.notes.append("<shape type=\"sphere\">: an area emitter on a sphere does "
@@ -123,6 +124,11 @@ class Builder:
             shape.params.setdefault("face_normals", flat)
         else:
             vertices, faces, uv = getattr(shapes, shape.type)()
+        transform = self.materials.uv_transforms.get(material)
+        if uv is None:
+            material = self.materials.untextured(material, f"<shape type=\"{shape.type}\">")
+        elif transform is not None:
+            uv = uv @ transform[:2, :2].T + transform[:2, 2]
         vertices, faces, uv = shapes.placed(shape, vertices, faces, uv)
         if radiance is not None:    # the emitting front, and behind it the reflecting back
             self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance))

@@ -97,16 +97,42 @@ class Materials:
         self.reader, self.pool, self.notes = reader, pool, notes
         self.records, self._index = [], {}
         self.textured = False
+        self.uv_transforms = {}     # material index -> 3 x 3 transform of Mitsuba's (u, v)
         self.sided = False      # reading the BSDF inside a twosided
 
     def index(self, bsdf):
         key = id(bsdf) if bsdf is not None else None
         if key not in self._index:
+            self._uv = []
             record = {"kind": DIFFUSE, "albedo": (0.5, 0.5, 0.5), "name": "default"} \
                 if bsdf is None else self.record(bsdf)
+            if any(not np.array_equal(m, self._uv[0]) for m in self._uv[1:]):
+                bsdf.fail("its textures transform the texture coordinates differently (ptrace "
+                          "gives a material one transform)")
             self._index[key] = len(self.records)
+            if self._uv and not np.array_equal(self._uv[0], np.eye(3)):
+                self.uv_transforms[self._index[key]] = self._uv[0]
             self.records.append(record)
         return self._index[key]
+
+    def untextured(self, index, where):
+        """The index of material `index` with its textures replaced by their mean colour, for
+        a shape without texture coordinates (noted once per kind); `index` if it has none."""
+        record = self.records[index]
+        if all(record.get(k, -1) < 0 for k in ("albedo_texture", "alpha_texture")):
+            return index
+        if ("untextured", index) not in self._index:
+            flat = {k: v for k, v in record.items() if k not in ("albedo_texture",
+                                                                 "alpha_texture")}
+            if record.get("albedo_texture", -1) >= 0:
+                flat["albedo"] = tuple(float(c) for c in self.pool.mean(record["albedo_texture"]))
+            if record.get("alpha_texture", -1) >= 0:
+                flat["opacity"] = float(self.pool.mean(record["alpha_texture"])[0])
+            self._index[("untextured", index)] = len(self.records)
+            self.records.append(flat)
+            self.notes.append(f"{where}: no texture coordinates: its textures drawn as their "
+                              f"mean colour")
+        return self._index[("untextured", index)]
 
     def emitter(self, radiance):
         """The index of a new emission material of this radiance."""
@@ -323,10 +349,7 @@ class Materials:
         """The pool index of a <texture type="bitmap">."""
         if texture.type != "bitmap":
             texture.fail(f"texture type {texture.type!r} is not supported (only bitmap)")
-        for name in ("to_uv", "uscale", "vscale", "uoffset", "voffset"):
-            if texture.has(name):
-                texture.fail(f"{name} (a transform of the texture coordinates) is not "
-                             f"supported")
+        self._uv.append(uv_transform(texture))
         name = texture.string("filename")
         if name is None:
             texture.fail("has no filename")
@@ -352,3 +375,17 @@ class Materials:
             self.notes.append(f"{texture.where}: parameter {unread!r} ignored")
         self.textured = True
         return index
+
+
+def uv_transform(texture):
+    """The 3 x 3 matrix a bitmap applies to Mitsuba's (u, v): its to_uv (the 2D part of the
+    4 x 4 transform), after 0.6's uscale, vscale, uoffset and voffset (u scale + offset)."""
+    matrix = np.eye(3)
+    if texture.has("to_uv"):
+        m = texture.transform("to_uv").matrix
+        matrix = np.array([[m[0, 0], m[0, 1], m[0, 3]], [m[1, 0], m[1, 1], m[1, 3]],
+                           [0.0, 0.0, 1.0]])
+    old = np.array([[texture.float("uscale", 1.0), 0.0, texture.float("uoffset", 0.0)],
+                    [0.0, texture.float("vscale", 1.0), texture.float("voffset", 0.0)],
+                    [0.0, 0.0, 1.0]])
+    return matrix @ old

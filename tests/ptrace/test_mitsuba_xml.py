@@ -193,6 +193,36 @@ def test_texture_coordinates_follow_mitsuba(tmp_path):
         assert scene.materials.albedo_texture[scene.material_index[0]] == 0
 
 
+@pytest.mark.parametrize("transform", [
+    '<transform name="to_uv"><scale x="2" y="3"/><translate x="0.25" y="0.1"/></transform>',
+    '<float name="uscale" value="2"/><float name="vscale" value="3"/><float name="uoffset" '
+    'value="0.25"/><float name="voffset" value="0.1"/>',
+])
+def test_texture_coordinate_transforms(tmp_path, transform):
+    """Mitsuba's (u, v) = (0, 0) at the rectangle's corner (-1, -1) becomes (0.25, 0.1), so
+    ptrace's (0.25, 0.9); (1, 1) at (1, 1) becomes (2.25, 3.1), ptrace's (2.25, -2.1)."""
+    write_texture(tmp_path / "tex.exr")
+    scene = ptrace.load(write(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture '
+                                        'type="bitmap" name="reflectance"><string name="'
+                                        f'filename" value="tex.exr"/>{transform}</texture>'
+                                        '</bsdf></shape>'))
+    corners = scene.geometry.vertices[scene.geometry.faces]
+    for point, expected in (([-1, -1, 0], [0.25, 0.9]), ([1, 1, 0], [2.25, -2.1])):
+        at = np.all(np.isclose(corners, point), axis=-1)
+        np.testing.assert_allclose(scene.uv[at], [expected] * at.sum(), atol=1e-12)
+
+
+def test_a_textured_sphere_takes_the_texture_mean(tmp_path):
+    write_texture(tmp_path / "tex.exr")
+    scene = ptrace.load(write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><texture '
+                                        'type="bitmap" name="reflectance"><string name="'
+                                        'filename" value="tex.exr"/></texture></bsdf></shape>'))
+    m = scene.material_index[0]
+    assert scene.materials.albedo_texture[m] == -1
+    np.testing.assert_allclose(scene.materials.albedo[m], [0.5, 0.5, 0.2], rtol=1e-6)
+    assert any("mean colour" in note for note in scene.notes)
+
+
 def write_texture(path):
     """An 8 x 8 EXR: red grows to the right, green down the image."""
     import OpenImageIO as oiio
@@ -426,9 +456,6 @@ REFUSALS = {
                      "NaN or infinite"),
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
-    "uv_scale": ('<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" '
-                 'name="reflectance"><string name="filename" value="t.png"/><float '
-                 'name="uscale" value="4"/></texture></bsdf></shape>', "uscale"),
     "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
                        'value="400:0.1, 700:0.5"/></bsdf></shape>', "wavelength:value"),
     "old_version": ("version 1.0", "versions 0.4 to 0.6"),
