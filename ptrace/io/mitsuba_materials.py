@@ -83,6 +83,7 @@ REFUSED = {"blendbsdf": "a blend of two BSDFs", "bumpmap": "a bump map",
            "normalmap": "a normal map", "hair": "hair", "measured": "measured data",
            "pplastic": "polarised plastic", "polarizer": "a polariser", "retarder": "a retarder",
            "circular": "a polariser", "null": "a null BSDF (for media)"}
+CHECKER = 256             # texels a side of a baked checkerboard
 ROUGH_GLASS_LIMIT = 0.1     # a roughdielectric up to this alpha is drawn smooth (noted)
 # principled's parameters that ptrace's glTF BRDF lacks, and their Mitsuba defaults
 PRINCIPLED_EXTRAS = {"anisotropic": 0.0, "sheen": 0.0, "sheen_tint": 0.0, "clearcoat": 0.0,
@@ -346,10 +347,14 @@ class Materials:
         return record
 
     def texture(self, texture, raw_default=False):
-        """The pool index of a <texture type="bitmap">."""
-        if texture.type != "bitmap":
-            texture.fail(f"texture type {texture.type!r} is not supported (only bitmap)")
+        """The pool index of a <texture type="bitmap"> or "checkerboard"."""
+        if texture.type not in ("bitmap", "checkerboard"):
+            texture.fail(f"texture type {texture.type!r} is not supported (only bitmap and "
+                         f"checkerboard)")
         self._uv.append(uv_transform(texture))
+        self.textured = True
+        if texture.type == "checkerboard":
+            return self._checkerboard(texture)
         name = texture.string("filename")
         if name is None:
             texture.fail("has no filename")
@@ -373,8 +378,27 @@ class Materials:
             texture.fail(f"cannot read the image {name!r}: {str(error)[:120]}")
         for unread in texture.unread():
             self.notes.append(f"{texture.where}: parameter {unread!r} ignored")
-        self.textured = True
         return index
+
+    def _checkerboard(self, texture):
+        """Mitsuba's checkerboard (color0 where u and v are both in the lower or both in the
+        upper half of their unit, color1 elsewhere) baked into an image of CHECKER texels a
+        side, repeated."""
+        colours = []
+        for name, default in (("color0", 0.4), ("color1", 0.2)):
+            value = texture.colour(name, Colour((default,) * 3))
+            if isinstance(value, Plugin):
+                texture.fail(f"a texture for {name!r} is not supported (only a colour)")
+            colours.append(np.asarray(value, np.float32))
+        half = np.arange(CHECKER) >= CHECKER // 2
+        same = half[:, None] == half[None, :]           # rows: v (down), columns: u
+        image = np.where(same[:, :, None], colours[0], colours[1]).astype(np.float32)
+        self.notes.append(f"<texture type=\"checkerboard\">: baked into a {CHECKER}x{CHECKER} "
+                          f"image (its edges filtered over a texel)")
+        for unread in texture.unread():
+            self.notes.append(f"{texture.where}: parameter {unread!r} ignored")
+        return self.pool.add(image, srgb=False, wrap=(REPEAT, REPEAT), name="checkerboard",
+                             key=("checkerboard",) + tuple(np.concatenate(colours).tolist()))
 
 
 def uv_transform(texture):

@@ -223,6 +223,22 @@ def test_a_textured_sphere_takes_the_texture_mean(tmp_path):
     assert any("mean colour" in note for note in scene.notes)
 
 
+def test_checkerboard_is_baked_with_mitsubas_quadrants(tmp_path):
+    """color0 where u and v are in the same half of their unit (the image's top-left and
+    bottom-right quarters: Mitsuba's v runs down), color1 in the others."""
+    scene = ptrace.load(write(tmp_path, '<shape type="rectangle"><bsdf type="diffuse"><texture '
+                                        'type="checkerboard" name="reflectance"><rgb name="'
+                                        'color0" value="1 0 0"/><rgb name="color1" value="0 0 '
+                                        '1"/></texture></bsdf></shape>'))
+    textures = scene.textures
+    side = int(textures.width[0])
+    image = textures.texels[:side * side].reshape(side, side, 3)
+    np.testing.assert_allclose(image[0, 0], [1, 0, 0])
+    np.testing.assert_allclose(image[-1, -1], [1, 0, 0])
+    np.testing.assert_allclose(image[0, -1], [0, 0, 1])
+    np.testing.assert_allclose(image[-1, 0], [0, 0, 1])
+
+
 def write_texture(path):
     """An 8 x 8 EXR: red grows to the right, green down the image."""
     import OpenImageIO as oiio
