@@ -41,7 +41,12 @@ def node_matrices(path, document):
         if not isinstance(i, int) or not 0 <= i < len(nodes) or i in world:
             continue
         node = _dict(nodes[i])
-        world[i] = parent @ local_matrix(path, node, i)
+        local = local_matrix(path, node, i)
+        with np.errstate(over="ignore", invalid="ignore"):    # checked here instead
+            world[i] = parent @ local
+        if not np.isfinite(world[i]).all():
+            raise SceneError(path, f"node {i}: its world matrix (its ancestors' matrices "
+                                   f"times its own) overflows to infinity")
         stack.extend((c, world[i]) for c in _list(node.get("children")))
     return world
 

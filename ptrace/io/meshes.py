@@ -51,8 +51,20 @@ def load_mesh(path, default_light=True):
     the default diffuse material. glTF files' KHR_lights_punctual lights and cameras are read
     (Scene.file_cameras). A file without lights gets the default ambient light unless its
     emissive surfaces light it (ptrace.io.default_light says when) or default_light is
-    False."""
+    False.
+
+    Every number is checked where it enters (ptrace.io.limits); an overflow the checks did not
+    foresee is still one line (a SceneError), never numpy's warnings."""
     path = str(path)
+    try:
+        with np.errstate(over="raise"):
+            return _load_mesh(path, default_light)
+    except FloatingPointError as error:
+        raise SceneError(path, f"its numbers overflow while it is read ({error}; ptrace "
+                               f"takes magnitudes up to {LIMIT:g})") from None
+
+
+def _load_mesh(path, default_light):
     files.require_regular_file(path)
     if os.path.getsize(path) == 0:
         raise SceneError(path, "is empty (0 bytes)")
