@@ -122,6 +122,19 @@ def test_a_gltf_vertex_beyond_the_limit_is_refused_naming_the_file(tmp_path, cap
     assert code == 2 and "huge.glb" in line and "vertex" in line and "1e+30" in line, line
 
 
+def test_gltf_scales_that_multiply_past_float64_are_one_line_naming_the_node(tmp_path,
+                                                                            capsys):
+    """Eleven nested nodes, each scaling by 1e30 (in range alone): numpy's overflow warnings
+    used to come before the error."""
+    path = tmp_path / "nested.gltf"
+    nodes = [{"scale": [1e30] * 3, "children": [i + 1]} for i in range(11)] + [{"mesh": 0}]
+    gltf(path, [dict(positions=QUAD, indices=QUAD_FACES.reshape(-1))], nodes=nodes,
+         document={"scenes": [{"nodes": [0]}]})
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+    assert code == 2 and "nested.gltf" in line and "node 10" in line, line
+    assert "overflow" in line and "warning" not in line, line
+
+
 def test_a_collada_sphere_of_radius_1e308_is_refused_naming_the_file_and_node(
         tmp_path, capsys, course_scene):
     """It used to end in an error about the camera's rotation, naming no file."""
