@@ -95,7 +95,10 @@ class Builder:
         emitter = self._one(shape, "emitter")
         if emitter is not None and emitter.type != "area":
             emitter.fail("only an area emitter can sit on a shape")
-        radiance = None if emitter is None else self._radiance(emitter, "radiance")
+        radiance = None
+        if emitter is not None:
+            radiance = self._radiance(emitter, "radiance")
+            self._unread(emitter)
         material = self.materials.index(bsdf)
         if shape.type == "sphere":
             centre, radius = shapes.sphere(shape)
@@ -158,14 +161,13 @@ class Builder:
 
     # --- emitters -------------------------------------------------------------------------
 
-    def _radiance(self, emitter, name, default=(1.0, 1.0, 1.0), scale=1.0):
+    def _radiance(self, emitter, name, default=(1.0, 1.0, 1.0)):
         value = emitter.colour(name, Colour(default))
         if isinstance(value, Plugin):
             emitter.fail(f"a texture for {name!r} is not supported")
         if min(value) < 0:
             emitter.fail(f"{name} is negative")
-        self._unread(emitter)
-        return tuple(scale * v for v in value)
+        return tuple(value)
 
     def _emitter(self, emitter):
         transform = emitter.transform("to_world")

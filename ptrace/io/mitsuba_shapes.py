@@ -75,10 +75,11 @@ def mesh_file(shape, path, notes):
     kept = [n for n in parts["notes"] if "material" not in n.lower() and "mtl" not in n.lower()]
     notes.extend(f"{shape.where}: {n}" for n in kept)
     uv = parts["uv"]
+    # ptrace's readers give the file's v; Mitsuba flips an OBJ's (flip_tex_coords)
+    flip = shape.type == "obj" and shape.boolean("flip_tex_coords", True)
     if uv is not None:
         uv = np.array(uv, dtype=np.float64)
-        # ptrace's readers give the file's v; Mitsuba flips an OBJ's (flip_tex_coords)
-        if shape.type == "obj" and shape.boolean("flip_tex_coords", True):
+        if flip:
             uv[..., 1] = 1.0 - uv[..., 1]
     return np.asarray(parts["vertices"], np.float64), np.asarray(parts["faces"], np.int64), uv
 
