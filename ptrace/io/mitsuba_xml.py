@@ -13,6 +13,7 @@ the file and the element.
 """
 import os
 import re
+import stat
 
 import defusedxml
 import defusedxml.ElementTree as safe_xml
@@ -180,8 +181,12 @@ class Reader:
                                     f"scenes of versions 0.4 to 0.6 (upgraded) and 2.x to 3.x")
 
     def resolve(self, plugin, name):
-        """The real path of the file `name` that a Plugin names, inside the scene's folder."""
-        return self._resolve(plugin.where, plugin.path, name)
+        """The real path of the file `name` that a Plugin names, inside the scene's folder and
+        a regular file (a FIFO or device is never opened: it could block or stream forever)."""
+        path = self._resolve(plugin.where, plugin.path, name)
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            plugin.fail(f"{name!r} is not a regular file")
+        return path
 
     def _resolve(self, where, path, name):
         """The real path of a file named in `path` at `where`, inside the scene's folder (as

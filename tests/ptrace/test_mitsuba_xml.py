@@ -3,6 +3,7 @@ every refusal as one line and exit 2, and a render whose mean agrees with Mitsub
 render of the same file. Every scene is written here, into tmp_path."""
 import json
 import math
+import os
 import struct
 import zlib
 
@@ -523,6 +524,14 @@ def test_field_of_view_as_mitsuba_reads_it(tmp_path, sensor):
     x_fov = float(x_fov[0] if hasattr(x_fov, "__len__") else x_fov)
     yfov = math.degrees(2 * math.atan(math.tan(math.radians(x_fov) / 2) * 64 / 48))
     assert ptrace.load(path).file_cameras[0].yfov == pytest.approx(yfov, rel=1e-6)
+
+
+def test_a_fifo_is_never_opened(tmp_path):
+    os.mkfifo(tmp_path / "pipe.obj")
+    path = write(tmp_path, '<shape type="obj"><string name="filename" value="pipe.obj"/>'
+                           '</shape>')
+    with pytest.raises(ptrace.SceneError, match="not a regular file"):
+        ptrace.load(path)
 
 
 def test_defines_on_the_command_line(tmp_path, capsys):
