@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .files import require_regular_file
+from .mitsuba_spectra import spectrum_to_rgb
 from .mitsuba_transforms import Transform, describe, parse_transform
 
 OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler", "integrator",
@@ -258,7 +259,7 @@ class Reader:
                 name = self._name(child, path)
                 if name is None:
                     raise SceneError(path, f"{describe(child)} has no name attribute")
-                holder.params[name] = self._value(child, tag, path, depth)
+                holder.params[name] = self._value(child, tag, path, holder.tag == "emitter")
             elif tag in OBJECT_TAGS and tag != "scene":
                 self._object(child, holder, path, depth)
             else:
@@ -317,7 +318,7 @@ class Reader:
             raise SceneError(path, f"{describe(element)}: its {what} is NaN or infinite")
         return values
 
-    def _value(self, element, tag, path, depth):
+    def _value(self, element, tag, path, emitter=False):
         attr = lambda key, default=None: self.attribute(element, key, path, default)
         if tag == "transform":
             return parse_transform(self, element, path)
@@ -348,8 +349,7 @@ class Reader:
                                        f"{values.size}")
             return values
         if tag == "spectrum" and ":" in text:
-            raise SceneError(path, f"{describe(element)}: a spectrum of wavelength:value pairs "
-                                   f"is not supported yet (give an <rgb>)")
+            return self._spectrum(element, path, text, emitter)
         if tag == "rgb" and text.strip().startswith("#"):
             raise SceneError(path, f"{describe(element)}: hexadecimal colours are not "
                                    f"supported (give three numbers)")
@@ -367,6 +367,23 @@ class Reader:
             values = np.where(values <= 0.04045, values / 12.92,
                               ((values + 0.055) / 1.055) ** 2.4)
         return Colour(float(v) for v in values)
+
+    def _spectrum(self, element, path, text, emitter):
+        """The RGB colour of a spectrum of wavelength:value pairs (ptrace.io.mitsuba_spectra)."""
+        pairs = []
+        for item in re.split(r"[,\s]+", text.strip()):
+            if item:
+                wavelength, _, value = item.partition(":")
+                pair = self.numbers(element, path, f"{wavelength} {value}", "spectrum")
+                if pair.size != 2:
+                    raise SceneError(path, f"{describe(element)}: {item[:40]!r} is not a "
+                                           f"wavelength:value pair")
+                pairs.append(pair)
+        pairs = np.array(pairs).reshape(-1, 2)
+        if len(pairs) < 2 or np.any(np.diff(pairs[:, 0]) <= 0):
+            raise SceneError(path, f"{describe(element)}: a spectrum needs two or more "
+                                   f"wavelength:value pairs, wavelengths increasing")
+        return Colour(spectrum_to_rgb(pairs[:, 0], pairs[:, 1], emitter))
 
 def _is_float(word):
     try:

@@ -92,6 +92,24 @@ def test_values_and_references(tmp_path):
     np.testing.assert_allclose(albedo[-1], [0.6] * 3)
 
 
+@pytest.mark.parametrize("pairs", ["400:0.5, 700:0.5", "400:0.1, 500:0.8, 600:0.2, 700:0.9"])
+def test_spectra_convert_to_rgb_as_mitsubas_rgb_variants_do(tmp_path, pairs):
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    path = write(tmp_path, f'<shape type="sphere"><bsdf type="diffuse"><spectrum name='
+                           f'"reflectance" value="{pairs}"/></bsdf></shape><shape type="cube">'
+                           f'<emitter type="area"><spectrum name="radiance" value="{pairs}"/>'
+                           f'</emitter></shape>')
+    scene = ptrace.load(path)
+    ours = [scene.materials.albedo[scene.material_index[-1]],      # the sphere
+            scene.materials.emission[scene.material_index[0]]]     # the cube's front
+    shapes = sorted(mi.load_file(str(path)).shapes(), key=lambda s: s.is_emitter())
+    theirs = [mi.traverse(shapes[0].bsdf())["reflectance.value"],
+              mi.traverse(shapes[1].emitter())["radiance.value"]]
+    for mine, reference in zip(ours, theirs):
+        np.testing.assert_allclose(mine, np.array(reference), rtol=2e-3)
+
+
 def test_include_reads_the_included_scene(tmp_path):
     (tmp_path / "parts").mkdir()
     write(tmp_path / "parts", '<shape type="sphere"><float name="radius" value="3"/></shape>',
@@ -474,7 +492,7 @@ REFUSALS = {
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
     "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
-                       'value="400:0.1, 700:0.5"/></bsdf></shape>', "wavelength:value"),
+                       'value="400:0.1, 300:0.5"/></bsdf></shape>', "wavelengths increasing"),
     "old_version": ("version 1.0", "versions 0.4 to 0.6"),
 }
 
