@@ -149,14 +149,15 @@ class _WriteFailed(Exception):
     """A write that did not produce a whole file (the reason in words)."""
 
 
-def _write_temporary(temporary, pixels, pixel_type, names):
+def _write_temporary(temporary, pixels, pixel_type, names, extension=None):
     """Write pixels into `temporary` and prove that they are there: OpenImageIO's error state
     after every call (on a full disk its write and close can return success while it records
     the short write), fsync (a filesystem may report a lost write only then), and the file read
-    back whole with the same size and channels."""
+    back whole with the same size and channels. extension (".png", ".exr") names the format
+    when the temporary file's name has none (/proc/self/fd/N)."""
     import OpenImageIO as oiio
     height, width, channels = pixels.shape
-    output = oiio.ImageOutput.create(temporary)
+    output = oiio.ImageOutput.create(extension[1:] if extension else temporary)
     if output is None:
         raise _WriteFailed(oiio.geterror() or "no image writer for this format")
     spec = oiio.ImageSpec(width, height, channels, pixel_type)
@@ -205,8 +206,13 @@ def write_images(images):
     """Write several images, each a dict of write_image's keywords (path, radiance, eight_bit,
     extra), whole or not at all: all are written to temporary files beside their targets and
     checked, and only then renamed over them, so a failure leaves every old file byte-identical
-    and no temporary file behind (whatever the way out, Ctrl-C included)."""
-    staged = []   # (temporary, path)
+    and no temporary file behind (whatever the way out, Ctrl-C included).
+
+    Where the system and the filesystem have them, the temporary files have no name (O_TMPFILE)
+    until they are whole: a process killed while it writes (kill -9) leaves nothing in the
+    folder. Elsewhere they are named .ptrace-HOST-PID-*, and the next write into the folder
+    removes those of ended processes (remove_dead_temporaries)."""
+    staged = []   # [temporary file's name, path, descriptor of an unnamed one or None]
     try:
         for image in images:
             path = os.fspath(image["path"])
@@ -215,30 +221,82 @@ def write_images(images):
                                                 image.get("eight_bit"), image.get("extra", ()))
             directory = os.path.dirname(os.path.abspath(path))
             remove_dead_temporaries(directory)
-            try:
-                handle, temporary = tempfile.mkstemp(prefix=_temporary_prefix(),
-                                                     suffix=extension, dir=directory)
-                os.close(handle)
-            except OSError as error:
-                raise _failure(path, directory, error) from None
-            staged.append((temporary, path))
+            unnamed = _unnamed(directory)
+            if unnamed is not None:
+                temporary = f"/proc/self/fd/{unnamed}"
+            else:
+                try:
+                    handle, temporary = tempfile.mkstemp(prefix=_temporary_prefix(),
+                                                         suffix=extension, dir=directory)
+                    os.close(handle)
+                except OSError as error:
+                    raise _failure(path, directory, error) from None
+            staged.append([temporary, path, unnamed])
             try:
                 with library_output():    # the writers' own lines: their errors are read
-                    _write_temporary(temporary, pixels, pixel_type, names)   # from OIIO's state
-                os.chmod(temporary, 0o644)
+                    _write_temporary(temporary, pixels, pixel_type, names,   # from OIIO's state
+                                     extension)
+                if unnamed is not None:
+                    os.fchmod(unnamed, 0o644)
+                else:
+                    os.chmod(temporary, 0o644)
             except (OSError, _WriteFailed) as error:
                 raise _failure(path, directory, error) from None
-        for temporary, path in staged:
+        for entry in staged:
+            temporary, path, unnamed = entry
+            directory = os.path.dirname(os.path.abspath(path))
             try:
-                os.replace(temporary, path)
+                if unnamed is not None:    # a name at last: the path itself if it is new
+                    temporary = entry[0] = _link(unnamed, directory, path)
+                if temporary is not None:
+                    os.replace(temporary, path)
             except OSError as error:
-                raise _failure(path, os.path.dirname(os.path.abspath(path)), error) from None
-            _sync_directory(os.path.dirname(os.path.abspath(path)))
+                raise _failure(path, directory, error) from None
+            _sync_directory(directory)
     finally:
-        for temporary, _ in staged:
-            if os.path.exists(temporary):
+        for temporary, _, unnamed in staged:
+            if unnamed is not None:
+                os.close(unnamed)
+            if temporary is not None and not temporary.startswith("/proc/") and \
+                    os.path.lexists(temporary):
                 os.remove(temporary)
-    return [path for _, path in staged]
+    return [path for _, path, _ in staged]
+
+
+def _unnamed(directory):
+    """A descriptor of a new file without a name in `directory` (O_TMPFILE, written through
+    /proc/self/fd), or None where the system or the filesystem has no such files."""
+    flag = getattr(os, "O_TMPFILE", None)
+    if flag is None or not os.path.isdir("/proc/self/fd"):
+        return None
+    try:
+        return os.open(directory, flag | os.O_WRONLY | getattr(os, "O_CLOEXEC", 0), 0o644)
+    except OSError:    # EOPNOTSUPP, EISDIR (an old kernel), ...
+        return None
+
+
+def _link(unnamed, directory, path):
+    """Give the unnamed file a name: `path` itself when nothing is there (None: done), else a
+    temporary name beside it for the rename over the old file (returned)."""
+    source = f"/proc/self/fd/{unnamed}"
+    root = os.open("/", os.O_RDONLY)   # a src_dir_fd makes os.link call linkat, which follows
+    try:                               # /proc's link to the file (link() would not)
+        try:
+            os.link(source, path, src_dir_fd=root, follow_symlinks=True)
+            return None
+        except FileExistsError:
+            pass
+        extension = os.path.splitext(path)[1]
+        while True:
+            named = os.path.join(directory, _temporary_prefix() + os.urandom(4).hex() +
+                                 extension)
+            try:
+                os.link(source, named, src_dir_fd=root, follow_symlinks=True)
+                return named
+            except FileExistsError:
+                continue
+    finally:
+        os.close(root)
 
 
 def _sync_directory(directory):
