@@ -350,33 +350,72 @@ KILLED_WRITER = textwrap.dedent("""
     import numpy as np
     import ptrace.image as image
 
-    def stuck(temporary, *args):     # the temporary file exists, empty, as when killed
+    def stuck(temporary, *args):     # half an image in the temporary file, then killed
+        with open(temporary, "wb") as handle:
+            handle.write(b"partial")
         print("writing", flush=True)
         time.sleep(600)
     image._write_temporary = stuck
+    if sys.argv[2] == "named":       # as on a filesystem without O_TMPFILE
+        image._unnamed = lambda directory: None
     image.write_image(sys.argv[1], np.zeros((4, 5, 3)))
 """)
 
 
-def test_a_render_killed_while_it_writes_leaves_nothing_after_the_next_write(tmp_path):
-    """kill -9 while the image is written: the old file stays whole; the 0-byte temporary
-    file the killed process could not remove is removed by the next write into the folder."""
-    target = tmp_path / "out.exr"
-    write_image(target, np.full((4, 5, 3), 0.25))
-    before = target.read_bytes()
-    child = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(target)],
+def killed_while_writing(target, kind):
+    """The pid of a process killed (SIGKILL) while it wrote target's temporary file."""
+    child = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(target), kind],
                              stdout=subprocess.PIPE, text=True)
     try:
         assert child.stdout.readline().strip() == "writing"   # its readiness signal
     finally:
         child.send_signal(signal.SIGKILL)
         child.wait(timeout=60)
+    return child.pid
+
+
+def test_a_render_killed_while_it_writes_leaves_nothing(tmp_path):
+    """kill -9 while the image is written into a file without a name (O_TMPFILE): nothing is
+    left beside the old file, which stays whole."""
+    from ptrace.image import _unnamed
+    probe = _unnamed(str(tmp_path))
+    if probe is None:
+        pytest.skip("this filesystem has no O_TMPFILE: the next test covers it")
+    os.close(probe)
+    target = tmp_path / "out.exr"
+    write_image(target, np.full((4, 5, 3), 0.25))
+    before = target.read_bytes()
+    killed_while_writing(target, "unnamed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.exr"]
+    assert target.read_bytes() == before
+
+
+def test_a_named_temporary_file_of_a_killed_render_goes_at_the_next_write(tmp_path):
+    """Without O_TMPFILE the killed process's temporary file (named with its host and pid)
+    stays until the next write into the folder removes it; the old file stays whole."""
+    target = tmp_path / "out.exr"
+    write_image(target, np.full((4, 5, 3), 0.25))
+    before = target.read_bytes()
+    pid = killed_while_writing(target, "named")
     left = [p.name for p in tmp_path.iterdir() if p.name != "out.exr"]
-    assert len(left) == 1 and left[0].startswith(".ptrace-") and str(child.pid) in left[0]
+    assert len(left) == 1 and left[0].startswith(".ptrace-") and f"-{pid}-" in left[0], left
     assert target.read_bytes() == before
     write_image(tmp_path / "other.png", np.full((4, 5, 3), 0.5))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.png", "out.exr"]
     assert target.read_bytes() == before
+
+
+def test_an_unnamed_write_replaces_an_old_file_and_makes_a_new_one(tmp_path):
+    """Both ways a file without a name gets one: over an old file (a temporary name, then the
+    rename) and where there was none (linked at its path)."""
+    old, new = tmp_path / "old.exr", tmp_path / "new.exr"
+    write_image(old, np.full((4, 5, 3), 0.25))
+    write_image(old, np.full((4, 5, 3), 0.75))
+    write_image(new, np.full((4, 5, 3), 0.5))
+    np.testing.assert_allclose(read_image(old), 0.75)
+    np.testing.assert_allclose(read_image(new), 0.5)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.exr", "old.exr"]
+    assert oct(os.stat(new).st_mode & 0o777) == oct(0o644)
 
 
 def test_only_temporaries_of_ended_processes_of_this_host_are_removed(tmp_path):
