@@ -598,13 +598,31 @@ BOX = """
 """
 
 
+# the box with a rough plastic cube, a glass sphere and a rough gold sphere
+MATERIALS_BOX = BOX.replace(
+    '<translate x="-0.3" y="-0.7" z="-0.2"/></transform><ref id="white"/></shape>',
+    '<translate x="-0.3" y="-0.7" z="-0.2"/></transform><bsdf type="roughplastic"><rgb name='
+    '"diffuse_reflectance" value="0.2 0.3 0.6"/><float name="alpha" value="0.2"/></bsdf>'
+    '</shape><shape type="sphere"><point name="center" x="-0.5" y="0.2" z="-0.5"/><float '
+    'name="radius" value="0.25"/><bsdf type="roughconductor"><string name="material" '
+    'value="Au"/><float name="alpha" value="0.15"/></bsdf></shape>').replace(
+    '<float name="radius" value="0.35"/><ref id="white"/>',
+    '<float name="radius" value="0.35"/><bsdf type="dielectric"/>')
+
+
 @pytest.mark.slow
-def test_cornell_box_mean_agrees_with_mitsuba(tmp_path):
+@pytest.mark.parametrize("box, spp", [(BOX, 64), (MATERIALS_BOX, 128)],
+                         ids=["diffuse", "materials"])
+def test_cornell_box_mean_agrees_with_mitsuba(tmp_path, box, spp):
+    """The same file rendered by Mitsuba 3 (4 times ptrace's samples) and by ptrace at -m 4
+    (Mitsuba's max_depth 5, which counts the camera's segment too)."""
+    assert box.count("bsdf type") >= (3 if box is BOX else 6)
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
-    path = write(tmp_path, BOX)
-    reference = np.array(mi.render(mi.load_file(str(path)), spp=256))[:, :, :3]
+    path = write(tmp_path, box)
+    reference = np.array(mi.render(mi.load_file(str(path)), spp=4 * spp))[:, :, :3]
     out = tmp_path / "box.exr"
-    assert main(["-q", "-r", "32", "24", "-s", "64", "-m", "4", "-f", str(out), str(path)]) == 0
+    assert main(["-q", "-r", "32", "24", "-s", str(spp), "-m", "4", "-f", str(out),
+                 str(path)]) == 0
     ratio = float(read_image(out)[:, :, :3].mean() / reference.mean())
     assert ratio == pytest.approx(1.0, abs=0.03), ratio
