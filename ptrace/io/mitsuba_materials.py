@@ -189,6 +189,9 @@ class Materials:
         else:
             record["opacity"] = float(np.mean(opacity))
         record["cutoff"] = BLEND_CUT
+        self.note(bsdf, "shadow rays pass through it as other rays do, with probability 1 - "
+                        "opacity; Mitsuba's path integrator stops them, so its shadows behind "
+                        "a mask are darker")
         return record
 
     def _diffuse(self, bsdf):
