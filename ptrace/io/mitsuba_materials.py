@@ -302,8 +302,9 @@ class Materials:
         if tint != (1.0, 1.0, 1.0):
             bsdf.fail("a tinted thindielectric is not supported (ptrace passes rays through "
                       "it unchanged)")
-        self.note(bsdf, "a mirror that rays pass through with the slab's transmittance at "
-                        "normal incidence (no change with angle)")
+        self.note(bsdf, "a mirror that rays (shadow rays too, unlike Mitsuba's path "
+                        "integrator) pass through with the slab's transmittance at normal "
+                        "incidence (no change with angle)")
         return {"kind": MIRROR, "cutoff": BLEND_CUT, "opacity": reflect,
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
                     "specular_reflectance", Colour((1.0,) * 3)))}
