@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from .. import budget
 from ..errors import SceneError
 from . import obj
 from .meshes import _drop_non_finite, _read_with_trimesh
@@ -67,6 +68,8 @@ def mesh_file(shape, path, notes):
     if shape.type == "obj":     # the file's texture coordinates, whatever its .mtl says
         parts = obj.read_obj(path)
         parts["uv"] = parts.get("file_uv", parts["uv"])
+        count = len(parts["faces"])     # (a PLY's reader charges them before reading)
+        budget.current().triangles(path, count, f"its {count:,} triangles")
     else:
         parts = _read_with_trimesh(path, ".ply")
     parts = _drop_non_finite(path, parts)

@@ -332,6 +332,16 @@ def test_a_serialized_file_that_lies_about_its_sizes(tmp_path, capsys, lie, frag
     assert err.count("\n") == 1 and fragment in err and "m.serialized" in err
 
 
+def test_the_memory_budget_counts_every_mesh_placed(tmp_path):
+    (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
+    one = '<shape type="obj"><string name="filename" value="quad.obj"/></shape>'
+    path = write(tmp_path, one * 3)
+    per_quad = ptrace.budget.LOAD_BYTES_PER_TRIANGLE * 2
+    assert ptrace.load(path, max_memory=3 * per_quad).triangle_count == 6
+    with pytest.raises(ptrace.budget.BudgetError, match="memory budget"):
+        ptrace.load(path, max_memory=3 * per_quad - 1)
+
+
 # --- materials ------------------------------------------------------------------------------
 
 def material_of(tmp_path, bsdf):
