@@ -152,8 +152,10 @@ def _check_magnitudes(path, vertices):
         big = ~(np.abs(vertices) <= LIMIT)
     if big.any():
         k, axis = np.argwhere(big)[0]
-        raise SceneError(path, f"vertex {k + 1} (as placed by the file's nodes): its "
-                               f"{'xyz'[axis]} {vertices[k, axis]:g} is {LIMIT_WORDS}")
+        placed = " (where its node places it)" if path.lower().endswith((".gltf", ".glb")) \
+            else ""
+        raise SceneError(path, f"vertex {k + 1}{placed}: its {'xyz'[axis]} "
+                               f"{vertices[k, axis]:g} is {LIMIT_WORDS}")
 
 
 def _read_with_trimesh(path, extension):
