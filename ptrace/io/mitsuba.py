@@ -37,7 +37,9 @@ from .mitsuba_serialized import read_serialized
 from .mitsuba_xml import Colour, Plugin, Reader
 
 SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
-INTEGRATORS = ("path", "volpath", "volpathmis", "direct", "ptracer", "moment", "aov")
+# integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
+INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
+               "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
 
 
 def load_mitsuba(path, defines=None):
@@ -309,8 +311,18 @@ class Builder:
         return math.degrees(2 * math.atan(half))
 
     def _integrator(self, integrator):
-        if integrator.type not in INTEGRATORS:
-            integrator.fail(f"integrator type {integrator.type!r} is not supported")
+        if integrator.type == "moment":     # the moments of its nested integrator's image
+            nested = self._one(integrator, "integrator")
+            integrator._read.update(integrator.params)
+            if nested is None:
+                integrator.fail("has no nested <integrator>")
+            self.notes.append("<integrator type=\"moment\">: its nested integrator's image "
+                              "rendered (not the moments)")
+            return self._integrator(nested)
+        if integrator.type not in INTEGRATORS + ("direct",):
+            integrator.fail(f"integrator type {integrator.type!r} is not supported (ptrace "
+                            f"renders what path, direct and the other light-transport "
+                            f"integrators render)")
         depth = integrator.integer("max_depth", -1)
         if integrator.type == "direct":
             depth = 2

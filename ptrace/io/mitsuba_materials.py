@@ -367,10 +367,12 @@ class Materials:
         if wrap not in WRAP:
             texture.fail(f"wrap_mode {wrap!r} is none of {', '.join(WRAP)}")
         filtering = texture.string("filter_type", "bilinear")
-        if filtering not in ("bilinear", "nearest"):
-            texture.fail(f"filter_type {filtering!r} is neither bilinear nor nearest")
-        if filtering == "nearest":
-            self.notes.append(f"{texture.where}: filter_type nearest drawn bilinear")
+        if filtering not in ("bilinear", "nearest", "ewa", "trilinear"):      # 0.6: ewa, ...
+            texture.fail(f"filter_type {filtering!r} is none of bilinear, nearest, ewa and "
+                         f"trilinear")
+        if filtering != "bilinear":
+            self.notes.append(f"<texture type=\"bitmap\">: filter_type {filtering} drawn "
+                              f"bilinear")
         raw = texture.boolean("raw", raw_default)
         try:
             pixels, encoded = read_image_file(path, f"the texture {name!r}", texture.path)

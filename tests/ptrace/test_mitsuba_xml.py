@@ -133,6 +133,33 @@ def test_version_0_6_is_upgraded(tmp_path):
     assert any("upgraded" in note for note in scene.notes)
 
 
+def test_a_0_6_scene_with_its_old_names(tmp_path):
+    path = write(tmp_path, '<integrator type="bdpt"><integer name="maxDepth" value="6"/>'
+                           '</integrator><sensor type="perspective"><float name="fov" value="45"/>'
+                           '<float name="nearClip" value="0.1"/><sampler type="ldsampler">'
+                           '<integer name="sampleCount" value="32"/></sampler><film '
+                           'type="ldrfilm"><integer name="width" value="40"/><integer '
+                           'name="height" value="30"/><boolean name="banner" value="false"/>'
+                           '</film></sensor><emitter type="spot"><float name="cutoffAngle" '
+                           'value="40"/><float name="beamWidth" value="30"/></emitter>'
+                           '<shape type="sphere"><bsdf type="diffuse"><srgb name="reflectance" '
+                           'value="0.5 0.5 0.5"/></bsdf></shape>', version="0.5.0")
+    scene = ptrace.load(path)
+    assert scene.file_cameras[0].znear == 0.1
+    assert scene.lights.cos_outer[0] == pytest.approx(math.cos(math.radians(40)))
+    # sRGB 0.5 is linear 0.214
+    np.testing.assert_allclose(scene.materials.albedo[0], [0.21404] * 3, rtol=1e-4)
+    notes = "\n".join(scene.notes)
+    assert "-r 40 30 -s 32 -m 5" in notes and "rendered by ptrace's path tracer" in notes
+
+
+def test_moment_renders_its_nested_integrator(tmp_path):
+    path = write(tmp_path, '<integrator type="moment"><integrator type="path"><integer '
+                           'name="max_depth" value="3"/></integrator></integrator><shape '
+                           'type="sphere"/>')
+    assert any("-m 2" in note for note in ptrace.load(path).notes)
+
+
 # --- shapes ---------------------------------------------------------------------------------
 
 def test_rectangle_vertices_and_normal(tmp_path):
@@ -501,6 +528,7 @@ REFUSALS = {
                      "NaN or infinite"),
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
+    "aov_integrator": ('<integrator type="aov"/>', "integrator type 'aov' is not supported"),
     "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
                        'value="400:0.1, 300:0.5"/></bsdf></shape>', "wavelengths increasing"),
     "old_version": ("version 1.0", "versions 0.4 to 0.6"),
