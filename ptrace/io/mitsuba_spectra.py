@@ -1,9 +1,10 @@
-"""Mitsuba spectra of wavelength:value pairs as RGB, the way Mitsuba 3's RGB variants convert
-them: the spectrum (linear between its pairs, 0 outside them) integrated against the CIE 1931
-colour matching functions over 360-830 nm, to XYZ, then linear sRGB. A reflectance (any
-spectrum outside an emitter) is weighted by the D65 illuminant and normalised by D65's own Y,
-so a flat spectrum is grey; an emitter's is normalised by the matching functions' Y, so a flat
-spectrum of 1 has Y = 1. Within 0.2 % of Mitsuba's own conversion.
+"""Mitsuba's spectral data as its RGB variants (scalar_rgb) use it: its named indices of
+refraction and conductors, and spectra of wavelength:value pairs converted to RGB as Mitsuba 3
+converts them: the spectrum (linear between its pairs, 0 outside them) integrated against the
+CIE 1931 colour matching functions over 360-830 nm, to XYZ, then linear sRGB. A reflectance
+(any spectrum outside an emitter) is weighted by the D65 illuminant and normalised by D65's own
+Y, so a flat spectrum is grey; an emitter's is normalised by the matching functions' Y, so a
+flat spectrum of 1 has Y = 1. Within 0.2 % of Mitsuba's own conversion.
 """
 import numpy as np
 
@@ -106,6 +107,56 @@ TABLE = np.array([
     (825, 1.77651e-06, 6.4153e-07, 0, 0.594728),
     (830, 1.25114e-06, 4.5181e-07, 0, 0.609233),
 ])
+# Mitsuba 3's named indices of refraction (its ior.h table)
+IOR = {"vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,
+       "carbon dioxide": 1.00045, "water": 1.3330, "acetone": 1.36, "ethanol": 1.361,
+       "carbon tetrachloride": 1.461, "glycerol": 1.4729, "benzene": 1.501,
+       "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+       "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
+       "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750, "diamond": 2.419}
+# Mitsuba 3's named conductors as its RGB variants (scalar_rgb) give them: (eta, k) per channel,
+# from the measured spectra its conductor plugin ships, converted to RGB by Mitsuba itself
+CONDUCTORS = {
+    "a-C": ((2.944, 2.2271, 1.9682), (0.88746, 0.7993, 0.81529)),
+    "Ag": ((0.15528, 0.11673, 0.13839), (4.8284, 3.1222, 2.1469)),
+    "Al": ((1.6575, 0.8804, 0.52124), (9.2238, 6.2695, 4.837)),
+    "AlAs": ((3.6053, 3.2329, 2.2163), (0.00067944, 0, 0.0075127)),
+    "AlSb": ((0, 4.1394, 4.6693), (0, 0.094009, 1.3006)),
+    "Au": ((0.14304, 0.37531, 1.442), (3.983, 2.3856, 1.6034)),
+    "Be": ((4.185, 3.185, 2.7841), (3.8355, 3.0101, 2.869)),
+    "Cr": ((4.3697, 2.9165, 1.6549), (5.2065, 4.2313, 3.7547)),
+    "CsI": ((2.1449, 1.7023, 1.6624), (0, 0, 0)),
+    "Cu": ((0.20101, 0.92375, 1.1022), (3.9133, 2.453, 2.1421)),
+    "Cu2O": ((3.5518, 2.9499, 2.7519), (0.11421, 0.1939, 0.60613)),
+    "CuO": ((3.2475, 2.4478, 2.2102), (0.52109, 0.57003, 0.72218)),
+    "d-C": ((2.7087, 2.3188, 2.2289), (0, 0, 0)),
+    "Hg": ((2.3989, 1.44, 0.90957), (6.3276, 4.3719, 3.4218)),
+    "HgTe": ((4.779, 3.2312, 2.6599), (1.6316, 1.5808, 1.7293)),
+    "Ir": ((3.0863, 2.0822, 1.6179), (5.5922, 4.0671, 3.2673)),
+    "K": ((0.064043, 0.04641, 0.038185), (2.1042, 1.3489, 0.91313)),
+    "Li": ((0.26579, 0.19562, 0.22095), (3.5402, 2.3111, 1.6686)),
+    "MgO": ((2.0896, 1.6507, 1.5949), (0, 0, 0)),
+    "Mo": ((4.484, 3.5251, 2.7763), (4.1114, 3.4208, 3.1506)),
+    "Na_palik": ((0.060269, 0.056141, 0.061988), (3.1793, 2.1125, 1.579)),
+    "Nb": ((3.4201, 2.7901, 2.3956), (3.4414, 2.7377, 2.5797)),
+    "Ni_palik": ((2.3673, 1.6634, 1.4671), (4.4988, 3.0502, 2.3454)),
+    "Rh": ((2.5858, 1.8602, 1.5543), (6.7823, 4.703, 3.9761)),
+    "Se-e": ((5.7228, 4.1657, 4.0813), (0.87114, 1.1052, 1.5653)),
+    "Se": ((4.0583, 2.8429, 2.8209), (0.75405, 0.63844, 0.52181)),
+    "SiC": ((3.1723, 2.526, 2.4794), (0, 0, 0)),
+    "SnTe": ((4.5242, 1.9816, 1.2816), (0, 0, 0)),
+    "Ta": ((2.0627, 2.3929, 2.6279), (2.4084, 1.7415, 1.947)),
+    "Te-e": ((7.5089, 4.2964, 2.37), (5.5839, 4.9472, 3.9976)),
+    "Te": ((7.3902, 4.4821, 2.6371), (3.256, 3.5271, 3.2921)),
+    "ThF4": ((1.8307, 1.4422, 1.3876), (0, 0, 0)),
+    "TiC": ((3.7005, 2.8374, 2.5823), (3.2656, 2.3516, 2.1728)),
+    "TiN": ((1.6484, 1.1505, 1.3798), (3.3683, 1.9435, 1.1021)),
+    "TiO2-e": ((3.1066, 2.5132, 2.5824), (0, 0, 0)),
+    "TiO2": ((3.4566, 2.8017, 2.9052), (0, 0, 0)),
+    "VC": ((3.6576, 2.7527, 2.5327), (3.0683, 2.1987, 1.9632)),
+    "VN": ((2.8656, 2.1192, 1.9401), (3.0322, 2.0561, 1.6163)),
+    "W": ((4.3708, 3.3002, 2.9984), (3.5006, 2.6049, 2.2732)),
+}
 XYZ_TO_SRGB = np.array([[3.240479, -1.537150, -0.498535], [-0.969256, 1.875991, 0.041556],
                         [0.055648, -0.204043, 1.057311]])
 STEPS = 1000

@@ -5,11 +5,11 @@ parser (defusedxml: no entity declarations, no DTDs, no external references); `$
 attribute is replaced by its value from `-D name=value` (the `defines`) or the file's own
 `<default name=.. value=..>`; `<include>` and `<path>` read only inside the scene's folder;
 `<ref>` finds an `id` anywhere in the scene; every value element (`<float>`, `<integer>`,
-`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` of a constant, `<point>`, `<vector>`,
-`<transform>`) becomes a checked Python value. Files of version 0.4 to 0.6 are upgraded as
-Mitsuba 3 upgrades them: camelCase parameter names become snake_case, `<lookAt>` becomes
-`<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one SceneError naming
-the file and the element.
+`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` (a constant, or wavelength:value pairs),
+`<point>`, `<vector>`, `<transform>`) becomes a checked Python value. Files of version 0.4 to
+0.6 are upgraded as Mitsuba 3 upgrades them: camelCase parameter names become snake_case,
+`<lookAt>` becomes `<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one
+SceneError naming the file and the element.
 """
 import os
 import re
@@ -25,7 +25,7 @@ from .mitsuba_spectra import spectrum_to_rgb
 from .mitsuba_transforms import Transform, describe, parse_transform
 
 OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler", "integrator",
-               "texture", "medium", "phase", "rfilter", "volume", "spectrum_plugin")
+               "texture", "medium", "phase", "rfilter", "volume")
 VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point", "vector",
               "transform", "srgb")
 MAX_INCLUDE_DEPTH = 32
