@@ -328,10 +328,14 @@ def write_image(path, radiance, eight_bit=None, extra=()):
 def read_image(path):
     """(H, W, C) float32 pixels of an image file (PNG values scaled to [0, 1])."""
     import OpenImageIO as oiio
-    buffer = oiio.ImageBuf(os.fspath(path))
-    if buffer.has_error:
-        raise PtraceError(f"{path}: cannot read image ({buffer.geterror()})")
-    return buffer.get_pixels(oiio.FLOAT)
+    with library_output() as printed:    # libpng's own lines: folded into the one line
+        buffer = oiio.ImageBuf(os.fspath(path))
+        pixels = None if buffer.has_error else buffer.get_pixels(oiio.FLOAT)
+        error = buffer.geterror() if buffer.has_error or pixels is None else None
+    if error is not None:
+        raise PtraceError(f"{path}: cannot read image "
+                          f"({printed.one_line(error) or 'not a readable image'})")
+    return pixels
 
 
 class Shown:
