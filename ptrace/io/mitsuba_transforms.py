@@ -72,8 +72,7 @@ def _vector3(reader, step, path, default):
             raise SceneError(path, f"{describe(step)}: value needs 3 numbers, has "
                                    f"{values.size}")
         return values
-    return np.array([float(reader.numbers(step, path, reader.attribute(step, k, path,
-                                                                   str(default)), k)[0])
+    return np.array([reader.number(step, path, reader.attribute(step, k, path, str(default)), k)
                      for k in "xyz"])
 
 
@@ -85,11 +84,11 @@ def _step(reader, step, tag, path):
         out[:3, :3] = np.diag(_vector3(reader, step, path, 1.0))
     elif tag == "rotate":
         axis = _vector3(reader, step, path, 0.0)
-        angle = reader.numbers(step, path, reader.required(step, "angle", path), "angle")
+        angle = reader.number(step, path, reader.required(step, "angle", path), "angle")
         length = float(np.linalg.norm(axis))
-        if not length > 0 or angle.size != 1:
-            raise SceneError(path, f"{describe(step)}: needs a non-zero axis and one angle")
-        out[:3, :3] = rotation(axis / length, math.radians(float(angle[0])))
+        if not length > 0:
+            raise SceneError(path, f"{describe(step)}: the axis of rotation is zero")
+        out[:3, :3] = rotation(axis / length, math.radians(angle))
     elif tag == "matrix":
         values = reader.numbers(step, path, reader.required(step, "value", path))
         if values.size == 16:

@@ -306,7 +306,16 @@ class Reader:
 
     # --- values ---------------------------------------------------------------------------
 
+    def number(self, element, path, text, what):
+        """The one number of an attribute's text (what names the attribute)."""
+        values = self.numbers(element, path, text, what)
+        if values.size != 1:
+            raise SceneError(path, f"{describe(element)}: {what} needs one number, has "
+                                   f"{values.size}")
+        return float(values[0])
+
     def numbers(self, element, path, text, what="value"):
+        """The numbers of an attribute's text, separated by commas or spaces, each finite."""
         words = [w for w in re.split(r"[,\s]+", text.strip()) if w]
         try:
             values = np.array([float(w) for w in words], dtype=np.float64)
@@ -342,7 +351,7 @@ class Reader:
             if text is not None:
                 values = self.numbers(element, path, text)
             else:
-                values = np.array([float(self.numbers(element, path, attr(k, "0"), k)[0])
+                values = np.array([self.number(element, path, attr(k, "0"), k)
                                    for k in "xyz"])
             if values.size != 3:
                 raise SceneError(path, f"{describe(element)}: needs 3 numbers, has "

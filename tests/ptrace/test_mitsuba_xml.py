@@ -528,6 +528,8 @@ REFUSALS = {
                      "NaN or infinite"),
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
+    "empty_number": ('<shape type="cube"><transform name="to_world"><translate x=""/>'
+                     '</transform></shape>', "x needs one number, has 0"),
     "aov_integrator": ('<integrator type="aov"/>', "integrator type 'aov' is not supported"),
     "spectrum_pairs": ('<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
                        'value="400:0.1, 300:0.5"/></bsdf></shape>', "wavelengths increasing"),
