@@ -119,7 +119,7 @@ class Builder:
             if name is None:
                 shape.fail("has no filename")
             vertices, faces, uv = shapes.mesh_file(shape, self.reader.resolve(shape, name),
-                                                   self.notes)
+                                                   self.notes, self.materials.textures(material))
         elif shape.type == "serialized":
             name = shape.string("filename")
             if name is None:

@@ -67,6 +67,11 @@ class Materials:
             self.records.append(record)
         return self._index[key]
 
+    def textures(self, index):
+        """Whether material `index` uses a texture."""
+        return any(self.records[index].get(k, -1) >= 0 for k in ("albedo_texture",
+                                                                 "alpha_texture"))
+
     def untextured(self, index, where):
         """The index of material `index` with its textures replaced by their mean colour, for
         a shape without texture coordinates (noted once per kind); `index` if it has none."""

@@ -62,7 +62,7 @@ def disk():
     return vertices, faces, uv
 
 
-def mesh_file(shape, path, notes):
+def mesh_file(shape, path, notes, want_uv=False):
     """(vertices, faces, uv or None) of an obj or ply file, uv as Mitsuba reads it (its v
     runs down the image)."""
     if shape.type == "obj":     # the file's texture coordinates, whatever its .mtl says
@@ -72,19 +72,40 @@ def mesh_file(shape, path, notes):
         budget.current().triangles(path, count, f"its {count:,} triangles")
     else:
         parts = _read_with_trimesh(path, ".ply")
+        if want_uv and parts["uv"] is None:
+            parts["uv"] = _ply_uv(path, parts)
     parts = _drop_non_finite(path, parts)
     if len(parts["faces"]) == 0:
         raise SceneError(path, "the file contains no triangles")
     kept = [n for n in parts["notes"] if "material" not in n.lower() and "mtl" not in n.lower()]
     notes.extend(f"{shape.where}: {n}" for n in kept)
     uv = parts["uv"]
-    # ptrace's readers give the file's v; Mitsuba flips an OBJ's (flip_tex_coords)
+    # ptrace's readers give the file's v; Mitsuba flips an OBJ's (flip_tex_coords), not a PLY's
     flip = shape.type == "obj" and shape.boolean("flip_tex_coords", True)
     if uv is not None:
         uv = np.array(uv, dtype=np.float64)
         if flip:
             uv[..., 1] = 1.0 - uv[..., 1]
     return np.asarray(parts["vertices"], np.float64), np.asarray(parts["faces"], np.int64), uv
+
+
+def _ply_uv(path, parts):
+    """(F, 3, 2) texture coordinates of a PLY's corners, which ptrace's reader keeps only for a
+    PLY that names a texture file: the file read again by trimesh, unprocessed, and its
+    coordinates taken only if its triangles are the reader's, corner by corner; else None."""
+    import trimesh
+    try:
+        raw = trimesh.load(path, file_type="ply", process=False)
+        uv = np.asarray(raw.visual.uv, dtype=np.float64)
+        faces = np.asarray(raw.faces, dtype=np.int64)
+        corners = np.asarray(raw.vertices, dtype=np.float64)[faces]
+    except Exception:       # noqa: BLE001 - no coordinates to be had: the caller notes it
+        return None
+    ours = parts["vertices"][parts["faces"]]
+    if uv.shape != (len(raw.vertices), 2) or corners.shape != ours.shape or \
+            not np.allclose(corners, ours):
+        return None
+    return uv[faces]
 
 
 def placed(shape, vertices, faces, uv):
