@@ -222,9 +222,9 @@ def test_obj_and_ply_shapes_are_read_by_ptrace_readers(tmp_path):
 
 def test_texture_coordinates_follow_mitsuba(tmp_path):
     """Mitsuba's v runs down the image, ptrace's up: a rectangle's corner (-1, -1) has
-    Mitsuba's (u, v) = (0, 0), so ptrace's (0, 1), and so has a PLY's of (u, v) = (0, 0);
-    an OBJ's vt (0, 0), which Mitsuba flips (flip_tex_coords), keeps ptrace's (0, 0).
-    (Renders of the three, textured, agree with Mitsuba's to 0.01 per pixel.)"""
+    Mitsuba's (u, v) = (0, 0), so ptrace's (0, 1), and so has a PLY's or a serialized mesh's
+    of (u, v) = (0, 0); an OBJ's vt (0, 0), which Mitsuba flips (flip_tex_coords), keeps
+    ptrace's (0, 0). (Renders of the four, textured, agree with Mitsuba's to 0.01 per pixel.)"""
     write_texture(tmp_path / "tex.exr")
     (tmp_path / "quad.obj").write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\n"
                                        "vt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n")
@@ -233,9 +233,14 @@ def test_texture_coordinates_follow_mitsuba(tmp_path):
             f"property float {p}\n" for p in "xyzuv") + "element face 2\nproperty list uchar "
         "int vertex_indices\nend_header\n-1 -1 0 0 0\n1 -1 0 1 0\n1 1 0 1 1\n-1 1 0 0 1\n"
         "3 0 1 2\n3 0 2 3\n")
+    (tmp_path / "quad.serialized").write_bytes(serialized([(
+        [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], [[0, 1, 2], [0, 2, 3]],
+        [[0, 0], [1, 0], [1, 1], [0, 1]])]))
     textured = ('<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string '
                 'name="filename" value="tex.exr"/></texture></bsdf>')
     for shape, expected in (('<shape type="rectangle">', [0, 1]),
+                            ('<shape type="serialized"><string name="filename" '
+                             'value="quad.serialized"/>', [0, 1]),
                             ('<shape type="obj"><string name="filename" value="quad.obj"/>',
                              [0, 0]),
                             ('<shape type="ply"><string name="filename" value="quad.ply"/>',
