@@ -118,6 +118,18 @@ def test_include_reads_the_included_scene(tmp_path):
     assert ptrace.load(path).geometry.radii.tolist() == [3.0]
 
 
+def test_path_folders_aliases_and_file_names_with_spaces(tmp_path):
+    (tmp_path / "my meshes").mkdir()
+    (tmp_path / "my meshes" / "a quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\n")
+    path = write(tmp_path, '<path value="my meshes"/><bsdf type="diffuse" id="grey"><rgb '
+                           'name="reflectance" value="0.25"/></bsdf><alias id="grey" as="dull"/>'
+                           '<shape type="obj"><string name="filename" value="a quad.obj"/>'
+                           '<ref id="dull"/></shape>')
+    scene = ptrace.load(path)
+    assert scene.triangle_count == 1
+    np.testing.assert_allclose(scene.materials.albedo[scene.material_index[0]], [0.25] * 3)
+
+
 def test_version_0_6_is_upgraded(tmp_path):
     path = write(tmp_path, '<sensor type="perspective"><float name="fov" value="30"/>'
                            '<string name="fovAxis" value="y"/><transform name="toWorld">'
