@@ -21,6 +21,7 @@ import numpy as np
 from .. import budget
 from ..errors import SceneError
 from .files import read_bytes
+from .limits import problem
 
 FORMAT_ID = 0x041C
 HAS_NORMALS, HAS_UV, HAS_COLOURS, FACE_NORMALS, SINGLE, DOUBLE = \
@@ -108,6 +109,7 @@ def _mesh(path, compressed, version, fail):
     faces = take(3, "<u8" if index == 8 else "<u4", triangles).astype(np.int64)
     if faces.size and faces.max() >= vertices:
         raise fail(f"a triangle uses vertex {int(faces.max())}, past its {vertices:,} vertices")
-    if not np.isfinite(positions).all():
-        raise fail("its positions have NaN or infinite values")
+    wrong = problem(positions)
+    if wrong is not None:
+        raise fail(f"a position: {wrong}")
     return positions, faces, None if uv is None else uv[faces], bool(flags & FACE_NORMALS)

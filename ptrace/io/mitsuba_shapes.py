@@ -13,6 +13,7 @@ import numpy as np
 from .. import budget
 from ..errors import SceneError
 from . import obj
+from .limits import problem
 from .meshes import _drop_non_finite, _read_with_trimesh
 
 DISK_SIDES = 128
@@ -113,8 +114,9 @@ def placed(shape, vertices, faces, uv):
     (Mitsuba's) turned to ptrace's."""
     transform = shape.transform("to_world")
     vertices = transform.apply(vertices)
-    if not np.isfinite(vertices).all():
-        shape.fail("to_world places vertices at infinity")
+    wrong = problem(vertices)
+    if wrong is not None:
+        shape.fail(f"to_world places a vertex where a coordinate is out of range: {wrong}")
     faces = np.array(faces, dtype=np.int64)
     if uv is not None:
         uv = np.array(uv, dtype=np.float64)
@@ -146,7 +148,11 @@ def sphere(shape):
         shape.fail("to_world scales the sphere unevenly (an ellipsoid); ptrace's spheres are "
                    "round")
     shape.boolean("flip_normals", False)
-    return transform.apply(centre)[0], radius * scale
+    centre, radius = transform.apply(centre)[0], radius * scale
+    wrong = problem(np.append(centre, radius))
+    if wrong is not None:
+        shape.fail(f"to_world places the sphere out of range: {wrong}")
+    return centre, radius
 
 
 def backing(vertices, faces, uv):

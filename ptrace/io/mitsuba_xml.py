@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .files import require_regular_file
+from .limits import problem
 from .mitsuba_spectra import spectrum_to_rgb
 from .mitsuba_transforms import Transform, describe, parse_transform
 
@@ -323,8 +324,9 @@ class Reader:
             bad = next(w for w in words if not _is_float(w))
             raise SceneError(path, f"{describe(element)}: {bad[:40]!r} in its {what} is not a "
                                    f"number") from None
-        if not np.isfinite(values).all():
-            raise SceneError(path, f"{describe(element)}: its {what} is NaN or infinite")
+        wrong = problem(values)
+        if wrong is not None:
+            raise SceneError(path, f"{describe(element)}: in its {what}, {wrong}")
         return values
 
     def _value(self, element, tag, path, emitter=False):

@@ -550,7 +550,11 @@ REFUSALS = {
     "wrong_type": ('<shape type="sphere"><string name="radius" value="big"/></shape>',
                    "parameter 'radius' must be a number"),
     "not_a_number": ('<shape type="sphere"><float name="radius" value="1e999"/></shape>',
-                     "NaN or infinite"),
+                     "inf is not a finite number"),
+    "beyond_limit": ('<shape type="sphere"><float name="radius" value="1e31"/></shape>',
+                     "1e+31 is beyond"),
+    "placed_beyond": ('<shape type="cube"><transform name="to_world"><scale value="1e20"/>'
+                      '<scale value="1e20"/></transform></shape>', "out of range"),
     "mirrored_camera": ('<sensor type="perspective"><transform name="to_world"><scale x="-1"/>'
                         '</transform></sensor>', "mirrors the image"),
     "empty_number": ('<shape type="cube"><transform name="to_world"><translate x=""/>'
