@@ -149,6 +149,10 @@ def _textured_luminance(materials, triangles, texture, material, uv, textures, s
     height = textures.height[texture][:, None]
     with np.errstate(invalid="ignore"):
         st = np.nan_to_num(st, nan=0.0, posinf=0.0, neginf=0.0)
+    # within 2^30, where float64 still resolves 2^-22 of a repeat, so that st x a side of at
+    # most 2^31 texels (PNG's largest) stays below int64's 2^63 (a file's vt may be anything
+    # finite: 1e308 x the width overflowed)
+    st = np.clip(st, -2.0 ** 30, 2.0 ** 30)
     column = _wrap(np.floor(st[..., 0] * width).astype(np.int64), width,
                    textures.wrap[texture, 0][:, None])
     row = _wrap(np.floor((1.0 - st[..., 1]) * height).astype(np.int64), height,
