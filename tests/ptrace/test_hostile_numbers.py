@@ -102,6 +102,19 @@ def test_the_default_light_rule_survives_an_overflowing_emission():
     assert lights == [] and "light it" in note, note
 
 
+def test_texture_coordinates_of_1e308_on_an_emitter_load(tmp_path):
+    """The default-light rule reads an emitter's texture at its vt: 1e308 x the width used
+    to overflow (a warning, then an invalid cast); the kernels wrap such coordinates."""
+    import PIL.Image
+    PIL.Image.new("RGB", (8, 8), (255, 255, 255)).save(tmp_path / "t.png")
+    (tmp_path / "glow.mtl").write_text("newmtl m\nKe 1 1 1\nmap_Ke t.png\n")
+    path = tmp_path / "glow.obj"
+    path.write_text("mtllib glow.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nvt 1e308 0\n"
+                    "vt 0 -1e308\nvt 1e308 1e308\nusemtl m\nf 1/1 2/2 3/3\n")
+    scene = ptrace.load(path)
+    assert any("default light" in note for note in scene.notes), scene.notes
+
+
 @pytest.mark.parametrize("coordinate", ["1e308", "-1e308", "1e31"])
 def test_an_obj_vertex_beyond_the_limit_is_refused_naming_the_file_and_line(tmp_path, capsys,
                                                                              coordinate):
