@@ -38,7 +38,7 @@ def first_outside(values, limit=LIMIT):
 
 def problem(values, limit=LIMIT):
     """None when every value is a finite number of magnitude at most `limit`; else words for
-    the first that is not: "has a NaN or infinite value" or "1e+308 is beyond ±1e+30, ..."."""
+    the first that is not: "nan is not a finite number", "1e+308 is beyond ±1e+30, ..."."""
     value = first_outside(values, limit)
     if value is None:
         return None
