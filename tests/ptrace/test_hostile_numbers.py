@@ -202,6 +202,18 @@ def test_a_flag_beyond_the_limit_is_refused_in_one_line_naming_it(tmp_path, caps
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_environment_image_beyond_the_limit_is_refused_naming_it(tmp_path, capsys):
+    """A float EXR's 3e38 is finite, but every sample it lights would overflow."""
+    import OpenImageIO as oiio
+    image = str(tmp_path / "hot.exr")
+    out = oiio.ImageOutput.create(image)
+    out.open(image, oiio.ImageSpec(8, 4, 3, oiio.FLOAT))
+    out.write_image(np.full((4, 8, 3), 3e38, np.float32))
+    out.close()
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", "-e", image, SHIPPED)
+    assert code == 2 and "hot.exr" in line and "3e+38 is beyond" in line, line
+
+
 def test_the_python_api_refuses_the_same_numbers():
     scene = ptrace.load(SHIPPED)
     camera = ptrace.course_camera(scene, 8, 6)
