@@ -1,7 +1,6 @@
 """ptrace: a physically based path tracer (CS184 semantics) on a pluggable ray accelerator."""
 # first: numba's cache set up (a fallback folder, unreadable files recompiled) before any kernel
 from . import jit  # noqa: F401, I001
-from . import _moved
 from .camera import Camera, course_camera
 from .environment import Environment, load_environment
 from .errors import PtraceError, SceneError
@@ -15,11 +14,3 @@ from .scene import Scene
 __all__ = ["Camera", "Environment", "PtraceError", "SceneError", "Scene", "Settings",
            "course_camera", "default_camera", "framing_camera", "load", "load_environment",
            "look_at", "render", "show"]
-
-# the modules that moved into ptrace.app and ptrace.rendering answer to their old names too
-# (ptrace.cli, ptrace.settings, ...), with a DeprecationWarning
-_moved.install()
-
-
-def __getattr__(name):
-    return _moved.moved_attribute(__name__, name)

@@ -1,8 +1,6 @@
-"""The package layout: the commands in ptrace.app, the render job in ptrace.rendering, and the
-modules' old names (ptrace.cli, ptrace.settings, ...) still importable, as the same module
-objects, with one DeprecationWarning each that names the new path."""
+"""The package layout: the commands in ptrace.app, the render job in ptrace.rendering (at those
+paths only), the public API, the console script, and what the kernel cache's key covers."""
 import ast
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -10,85 +8,33 @@ from pathlib import Path
 import pytest
 
 import ptrace
-from ptrace import _moved, jit
+from ptrace import jit
 
 ROOT = Path(__file__).resolve().parents[2]
 
-# Run in a fresh process: an old name warns only the first time it is imported in a process.
-PROBE = r"""
-import importlib, json, pickle, sys, warnings
-import ptrace
-from ptrace import _moved
-out = {}
-for old, new in sorted(_moved.MOVED.items()):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        module = importlib.import_module(old)
-        again = importlib.import_module(old)
-    out[old] = {"same": module is importlib.import_module(new) and again is module,
-                "name": module.__name__,
-                "warnings": [(w.category.__name__, str(w.message)) for w in caught]}
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    sys.modules.pop("ptrace.settings"); del ptrace.settings
-    from ptrace.settings import Settings        # this line is the one the warning names
-out["from"] = {"same": Settings is ptrace.Settings,
-               "where": [(w.filename, w.lineno) for w in caught]}
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    sys.modules.pop("ptrace.renderer"); del ptrace.renderer
-    attribute = ptrace.renderer
-out["attribute"] = {"same": attribute is sys.modules["ptrace.rendering.renderer"],
-                    "warnings": len(caught)}
-out["pickle"] = pickle.loads(pickle.dumps(ptrace.Settings(spp=3))) == ptrace.Settings(spp=3)
-print(json.dumps(out))
-"""
-
-
-@pytest.fixture(scope="module")
-def probed():
-    run = subprocess.run([sys.executable, "-c", PROBE], capture_output=True, text=True,
-                         timeout=300, cwd=ROOT)
-    assert run.returncode == 0, run.stderr
-    return json.loads(run.stdout.strip().splitlines()[-1])
+# the modules that moved into ptrace.app and ptrace.rendering, now at their new paths only
+MOVED = {f"ptrace.{name}": f"ptrace.app.{name}" for name in (
+    "cli", "cli_camera", "options", "view", "view_messages", "view_render", "view_session")}
+MOVED.update({f"ptrace.{name}": f"ptrace.rendering.{name}" for name in (
+    "distributed", "executors", "renderer", "settings", "tiles", "timing")})
 
 
 def test_every_moved_module_lives_at_its_new_path_only():
-    assert len(_moved.MOVED) == 13
-    for old, new in _moved.MOVED.items():
+    for old, new in MOVED.items():
         assert (ROOT / (new.replace(".", "/") + ".py")).is_file(), new
         assert not (ROOT / (old.replace(".", "/") + ".py")).exists(), old
+        with pytest.raises(ModuleNotFoundError):
+            __import__(old)
     assert (ROOT / "ptrace" / "app" / "view_page.html").is_file()
 
 
-def test_an_old_name_is_the_new_module_and_warns_once(probed):
-    for old, new in _moved.MOVED.items():
-        seen = probed[old]
-        assert seen["same"] and seen["name"] == new, (old, seen)
-        assert seen["warnings"] == [["DeprecationWarning",
-                                     f"{old} has moved to {new}; import it from there (the old "
-                                     f"name is deprecated)"]], (old, seen)
-
-
-def test_the_warning_names_the_line_that_used_the_old_name(probed):
-    assert probed["from"]["same"]
-    assert probed["from"]["where"] == [["<string>", PROBE.splitlines().index(
-        "    from ptrace.settings import Settings        # this line is the one the warning "
-        "names") + 1]]
-
-
-def test_an_old_name_as_an_attribute_of_the_package(probed):
-    assert probed["attribute"] == {"same": True, "warnings": 1}
-    with pytest.raises(AttributeError, match="has no attribute 'no_such_module'"):
-        ptrace.no_such_module   # only moved names answer
-
-
-def test_the_public_api_is_unchanged(probed):
+def test_the_public_api_and_a_pickled_settings():
+    import pickle
     for name in ptrace.__all__:
         assert getattr(ptrace, name) is not None, name
     assert callable(ptrace.render) and ptrace.render.__module__ == "ptrace.rendering.renderer"
     assert ptrace.Settings.__module__ == "ptrace.rendering.settings"
-    assert probed["pickle"]
+    assert pickle.loads(pickle.dumps(ptrace.Settings(spp=3))) == ptrace.Settings(spp=3)
 
 
 def test_a_name_that_never_existed_is_not_found():
