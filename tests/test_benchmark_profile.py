@@ -1,7 +1,8 @@
 """The render profile benchmark: the render's own phases that it reads (stats["phases"] and
 stats["counts"], ptrace.rendering.timing.Phases), its helpers on tiny renders (the wall-time
-phases add up, the wrapper is put back, the counting face counts every ray and changes no pixel, the
-differencing rows add up), and a tiny quick run's report, with a failing embree backend skipped.
+phases add up, the wrappers are put back, the stage clock times every stage, counts every ray
+and changes no pixel, the differencing rows add up), and a tiny quick run's report, with a
+failing embree backend skipped.
 
 Reports go to a temporary directory, never into benchmarks/results/.
 """
@@ -19,10 +20,9 @@ import ptrace.rendering.tiles
 import ptrace.rendering.timing
 from benchmarks import profile_render as pr
 from benchmarks import report
+from ptrace.kernel import wavefront
 
-# the profile splits the megakernel's loop (benchmarks.profile_render.timed_render)
-TINY = dict(spp=2, light_samples=2, max_depth=4, integrator="path", resolution=(24, 18),
-            loop="megakernel")
+TINY = dict(spp=2, light_samples=2, max_depth=4, integrator="path", resolution=(24, 18))
 PIXELS = 24 * 18
 REPO = pathlib.Path(__file__).resolve().parents[1]
 
@@ -93,10 +93,10 @@ def test_union_seconds():
 
 
 def test_wall_phases_add_up_to_the_wall_time(cow):
-    original = ptrace.rendering.tiles.render_pixels
+    original = wavefront.Wavefront.trace
     plain = ptrace.render(cow, threads=2, accel="bvh", **TINY)
     run = pr.timed_render(cow, 2, accel="bvh", **TINY)
-    assert ptrace.rendering.tiles.render_pixels is original
+    assert wavefront.Wavefront.trace is original
     assert np.array_equal(run.image, plain)
     phases = run.phases()
     assert list(phases) == list(pr.WALL_PHASES)
@@ -121,86 +121,44 @@ def test_the_wrapper_is_put_back_when_the_render_fails(cow, monkeypatch):
     def failing(*args):
         raise RuntimeError("kernel failed")
 
-    monkeypatch.setattr(ptrace.rendering.tiles, "render_pixels", failing)
+    monkeypatch.setattr(wavefront.Wavefront, "trace", failing)
+    closest = wavefront.closest_stage
     with pytest.raises(RuntimeError, match="kernel failed"):
-        pr.timed_render(cow, 2, accel="bvh", **TINY)
-    assert ptrace.rendering.tiles.render_pixels is failing
+        pr.timed_render(cow, 2, stages=pr.StageClock(), accel="bvh", **TINY)
+    assert wavefront.Wavefront.trace is failing and wavefront.closest_stage is closest
 
 
-def cache_indexes():
-    """numba's cache index files of the library packages."""
-    return [p for package in ("ptrace", "accel")
-            for p in (REPO / package).rglob("*.nbi")]
-
-
-@pytest.mark.slow   # compiles the counting copy of the path loop: 10-30 s, once per process
-def test_the_counting_face_counts_every_ray_and_changes_no_pixel(cow):
+def test_the_stage_clock_times_every_stage_counts_every_ray_and_changes_no_pixel(cow):
     stats = {}
     options = dict(TINY, accel="bvh")
     plain = ptrace.render(cow, threads=2, stats=stats, **options)
-    counter = pr.counting_plan(cow, options, stats["rays"])
-    tiles = ptrace.rendering.tiles
-    saved = accel.build, tiles.render_pixels, tiles.new_scratch
-    run, backend = pr.counted_render(cow, 2, counter, **options)
-    assert (accel.build, tiles.render_pixels, tiles.new_scratch) == saved
+    saved = [getattr(wavefront, name) for name in pr.STAGES + ("hit_stage", "shading_stage")]
+    run = pr.timed_render(cow, 2, stages=pr.StageClock(), **options)
+    assert [getattr(wavefront, name) for name in pr.STAGES + ("hit_stage", "shading_stage")] \
+        == saved
     assert np.array_equal(run.image, plain)
-    camera, bounce, shadow = counter.totals()
-    assert camera + bounce + shadow == stats["rays"] == run.rays
-    assert camera == PIXELS * TINY["spp"] and bounce > 0 and shadow > 0
-    assert counter.used == run.calls == 1
-    # one block: every ray was copied, camera rays from the eye with the camera's bounds
-    eye = ptrace.camera.course_camera(cow, 24, 18)
-    rays = [counter.captured(k) for k in range(3)]
-    assert [len(r) for r in rays] == [camera, bounce, shadow]
-    assert (rays[0].origins == eye.position).all()
-    assert (rays[0].tmin == eye.znear).all() and (rays[0].tmax == eye.zfar).all()
-    assert (rays[1].tmin == 0).all() and not (rays[1].origins == eye.position).all(axis=1).any()
-    # the loop-style replay asks the same questions as the batch face
-    for k in range(3):
-        array = pr.ray_array(rays[k])
-        scratch = accel.compiled.new_scratch(backend.compiled)
-        checksum = pr._replay(backend.compiled, scratch, array, 0, len(array), k == pr.SHADOW)
-        if k == pr.SHADOW:
-            assert checksum == backend.occluded(rays[k]).sum()
-        else:
-            hits = backend.intersect(rays[k])
-            assert checksum == hits.prim.sum() and (hits.prim >= 0).any()
-    # with -m 1 there are no bounce rays: every ray after the camera's is a shadow ray
-    stats = {}
-    one = dict(options, max_depth=1, spp=20, resolution=(40, 30))   # 24 blocks, 2 threads
-    ptrace.render(cow, threads=2, stats=stats, **one)
-    counter = pr.counting_plan(cow, one, stats["rays"])
-    run, _ = pr.counted_render(cow, 2, counter, **one)
-    assert counter.used == run.calls == pr.planned_blocks(1200, 20)
-    assert counter.totals() == (1200 * 20, 0, stats["rays"] - 1200 * 20)
-    # no numba cache index of the library names a type of the benchmark: a process that
-    # cannot import benchmarks/ would fail to read it
-    for index in cache_indexes():
-        data = index.read_bytes()
-        assert b"CountingRecord" not in data and b"profile_render" not in data, index
-
-
-def test_the_counting_face_refuses_a_render_with_more_blocks_than_rows():
-    counter = pr.RayCounter(np.zeros(3), blocks=4, capacity=[8, 8, 8], target=16)
-    assert counter.check() == 0
-    counter.used = counter.counts.shape[0]
-    with pytest.raises(RuntimeError, match="counts would race"):
-        counter.check()
+    clock = run.stages
+    assert {"camera_stage", "closest_stage", "hit_stage", "shading: diffuse", "any_stage",
+            "shadow_stage", "fold_stage", "add_stage"} <= set(clock.seconds)
+    assert clock.items["camera_stage"] == PIXELS * TINY["spp"]
+    # every ray traced went through a trace stage: camera and bounce rays the closest hit's,
+    # shadow rays the any hit's
+    traced = sum(clock.items.get(name, 0) for name in pr.TRACE_STAGES)
+    assert traced == stats["rays"] == run.rays
+    assert clock.items["closest_stage"] > PIXELS * TINY["spp"] and clock.items["any_stage"] > 0
+    rows = pr.stage_rows(run)
+    assert rows[-1][3] == pytest.approx(run.thread_seconds)
+    assert sum(row[3] for row in rows[:-1]) == pytest.approx(run.thread_seconds)
+    assert all(row[3] > 0 for row in rows[:-2])
+    assert 0 < pr.accelerator_seconds(run) < run.thread_seconds
 
 
 def test_the_differencing_rows_add_up():
     loop = {"normals": 1.0, "m0": 1.5, "m1": 3.0, "full": 7.0}
     rays = {"normals": 100, "m0": 100, "m1": 250, "full": 600}
-    est = pr.Estimate(counts=(100, 200, 300), replayed=(100, 200, 300),
-                      per_ray=(1e-3, 2e-3, 3e-3), batch_face=(None,) * 3,
-                      synthetic=(None,) * 3, run=None)
-    rows = pr.ladder_rows(loop, rays, est)
+    rows = pr.ladder_rows(loop, rays)
     assert [r[1] for r in rows] == [100, 0, 150, 350, 600]
     assert [r[2] for r in rows] == pytest.approx([1.0, 0.5, 1.5, 4.0, 7.0])
-    # camera rays; none; 150 first-vertex shadow rays; 200 bounce + 150 later shadow rays
-    assert [r[3] for r in rows] == pytest.approx([0.1, 0.0, 0.45, 0.85, 1.4])
-    assert rows[-1][3] == pytest.approx(est.traversal)
-    assert all(r[3] + r[4] == pytest.approx(r[2]) for r in rows)
 
 
 def table(section, first_header_cell):
@@ -220,7 +178,7 @@ def number(cell):
     return float(cell.replace(",", ""))
 
 
-@pytest.mark.slow   # a few seconds, and the counting copy of the loop compiled once per process
+@pytest.mark.slow   # a few seconds
 def test_quick_report(tmp_path, monkeypatch, scenes_dir):
     monkeypatch.setenv("PTRACE_SCENES", str(scenes_dir))
     monkeypatch.setattr(report, "RESULTS", tmp_path)
@@ -235,9 +193,9 @@ def test_quick_report(tmp_path, monkeypatch, scenes_dir):
     names = ["cow -s 64 -l 16 -m 6 (bvh)", "cow -s 64 -l 16 -m 6 (embree)",
              "cow normals -s 1 (bvh)"]
     threads = numba.get_num_threads()
-    original = ptrace.rendering.tiles.render_pixels
+    original = wavefront.Wavefront.trace
     path = pr.main(["--quick", "--resolution", "32x24", "--only", *names, "--output", "p.md"])
-    assert numba.get_num_threads() == threads and ptrace.rendering.tiles.render_pixels is original
+    assert numba.get_num_threads() == threads and wavefront.Wavefront.trace is original
     assert accel.build is embree_fails
     assert path == tmp_path / "p.md"
     text = path.read_text()
@@ -260,14 +218,14 @@ def test_quick_report(tmp_path, monkeypatch, scenes_dir):
         seconds = [number(row[1]) for row in wall]
         assert abs(sum(seconds[:-1]) - seconds[-1]) <= 0.0005 * len(seconds), name
         assert abs(sum(number(row[2]) for row in wall[:-1]) - 100) <= 0.05 * len(wall), name
-        kinds = table(section, "ray kind")
-        assert [row[0] for row in kinds] == list(pr.KIND_LABELS)
-        counted = [number(row[1]) for row in kinds]
-        traced = re.search(r"Checks: counted rays ([0-9,]+) = rays traced ([0-9,]+);", section)
-        assert traced and number(traced[1]) == number(traced[2]) == sum(counted), name
-        assert "counting-face image identical" in section
+        stages = table(section, "stage")
+        assert stages[-2][0] == pr.BETWEEN and stages[-1][0] == "total: the loop"
+        seconds = [number(row[3]) for row in stages]
+        assert abs(sum(seconds[:-1]) - seconds[-1]) <= 0.0005 * len(seconds), name
+        traced = re.search(r"their rays ([0-9,]+) = rays traced ([0-9,]+)\.", section)
+        assert traced and number(traced[1]) == number(traced[2]), name
         slowest = [line for line in section.splitlines() if line[:3] in ("1. ", "2. ", "3. ")]
-        assert len(slowest) == 3 and all(re.search(r"\((measured|estimate)\)$", line)
+        assert len(slowest) == 3 and all(re.search(r"\(measured\)$", line)
                                          for line in slowest), name
         shares = [float(re.search(r", ([0-9.]+)% of wall", line)[1]) for line in slowest]
         assert shares == sorted(shares, reverse=True)
@@ -275,15 +233,17 @@ def test_quick_report(tmp_path, monkeypatch, scenes_dir):
     full = text.split(f"## {names[0]}\n", 1)[1].split("\n## ", 1)[0]
     loop = table(full, "part of the path loop")
     assert len(loop) == len(pr.LADDER) + 1
-    assert [row[0] for row in loop[:-1]] == [label for _, label, _ in pr.LADDER]
+    assert [row[0] for row in loop[:-1]] == [label for _, label in pr.LADDER]
     parts = [number(row[2]) for row in loop]
     assert abs(sum(parts[:-1]) - parts[-1]) <= 0.0005 * len(parts)
     assert number(loop[1][1]) == 0 and number(loop[0][1]) == 32 * 24 * 4   # -s 64 / 16
     assert sum(number(row[1]) for row in loop[:-1]) == number(loop[-1][1])
-    kinds = table(full, "ray kind")
-    assert sum(number(row[1]) for row in kinds) == number(loop[-1][1])
-    assert all(number(row[1]) > 0 for row in kinds)
+    stages = {row[0]: row for row in table(full, "stage")}
+    assert number(stages["camera_stage"][2]) == 32 * 24 * 4
+    assert number(stages["closest_stage"][2]) + number(stages["any_stage"][2]) == \
+        number(loop[-1][1])
     normals = text.split(f"## {names[2]}\n", 1)[1].split("\n## ", 1)[0]
     assert "part of the path loop" not in normals
-    kinds = table(normals, "ray kind")
-    assert number(kinds[0][1]) == 32 * 24 and number(kinds[1][1]) == number(kinds[2][1]) == 0
+    stages = {row[0]: row for row in table(normals, "stage")}
+    assert number(stages["closest_stage"][2]) == 32 * 24
+    assert "any_stage" not in stages and "hit_stage" not in stages
