@@ -43,10 +43,6 @@ BENCHMARKS = {
     "many_lights": Benchmark("a room of 64 area lights and 1024 emissive tiles: MSE x seconds "
                              "of each light sampler against every light at every vertex",
                              in_all=False),
-    "wavefront_gate": Benchmark("the diffuse Cornell boxes by the megakernel and the wavefront "
-                                "prototype in turns: cold compile, paths/s, Mitsuba 3",
-                                quick=("--turns", "1", "--no-cold", "--no-mitsuba"),
-                                in_all=False),
 }
 
 # modules of the package that are not benchmarks

@@ -1,7 +1,8 @@
 """The integrator's integer codes and defaults that the settings need, in a module without
 numba: ptrace.rendering.settings (read by both commands, pickled to Dask workers) imports them from
-here, and ptrace.integrator (the compiled loop, which compiles them in as constants) imports and
-re-exports them, so `from ptrace.integrator import SOBOL` still names the same value."""
+here, and ptrace.integrator (the kernels' shared part, which compiles them in as constants)
+imports and re-exports them, so `from ptrace.integrator import SOBOL` still names the same
+value."""
 from collections import namedtuple
 
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))
@@ -11,7 +12,7 @@ RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, m
 # paths early and turns a dim mirror's chains into rare heavy ones (CBcoil's per-pixel spread,
 # tests/ptrace/test_per_pixel.py)
 RR_DEPTH = 5
-PATH, NORMALS = 0, 1    # what render_pixels computes per sample
+PATH, NORMALS = 0, 1    # what the path loop computes per sample
 INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 # Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
 # samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by

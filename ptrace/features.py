@@ -1,10 +1,10 @@
 """Feature buffers (AOVs): what each camera ray's first hit is, averaged per pixel like the
 radiance, for a denoiser's guides and for users: albedo, shading normal and distance.
 
-The kernel side is `ptrace.integrator.first_hit_features`, which render_pixels calls for each sample
-when a render asks for AOVs (`ptrace.render(..., aovs={})`, the CLI's `--aov`): it traces the
-sample's camera ray once more (the same ray trace_path starts from), so a render without AOVs pays
-nothing and the path loop stays as it is, and a render with them pays one ray per sample. Here: the
+The kernel side is `ptrace.integrator.hit_features`, which the wavefront's features_stage takes of
+each camera ray's hit when a render asks for AOVs (`ptrace.render(..., aovs={})`, the CLI's
+`--aov`): the camera rays are traced once more for it, before the paths start from them, so a
+render without AOVs pays nothing and a render with them pays one ray per sample. Here: the
 names, the per-pixel images from the sums, and the denoiser. `denoise` runs Intel Open Image Denoise
 through the optional `pyoidn` package (`pip install "ptrace[denoise]"`).
 """

@@ -1,27 +1,21 @@
-"""The path integrator as one compiled loop: each thread carries a path from the camera to its end.
-
-`render_pixels` runs on many small blocks of pixels at once; for every (pixel, sample) it
-makes the camera ray, intersects it through the accelerator's compiled face (accel.compiled:
-naive, bvh or embree, one specialisation of this kernel each), adds the emission it sees, and at
-each of up to max_depth vertices samples direct light unless the BSDF is delta, samples the
-BSDF, applies Russian roulette from vertex rr_depth on, and traces the bounce ray. No Python, no
-array and no kernel launch between bounces.
+"""What every stage of the path loop shares (ptrace.kernel runs it, as waves of paths through
+small stage kernels): the records the kernels take, built once per scene (`scene_records`,
+`camera_record`), the camera's rays, the surface at a hit and the spawn of the next ray, the
+sampler's dimensions per vertex, the power heuristic, the emission a bounce ray finds with its
+weight against light sampling (`emission_found`), the normals integrator's colour and the AOVs
+of a hit.
 
 Direct light is estimated by multiple importance sampling (the default; pbrt-v4's and
 Mitsuba's path integrators do the same): -l samples of each light, and the BSDF sample that
 continues the path, each weighted by the power heuristic, so that emission a BSDF-sampled ray
 finds counts too (emission_found). With --direct light it is the course's estimator
 (docs/course.md#direct-light): light samples alone, and a bounce ray's emission counts only after
-a delta bounce.
--H is the course's uniform hemisphere sampling. The lights are the file's lights plus, as one
-more light, the emissive primitives that are not a file light's face (ptrace.lights). Random
-numbers come from the Sobol' sampler (stratified) or the independent one (ptrace.sampling).
-Departures from the course are listed in docs/departures.md.
-
-Kernel state travels as a few named records (namedtuples of flat arrays and scalars, built once
-per scene by `scene_records`). Random numbers are keyed by (seed, pixel, sample, dimension), and
-each pixel's samples are summed from zero, in sample order, by one thread, then added to the
-pixel's running sums: the image does not depend on threads, blocks or backend.
+a delta bounce. -H is the course's uniform hemisphere sampling. The lights are the file's
+lights plus, as one more light, the emissive primitives that are not a file light's face
+(ptrace.lights). Random numbers come from the Sobol' sampler (stratified) or the independent one
+(ptrace.sampling), keyed by (seed, pixel, sample, dimension), so the image does not depend on
+threads, blocks, waves or backend. Departures from the course are listed in
+docs/departures.md.
 """
 import math
 from collections import namedtuple
@@ -29,7 +23,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, conductor_fresnel, is_delta, uniform_hemisphere
+from .bsdf import conductor_fresnel
 from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
     AUTO_EVERY_LIGHT,
     AUTO_MANY,
@@ -45,29 +39,21 @@ from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here
     SOBOL,
     Options,
 )
-from .cutouts import shadowed, visible_hit
 from .environment import (
-    LUMINANCE,
     environment_arrays,
     environment_pdf,
     environment_radiance,
-    environment_sample,
 )
-from .light_bvh import bvh_arrays, bvh_choose, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
+from .light_bvh import bvh_arrays, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
 from .light_hits import build_light_hits, next_light, no_light_hits
 from .lights import (
     EMITTER,
     area_light_hit,
     area_light_pdf,
-    choose,
     emitter_arrays,
     emitter_pdf,
-    light_is_delta,
     light_selection,
     primitive_pdf,
-    sample_emitter,
-    sample_light,
-    sample_primitive,
     selection_weights,
 )
 from .sampling import sobol_1d, sobol_2d, uniform
@@ -77,7 +63,6 @@ from .scene import (
     EMISSION,
     ENVIRONMENT,
     GLASS,
-    GLOSSY,
     GLTF_PBR,
     MICROFACET,
     REFRACTION,
@@ -317,166 +302,6 @@ def light_mode(options, lights):
     return mode
 
 
-# Inlining, for compile time: render_pixels' per-sample callees (trace_path, emission_found,
-# normal_colour, first_hit_features) are inlined by numba itself (inline="always"), so none is
-# ever compiled on its own; with forceinline each was also compiled alone (optimised and turned
-# into machine code) before LLVM inlined it into its caller, once per backend. direct_light stays
-# forceinline: numba cannot inline a call of more than 30 arguments (Python passes them as *args).
-# The smaller kernel functions stay forceinline too: inlined by numba at every call site, their
-# type inference made render_pixels' compile several times longer; and calling the BSDFs or
-# direct_light instead of inlining them did not make the cold compile shorter.
-@njit(cache=True, _nrt=False, forceinline=True)
-def direct_light(shapes, materials, lights, options, record, scratch, pixel, sample, vertex, m,
-                 ar, ag, ab, alpha, metallic, px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy,
-                 yz, nx, ny, nz, wox, woy, woz, tr, tg, tb):
-    """Direct light at a non-delta vertex, times the path throughput: (r, g, b, rays traced).
-
-    Light sampling: -l samples of each area, ambient, environment or emissive-geometry light and
-    one of each delta light, each weighted L f cos / (n pdf) and kept if its shadow ray is clear
-    (docs/course.md#direct-light); with multiple importance sampling each non-delta sample also
-    carries its power heuristic weight against the BSDF sample that trace_path takes next. With
-    -H: -l uniform hemisphere samples per light, each weighted f cos / (pdf n) times the
-    emission its ray finds (or the environment's radiance where it escapes). Under the power
-    or bvh light sampler (light_mode): -l samples in all, each of one light chosen by power, or
-    by the light BVH at p and its shading normal n (an emissive primitive on its own), each
-    weighted as if -l times that probability. (ar, ag, ab), alpha and metallic are the albedo,
-    roughness and metallic at this vertex (ptrace.textures.surface_albedo)."""
-    kind = materials.kind[m]
-    base = vertex * DIMS_PER_VERTEX
-    r = g = b = 0.0
-    rays = 0
-    if options.hemisphere:
-        count = 0
-        for light in range(lights.kind.shape[0]):
-            count += lights.kind[light] != EMITTER
-        count = max(count, 1) * options.light_samples
-        for j in range(count):
-            u1, u2 = sample_2d(options, pixel, sample, sample * count + j, base + DIM_LIGHT,
-                               base + DIM_LIGHT + 2 * j)
-            lx, ly, lz = uniform_hemisphere(u1, u2)
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, metallic, materials.eta, materials.k,
-                                   materials.specular, m, wox, woy, woz, lx, ly, lz)
-            scale = lz * 2.0 * math.pi / count
-            wx = lx * xx + ly * yx + lz * nx
-            wy = lx * xy + ly * yy + lz * ny
-            wz = lx * xz + ly * yz + lz * nz
-            ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-            rays += 1
-            t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel,
-                                        sample, base + RAY_KEYS * (1 + j), ox, oy, oz, wx, wy,
-                                        wz, 0.0, math.inf)
-            if prim < 0:
-                if lights.env_image.shape[0] > 0:
-                    er, eg, eb = environment_radiance(lights.env_image, wx, wy, wz)
-                    r += tr * (fr * scale) * er
-                    g += tg * (fg * scale) * eg
-                    b += tb * (fb * scale) * eb
-                continue
-            e = shapes.material_index[prim]
-            if not emits(materials.kind[e]):
-                continue
-            er, eg, eb = surface_emission(shapes, materials, e, prim, u, v)
-            r += tr * (fr * scale) * er
-            g += tg * (fg * scale) * eg
-            b += tb * (fb * scale) * eb
-        return r, g, b, rays
-    n = options.light_samples
-    mode = light_mode(options, lights)
-    power = mode != LIGHTS_ALL      # one light per light sample, by power or by the tree
-    j = 0
-    for outer in range(n if power else lights.kind.shape[0]):
-        index = 0
-        light = outer
-        prim = -1
-        chosen = 1.0
-        if power:   # light sample `outer` of -l: one light, chosen by power or by the tree
-            index = sample * n + outer
-            u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
-                           base + DIM_LIGHT + 4 * outer + 2)
-            if mode == LIGHTS_BVH:
-                light, prim, chosen = bvh_choose(lights, u0, px, py, pz, nx, ny, nz)
-                if light < 0:
-                    continue
-            else:
-                light = choose(lights.select_cdf, u0)
-                chosen = lights.select_pmf[light]
-        light_kind = lights.kind[light]
-        delta = light_is_delta(light_kind, lights.model[light])
-        count = 1 if delta or power else n
-        for s in range(count):
-            if power:   # weight: the light's expected samples at this vertex
-                weight = n * chosen
-                u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
-                                   base + DIM_LIGHT + 4 * outer)
-            else:
-                weight = count
-                index = sample * count + s
-                u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
-                                   base + DIM_LIGHT + 2 * j)
-            if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
-                lr, lg, lb, wx, wy, wz, dist, pdf = sample_primitive(shapes, materials, prim, px,
-                                                                     py, pz, u1, u2)
-            elif light_kind == EMITTER:
-                if power:
-                    u0 = sample_1d(options, pixel, sample, index,
-                                   base + DIM_LIGHT + DIM_CHOOSE_PRIM,
-                                   base + DIM_LIGHT + 4 * outer + 3)
-                else:
-                    u0 = sample_1d(options, pixel, sample, index,
-                                   base + DIM_LIGHT + 2 * light + 1, base + DIM_SELECT + j)
-                lr, lg, lb, wx, wy, wz, dist, pdf = sample_emitter(
-                    shapes, materials, lights.emitter_prims, lights.emitter_cdf,
-                    lights.prim_pdf, px, py, pz, u0, u1, u2)
-            elif light_kind == ENVIRONMENT:
-                wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
-                                                     lights.env_table, u1, u2)
-                lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
-                dist = math.inf
-            else:
-                lr, lg, lb, wx, wy, wz, dist, pdf = sample_light(lights, light, px, py, pz, u1,
-                                                                 u2)
-            j += 1
-            if pdf < 1e-11:
-                continue
-            if light_kind == EMITTER and dist <= offset:
-                # a point of p's own emissive surface (one that reflects too: glTF's): within
-                # rounding of p, its direction is noise (from a sphere's own surface every
-                # sample lands on p), and no light leaves a surface into itself
-                continue
-            wiz = wx * nx + wy * ny + wz * nz
-            if wiz <= 0.0:
-                continue
-            wix = wx * xx + wy * xy + wz * xz
-            wiy = wx * yx + wy * yy + wz * yz
-            fr, fg, fb = bsdf_eval(kind, ar, ag, ab, alpha, metallic, materials.eta, materials.k,
-                                   materials.specular, m, wox, woy, woz, wix, wiy, wiz)
-            scale = wiz / (weight * pdf)
-            if options.mis and not delta:
-                scale *= power_heuristic(weight * pdf, bsdf_pdf(kind, ar, ag, ab, alpha, metallic,
-                                                                wox, woy, woz, wix, wiy, wiz))
-            ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-            sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a directional or ambient light
-            if dist != math.inf:
-                # aim from the spawned origin at the light's point and stop just short of it:
-                # measured from the shading point instead, the spawn offset could carry the
-                # ray's end past the light onto an emitter lying on it
-                ax = px + dist * wx - ox
-                ay = py + dist * wy - oy
-                az = pz + dist * wz - oz
-                length = math.sqrt(ax * ax + ay * ay + az * az)
-                if length > 0.0:   # else the light sits at the origin: nothing in between
-                    sdx, sdy, sdz = ax / length, ay / length, az / length
-                tmax = length * (1.0 - SHADOW_SHORTEN)
-            rays += 1
-            if shadowed(shapes, materials, options, record, scratch, pixel, sample,
-                        base + RAY_KEYS * j, ox, oy, oz, sdx, sdy, sdz, tmax):
-                continue
-            r += tr * (lr * fr * scale)
-            g += tg * (lg * fg * scale)
-            b += tb * (lb * fb * scale)
-    return r, g, b, rays
-
-
 @njit(cache=True, _nrt=False, forceinline=True)
 def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
     """A light's expected light samples at vertex q (shading normal n) under light sampler
@@ -501,7 +326,7 @@ def area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx, qy, qz,
     if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
         return 0.0, 0.0, 0.0
     weight = 1.0
-    if not delta:   # the light's density for this direction from q, as direct_light
+    if not delta:   # the light's density for this direction from q, as the shading samples it
         n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
         weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz, dx,
                                                                dy, dz))
@@ -520,10 +345,11 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     ambient light and the environment if it escapes. After a non-delta bounce, only with multiple
     importance sampling: the area lights (faced or not; the face itself then does not count again),
     the ambient light, the environment and the emissive primitives that are lights, each with its
-    power heuristic weight against the light sampling that direct_light did at q (bsdf_pdf_ is this
-    ray's density). Area lights are transparent, as in the course: a ray passes on through them.
-    When direct_light chose lights by power or by the light BVH, a light's samples per vertex are -l
-    times its probability of being chosen (at q, by the tree), and its weight says so."""
+    power heuristic weight against the light sampling the shading kernel did at q (bsdf_pdf_ is
+    this ray's density). Area lights are transparent, as in the course: a ray passes on through
+    them. When the shading kernel chose lights by power or by the light BVH, a light's samples
+    per vertex are -l times its probability of being chosen (at q, by the tree), and its weight
+    says so."""
     r = g = b = 0.0
     kinds = lights.kind
     mode = light_mode(options, lights)
@@ -568,7 +394,7 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
                 return r, g, b       # a light's face: its light was counted above
             if abs(dx * gx + dy * gy + dz * gz) == 0.0:
                 return r, g, b
-            # the emitter sampler's density for this direction from q, as direct_light
+            # the emitter sampler's density for this direction from q, as the shading samples it
             if mode == LIGHTS_BVH:   # this primitive, chosen by the tree
                 density = options.light_samples * bvh_prim_pmf(
                     lights, prim, qx, qy, qz, qnx, qny, qnz) * primitive_pdf(
@@ -586,123 +412,11 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     return r, g, b
 
 
-@njit(cache=True, _nrt=False, inline="always")
-def trace_path(shapes, materials, lights, options, record, scratch, pixel, sample, ox, oy, oz,
-               dx, dy, dz, tmin, tmax):
-    """Radiance of one camera path and the number of rays it traced."""
-    kinds = materials.kind
-    rays = 1
-    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
-                                ox, oy, oz, dx, dy, dz, tmin, tmax)
-    m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx, dy, dz,
-                                                            t, prim, u, v)
-    r = g = b = 0.0
-    if m < 0:
-        if lights.env_image.shape[0] > 0:   # the environment is the background
-            r, g, b = environment_radiance(lights.env_image, dx, dy, dz)
-        return r, g, b, rays
-    if emits(kinds[m]):
-        r, g, b = surface_emission(shapes, materials, m, prim, u, v)
-    tr = tg = tb = 1.0
-    lit = lights.kind.shape[0] > 0
-    # multiple importance sampling needs a light that BSDF-sampled rays can find (not only
-    # point and directional lights)
-    mis = options.mis and not options.hemisphere and lights.findable
-    for vertex in range(1, options.max_depth + 1):
-        # the shading frame (x, y, n) and wo in it; every variable is assigned on every path
-        # (in an earlier wavefront kernel a frame set only under an `if` was undefined when
-        # compiled, and the microfacet BSDF, which reads wo.x and wo.y, saw garbage)
-        xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-        wox = -dx * xx - dy * xy - dz * xz
-        woy = -dx * yx - dy * yy - dz * yz
-        woz = -dx * nx - dy * ny - dz * nz
-        kind = kinds[m]
-        delta = is_delta(kind)
-        sx, sy, sz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
-        if (sx != nx or sy != ny or sz != nz) and \
-                (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
-            # a bent normal that keeps wo on its side (else the unbent one shades); the frame
-            # is made again only for a normal the texture bent
-            nx, ny, nz = sx, sy, sz
-            xx, xy, xz, yx, yy, yz = frame(nx, ny, nz)
-            wox = -dx * xx - dy * xy - dz * xz
-            woy = -dx * yx - dy * yy - dz * yz
-            woz = -dx * nx - dy * ny - dz * nz
-        ar, ag, ab, alpha, metallic = surface_albedo(shapes, materials, m, prim, u, v)
-        if lit and kind != EMISSION and not delta:
-            lr, lg, lb, n = direct_light(shapes, materials, lights, options, record, scratch,
-                                         pixel, sample, vertex, m, ar, ag, ab, alpha, metallic,
-                                         px, py, pz, gx, gy, gz, offset, xx, xy, xz, yx, yy, yz,
-                                         nx, ny, nz, wox, woy, woz, tr, tg, tb)
-            r += lr
-            g += lg
-            b += lb
-            rays += n
-        # at the last vertex the BSDF's ray is traced only for the light it finds: after a
-        # delta BSDF, whose light no light sample can reach (so -m N counts the same paths as
-        # pbrt's and Mitsuba's max depth N + 1; the course stops there, leaving a mirror black
-        # at -m 1), and with multiple importance sampling, the other half of the direct light
-        if vertex == options.max_depth and not (delta or mis):
-            break
-        base = vertex * DIMS_PER_VERTEX
-        u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
-        u3 = 0.0   # the lobe choice: only glass, the glossy coat and glTF's material have one
-        if kind == GLASS or kind == GLOSSY or kind == GLTF_PBR:
-            u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS, base + DIM_GLASS)
-        wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
-            kind, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
-            materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
-        if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
-            break
-        weight = abs(wiz) / pdf
-        tr *= fr * weight
-        tg *= fg * weight
-        tb *= fb * weight
-        if options.roulette and vertex >= options.rr_depth:
-            q = min(options.rr_cap, max(tr, tg, tb))
-            if not sample_1d(options, pixel, sample, sample, base + DIM_RR, base + DIM_RR) < q:
-                break
-            tr /= q
-            tg /= q
-            tb /= q
-        wx = wix * xx + wiy * yx + wiz * nx
-        wy = wix * xy + wiy * yy + wiz * ny
-        wz = wix * xz + wiy * yz + wiz * nz
-        length = math.sqrt(wx * wx + wy * wy + wz * wz)
-        dx, dy, dz = wx / length, wy / length, wz / length
-        qx, qy, qz, qnx, qny, qnz = px, py, pz, nx, ny, nz
-        ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, dx, dy, dz)
-        rays += 1
-        t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample,
-                                    base, ox, oy, oz, dx, dy, dz, 0.0, math.inf)
-        m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, kinds, ox, oy, oz, dx,
-                                                                dy, dz, t, prim, u, v)
-        if delta or mis:
-            er, eg, eb = emission_found(shapes, materials, lights, options, delta, pdf, qx, qy,
-                                        qz, qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t, prim, u,
-                                        v, m, gx, gy, gz)
-            r += tr * er
-            g += tg * eg
-            b += tb * eb
-        if m < 0 or vertex == options.max_depth:
-            break
-    return r, g, b, rays
-
-
-@njit(cache=True, _nrt=False, inline="always")
-def normal_colour(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz, dx, dy,
-                  dz, tmin, tmax):
-    """The course's normal shading, 0.5 n + 0.5 (black on a miss): n is the barycentric blend of
-    the vertex normals, not renormalised, like the course, or a sphere's unit outward normal (a
-    cut-out surface is seen through, as in the image)."""
-    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
-                                ox, oy, oz, dx, dy, dz, tmin, tmax)
-    return hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v)
-
-
 @njit(cache=True, _nrt=False, forceinline=True)
 def hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v):
-    """normal_colour of a known hit (t, prim, u, v) of the ray o + t d; black on a miss."""
+    """The course's normal shading of a hit (t, prim, u, v) of the ray o + t d, 0.5 n + 0.5: n
+    the barycentric blend of the vertex normals, not renormalised, like the course, or a
+    sphere's unit outward normal; black on a miss."""
     if prim < 0:
         return 0.0, 0.0, 0.0
     faces, normals = shapes.faces, shapes.vertex_normals
@@ -721,23 +435,14 @@ def hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v):
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
 
 
-@njit(cache=True, _nrt=False, inline="always")
-def first_hit_features(shapes, materials, options, record, scratch, pixel, sample, ox, oy, oz,
-                       dx, dy, dz, tmin, tmax):
-    """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's first hit: the
-    surface's albedo at the hit as a denoiser wants it (diffuse: its albedo; mirror: its
-    reflectance; glass and refraction: their transmittance; a conductor: its reflectance at
-    normal incidence; an emitter: its emission clamped to 1), the shading normal turned toward
-    the camera, world space (bent by a normal texture), and the distance along the ray; zeros and
-    hit 0 on a miss. The hit is the camera ray's, past the surfaces it passes through."""
-    t, prim, u, v = visible_hit(shapes, materials, options, record, scratch, pixel, sample, 0,
-                                ox, oy, oz, dx, dy, dz, tmin, tmax)
-    return hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v)
-
-
 @njit(cache=True, _nrt=False, forceinline=True)
 def hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v):
-    """first_hit_features of a known hit (t, prim, u, v) of the camera ray o + t d."""
+    """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's hit (t, prim, u, v),
+    o + t d: the surface's albedo at the hit as a denoiser wants it (diffuse: its albedo;
+    mirror: its reflectance; glass and refraction: their transmittance; a conductor: its
+    reflectance at normal incidence; an emitter: its emission clamped to 1), the shading normal
+    turned toward the camera, world space (bent by a normal texture), and the distance along the
+    ray; zeros and hit 0 on a miss."""
     m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, materials.kind, ox, oy, oz,
                                                             dx, dy, dz, t, prim, u, v)
     if m < 0:
@@ -816,84 +521,3 @@ def camera_ray(camera, options, pixel_x, pixel_y, pixel, sample):
     norm = np.sqrt(x * x + y * y + z * z)
     return ox, oy, oz, x / norm, y / norm, z / norm
 
-
-@njit(cache=True, nogil=True, _nrt=False)
-def render_pixels(shapes, materials, lights, camera, options, record, scratch, pixel_x, pixel_y,
-                  rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count, features):
-    """Samples first_sample .. first_sample + pass_n - 1 of each given pixel (y from the bottom):
-    per pixel, the samples' radiance, illuminance and its square are summed from zero, in sample
-    order, and added to row rows[k] of the sums, with the count of finite samples (a sample with
-    a non-finite channel is dropped and counted). Returns (dropped, rays traced). features,
-    if it has rows ((n, 8), else (0, 8)), gets the same per-pixel sums of each kept sample's
-    first_hit_features (ptrace.features: AOVs), from one more trace of its camera ray.
-
-    Serial and without the GIL: the caller (ptrace.rendering.tiles) runs many such calls on small
-    blocks of pixels at once, one per thread (see there for why not prange). scratch is the
-    backend's
-    (accel.compiled.new_scratch), one per concurrent call. This function and every function it
-    calls with arrays are compiled without NRT (`_nrt=False`, see accel.compiled): otherwise
-    each call between them increfs and decrefs every array of the records, atomically, once
-    per path and per vertex."""
-    l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
-    width = camera.width
-    dropped = 0
-    rays = 0
-    aovs = features.shape[0] > 0
-    for k in range(pixel_x.shape[0]):
-        pixel = pixel_y[k] * width + pixel_x[k]
-        r = g = b = lum = lum2 = 0.0
-        f0 = f1 = f2 = f3 = f4 = f5 = f6 = f7 = 0.0
-        n = 0
-        for sample in range(first_sample, first_sample + pass_n):
-            cx, cy, cz, dx, dy, dz = camera_ray(camera, options, pixel_x[k], pixel_y[k], pixel,
-                                                sample)
-            if options.mode == NORMALS:
-                x, y, z = normal_colour(shapes, materials, options, record, scratch, pixel,
-                                        sample, cx, cy, cz, dx, dy, dz, camera.znear,
-                                        camera.zfar)
-                rays += 1
-            else:
-                x, y, z, traced = trace_path(shapes, materials, lights, options, record, scratch,
-                                             pixel, sample, cx, cy, cz, dx, dy, dz, camera.znear,
-                                             camera.zfar)
-                rays += traced
-            if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
-                dropped += 1
-                continue
-            if aovs:
-                a0, a1, a2, a3, a4, a5, a6, a7 = first_hit_features(
-                    shapes, materials, options, record, scratch, pixel, sample, cx, cy, cz, dx,
-                    dy, dz, camera.znear, camera.zfar)
-                rays += 1
-                f0 += a0
-                f1 += a1
-                f2 += a2
-                f3 += a3
-                f4 += a4
-                f5 += a5
-                f6 += a6
-                f7 += a7
-            value = x * l0 + y * l1 + z * l2
-            r += x
-            g += y
-            b += z
-            lum += value
-            lum2 += value * value
-            n += 1
-        row = rows[k]
-        sum_rgb[row, 0] += r
-        sum_rgb[row, 1] += g
-        sum_rgb[row, 2] += b
-        sum_l[row] += lum
-        sum_l2[row] += lum2
-        count[row] += n
-        if aovs:
-            features[row, 0] += f0
-            features[row, 1] += f1
-            features[row, 2] += f2
-            features[row, 3] += f3
-            features[row, 4] += f4
-            features[row, 5] += f5
-            features[row, 6] += f6
-            features[row, 7] += f7
-    return dropped, rays

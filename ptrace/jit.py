@@ -17,10 +17,7 @@ import tempfile
 # The wait the first-run notice announces: a small render's compile time with an empty cache on
 # the 2-core development machine, rounded (the commit that last set it gives the command and
 # the runs; re-measure it when the kernels change much).
-COLD_COMPILE_SECONDS = 130      # the megakernel (--loop megakernel: ptrace.integrator)
-# the same for the wavefront (the default loop: ptrace.kernel), its stages alone
-# (benchmarks/results/wavefront_gate.md)
-WAVEFRONT_COMPILE_SECONDS = 55
+COLD_COMPILE_SECONDS = 55
 
 _NOTES = []   # one line per kind, in the order they happened
 
@@ -251,8 +248,8 @@ def is_cold(record_class, dispatcher=None):
     kernel that dominates compile time; the others come and go with it). Reads only the cache's
     index; any surprise in numba's internals counts as warm (no message rather than a wrong
     one)."""
-    if dispatcher is None:
-        from .integrator import render_pixels as dispatcher
+    if dispatcher is None:   # the stage compiled once per backend (and first)
+        from .kernel.trace import closest_stage as dispatcher
     try:
         index = dispatcher._cache._cache_file._load_index()
     except Exception:   # noqa: BLE001 - numba internals: never let a notice break a render

@@ -45,7 +45,7 @@ from benchmarks.rays import scenes_dir
 from benchmarks.templating import blocks, fill, join, pinned_ids, plain
 from ptrace import integrator
 from ptrace.camera import Camera, course_camera
-from ptrace.integrator import LUMINANCE
+from ptrace.environment import LUMINANCE
 from ptrace.rendering import tiles
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import TileWork, new_sums

@@ -26,6 +26,7 @@ REPORT = ROOT / "benchmarks" / "results" / "mutants.md"
 
 INTEGRATOR, KERNELS, BVH = "ptrace/integrator.py", "accel/kernels.py", "accel/bvh.py"
 SIMD = "accel/simd.py"
+SHADING = "ptrace/kernel/shading.py"
 RR_TEST = "tests/ptrace/test_roulette_rule.py"
 PROMISES = "tests/ptrace/test_hostile_promises.py"
 ALPHA_TEST = "tests/ptrace/test_gltf_alpha_normals.py"
@@ -34,7 +35,7 @@ ALPHA_TEST = "tests/ptrace/test_gltf_alpha_normals.py"
 MUTANTS = {
     "rr-survives-1-minus-q": (
         "roulette continues with probability 1 - q while still dividing by q",
-        [(INTEGRATOR, "base + DIM_RR, base + DIM_RR) < q:", "base + DIM_RR, base + DIM_RR) >= q:")],
+        [(SHADING, "base + DIM_RR) < q:", "base + DIM_RR) >= q:")],
         [RR_TEST]),
     "rr-cap-half": (
         "the default roulette cap is 0.5 instead of 0.95",
@@ -58,7 +59,7 @@ MUTANTS = {
         ["tests/ptrace/test_image.py"]),
     "dropped-cosine": (
         "the path throughput drops the cosine of the sampled direction",
-        [(INTEGRATOR, "weight = abs(wiz) / pdf", "weight = 1.0 / pdf")],
+        [(SHADING, "weight = abs(wiz) / pdf", "weight = 1.0 / pdf")],
         ["tests/ptrace/test_light_transport.py", "-k", "furnace"]),
     "swapped-barycentrics": (
         "the watertight test returns (v, u) for (u, v)",
@@ -124,8 +125,8 @@ MUTANTS = {
     "last-vertex-delta-only-under-mis": (
         "at the last vertex a mirror's or glass's ray is traced only under MIS, so under "
         "--direct light, -H or with point lights the mirror shows no light",
-        [(INTEGRATOR, "if vertex == options.max_depth and not (delta or mis):",
-          "if vertex == options.max_depth and not mis:")],
+        [(SHADING, "if vertex == max_depth and not (DELTA_KIND or mis):",
+          "if vertex == max_depth and not mis:")],
         [PROMISES, "-k", "last_vertex"]),
     "face-anywhere-in-the-plane": (
         "an emissive panel anywhere in a light's plane is taken for the light's face (the "

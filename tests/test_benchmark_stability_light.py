@@ -21,7 +21,7 @@ import pytest
 import ptrace
 from benchmarks import report
 from ptrace import integrator
-from ptrace.integrator import LUMINANCE
+from ptrace.environment import LUMINANCE
 from studies import stability_light as study
 
 import study_checks as check

@@ -139,7 +139,6 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
         INTEGRATORS,
         LIGHT_SAMPLER_CODES,
         LIGHT_SAMPLERS,
-        LOOPS,
         SAMPLERS,
     )
     from .cli_camera import add_camera_flags
@@ -209,10 +208,6 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     add("--bvh-split", choices=BVH_SPLITS, default="mean",
         help="with --accel bvh: mean (split at the mean centroid; default) or sah "
              "(binned surface area heuristic)")
-    add("--loop", choices=LOOPS, default="wavefront",
-        help="the path loop: wavefront (waves of paths through small stage kernels, compiled "
-             "only for what the scene uses; default) or megakernel (one compiled loop per "
-             "path, compiled whole); the same image")
     add("--seed", type=int_range("seed (--seed)", "seed"), default=0,
         help=f"random seed, {range_text('seed')} (default 0)")
     add("--integrator", choices=INTEGRATORS, default="path",
@@ -307,7 +302,7 @@ def settings_of(args):
         spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
         light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
         hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-        light_sampler=args.light_sampler, bvh_split=args.bvh_split, loop=args.loop)
+        light_sampler=args.light_sampler, bvh_split=args.bvh_split)
 
 
 def plan(args, files_of):

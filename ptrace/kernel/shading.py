@@ -3,9 +3,8 @@ the kinds a scene has: at each queued vertex, -l samples of every area light unl
 delta (each a shadow ray in the wave's shadow queue, carrying the light it would add, weighted
 by the power heuristic against the BSDF's sample with multiple importance sampling), then the
 BSDF's sample, roulette, and the next ray. The kind is a constant of its kernel, so LLVM keeps
-only that kind's branch of ptrace.bsdf's functions. The megakernel's arithmetic
-(ptrace.integrator.direct_light and trace_path) for these kinds and these lights, with the same
-random-number keys."""
+only that kind's branch of ptrace.bsdf's functions. Random numbers are keyed by (pixel, sample,
+dimension), with the dimensions of ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
 import math
 
 from numba import njit
@@ -99,7 +98,7 @@ def any_light(shapes, materials, lights, options, pixel, sample, index, base, li
               pz):
     """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from p, the
     j-th light sample of the vertex: (radiance, unit direction, distance (inf at infinity),
-    pdf), with direct_light's keys for the light sampler `all`."""
+    pdf), with the light sampler `all`'s keys."""
     light_kind = lights.kind[light]
     u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
                        base + DIM_LIGHT + 2 * j)
@@ -121,7 +120,7 @@ def chosen_light(shapes, materials, lights, options, pixel, sample, index, base,
                  outer, px, py, pz):
     """Light sample `outer` of -l at p, of the light (or, with prim >= 0, the emissive
     primitive) that the power or bvh light sampler chose for it: (radiance, unit direction,
-    distance, pdf), with direct_light's keys for those samplers."""
+    distance, pdf), with those samplers' keys."""
     u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
                        base + DIM_LIGHT + 4 * outer)
     light_kind = lights.kind[light]
@@ -138,6 +137,26 @@ def chosen_light(shapes, materials, lights, options, pixel, sample, index, base,
         lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
         return lr, lg, lb, wx, wy, wz, math.inf, pdf
     return sample_light(lights, light, px, py, pz, u1, u2)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def queue_ray(shadow, shadow_path, shadow_key, s, ox, oy, oz, dx, dy, dz, tmax, r, g, b, path,
+              key):
+    """Row s of the shadow queue: a ray o + t d, t in [0, tmax], of path `path` with its key,
+    carrying the light (r, g, b) it adds if it is clear (with -H: the weight of what it
+    finds)."""
+    shadow[SOX, s] = ox
+    shadow[SOY, s] = oy
+    shadow[SOZ, s] = oz
+    shadow[SDX, s] = dx
+    shadow[SDY, s] = dy
+    shadow[SDZ, s] = dz
+    shadow[STMAX, s] = tmax
+    shadow[SR, s] = r
+    shadow[SG, s] = g
+    shadow[SB, s] = b
+    shadow_path[s] = path
+    shadow_key[s] = key
 
 
 _STAGES = {}
@@ -166,7 +185,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
         return _STAGES[key]
     KIND, GENERAL, MODE, HEMI = kind, general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
-    DELTA_KIND = bool(is_delta.py_func(kind))
+    DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
 
     @njit(cache=True, nogil=True, _nrt=False)
@@ -207,7 +226,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                 alpha, metallic = materials.alpha[m], materials.metallic[m]
             base = vertex * DIMS_PER_VERTEX
             rays = 0
-            if HEMI and light_count:    # (the megakernel's direct_light under -H)
+            if HEMI and light_count:    # -H: the course's uniform hemisphere sampling
                 count = 0
                 for light in range(light_count):
                     count += lights.kind[light] != EMITTER
@@ -225,18 +244,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                     wz = lx * xz + ly * yz + lz * nz
                     ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
                     rays += 1
-                    shadow[SOX, shadows] = ox
-                    shadow[SOY, shadows] = oy
-                    shadow[SOZ, shadows] = oz
-                    shadow[SDX, shadows] = wx
-                    shadow[SDY, shadows] = wy
-                    shadow[SDZ, shadows] = wz
-                    shadow[STMAX, shadows] = math.inf
-                    shadow[SR, shadows] = tr * (fr * scale)
-                    shadow[SG, shadows] = tg * (fg * scale)
-                    shadow[SB, shadows] = tb * (fb * scale)
-                    shadow_path[shadows] = i
-                    shadow_key[shadows] = base + RAY_KEYS * (1 + j)
+                    queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, wx, wy, wz,
+                              math.inf, tr * (fr * scale), tg * (fg * scale), tb * (fb * scale),
+                              i, base + RAY_KEYS * (1 + j))
                     shadows += 1
             j = 0
             lit = 0 if HEMI else light_count     # (-H takes no light samples)
@@ -285,7 +295,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                         continue
                     if GENERAL:
                         if lights.kind[light] == EMITTER and dist <= offset:
-                            # a point of p's own emissive surface (direct_light's rule)
+                            # a point of p's own emissive surface: within rounding of p its
+                            # direction is noise, and no light leaves a surface into itself
                             continue
                     wiz = wx * nx + wy * ny + wz * nz
                     if wiz <= 0.0:
@@ -311,18 +322,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                             sdx, sdy, sdz = ax / length, ay / length, az / length
                         tmax = length * (1.0 - SHADOW_SHORTEN)
                     rays += 1
-                    shadow[SOX, shadows] = ox
-                    shadow[SOY, shadows] = oy
-                    shadow[SOZ, shadows] = oz
-                    shadow[SDX, shadows] = sdx
-                    shadow[SDY, shadows] = sdy
-                    shadow[SDZ, shadows] = sdz
-                    shadow[STMAX, shadows] = tmax
-                    shadow[SR, shadows] = tr * (lr * fr * scale)
-                    shadow[SG, shadows] = tg * (lg * fg * scale)
-                    shadow[SB, shadows] = tb * (lb * fb * scale)
-                    shadow_path[shadows] = i
-                    shadow_key[shadows] = base + RAY_KEYS * j
+                    queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, sdx, sdy,
+                              sdz, tmax, tr * (lr * fr * scale), tg * (lg * fg * scale),
+                              tb * (lb * fb * scale), i, base + RAY_KEYS * j)
                     shadows += 1
             ints[RAYS, i] += rays
             if vertex == max_depth and not (DELTA_KIND or mis):

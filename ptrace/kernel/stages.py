@@ -3,9 +3,9 @@ leaves (its surface, the emission it finds, and the queue of the paths that go o
 the light that clear shadow rays carry, and the per-pixel sums. Each runs over a queue of path
 slots of one wave (ptrace.kernel.layout) and is compiled once, for every backend.
 
-A path's arithmetic is the megakernel's (ptrace.integrator.trace_path), operation for
-operation and in the same order, and its random numbers have the same keys, so a wave renders
-the megakernel's image bit for bit, whatever the wave size."""
+A path's random numbers are keyed by (pixel, sample, dimension) and its light is added in the
+order it was found, so a wave renders the same image bit for bit whatever the wave size, the
+threads or the order the paths are processed in."""
 
 import numpy as np
 from numba import njit
@@ -108,7 +108,7 @@ def area_lights_found(lights, light_samples, delta, bsdf_pdf_, qx, qy, qz, ox, o
     closest hit at t) finds: after a delta bounce whole, but for the lights whose face is
     geometry (which then counts as emissive geometry); after a non-delta bounce of density
     bsdf_pdf_, each weighted by the power heuristic against the -l samples that light sampling
-    took of it at q (every light sampled: the megakernel's emission_found under
+    took of it at q (every light sampled: ptrace.integrator.emission_found under
     --light-sampler all)."""
     r = g = b = 0.0
     k = np.int64(0)     # not a literal 0: next_light would compile once more for it
@@ -150,7 +150,7 @@ def hit_stage(general=False):
     listed in out by material kind: kind c's paths are out[starts[c]:starts[c + 1]] (a counting
     sort, so each kind's shading kernel runs over a queue of its own). Returns how many.
     Without `general` the lights are area lights (wavefront.AreaLights), the emitters their
-    faces and the surfaces untextured; with it, the emission is the megakernel's
+    faces and the surfaces untextured; with it, the emission is ptrace.integrator's
     emission_found over ptrace.integrator's full records (any light, the environment as the
     background, emissive geometry, emission textures, glTF's emissive material)."""
     if general in _HIT_STAGES:
@@ -238,9 +238,9 @@ def hit_stage(general=False):
 
 @njit(cache=True, nogil=True, _nrt=False)
 def features_stage(shapes, materials, floats, ints, n, features):
-    """The AOVs (albedo, normal, distance, hit: the megakernel's first_hit_features) of each of
+    """The AOVs (albedo, normal, distance, hit: ptrace.integrator.hit_features) of each of
     the first n paths' camera hit, into the rows of features (8, wave size). materials: the
-    megakernel's full record."""
+    full record (ptrace.integrator.MaterialArrays)."""
     for i in range(n):
         a0, a1, a2, a3, a4, a5, a6, a7 = hit_features(
             shapes, materials, floats[OX, i], floats[OY, i], floats[OZ, i], floats[DX, i],
@@ -252,9 +252,10 @@ def features_stage(shapes, materials, floats, ints, n, features):
 
 @njit(cache=True, nogil=True, _nrt=False)
 def normals_stage(shapes, floats, ints, n):
-    """The normals integrator's colour of each of the first n paths' camera hit (the
-    megakernel's normal_colour): 0.5 n + 0.5, n the barycentric blend of the vertex normals (not
-    renormalised, like the course) or a sphere's unit outward normal; black on a miss."""
+    """The normals integrator's colour of each of the first n paths' camera hit (the course's
+    normal shading, ptrace.integrator.hit_normal_colour): 0.5 n + 0.5, n the barycentric blend
+    of the vertex normals (not renormalised, like the course) or a sphere's unit outward
+    normal; black on a miss."""
     for i in range(n):
         r, g, b = hit_normal_colour(shapes, floats[OX, i], floats[OY, i], floats[OZ, i],
                                     floats[DX, i], floats[DY, i], floats[DZ, i], floats[T, i],
@@ -278,8 +279,8 @@ def shadow_stage(floats, shadow, shadow_path, blocked, n):
 def probe_found_stage(shapes, materials, lights, floats, shadow, shadow_path, probe_prim,
                       probe_uv, n):
     """(-H) The emission each hemisphere ray found (the environment's radiance where it escaped),
-    times its weight, added to its path's radiance in queue order (the megakernel's
-    direct_light under -H). materials, lights: the megakernel's full records."""
+    times its weight, added to its path's radiance in queue order. materials, lights: the full
+    records (ptrace.integrator's MaterialArrays, LightArrays)."""
     env = lights.env_image.shape[0] > 0
     for s in range(n):
         prim = probe_prim[s]
@@ -303,9 +304,9 @@ def probe_found_stage(shapes, materials, lights, floats, shadow, shadow_path, pr
 @njit(cache=True, nogil=True, _nrt=False)
 def fold_stage(floats, ints, start, count, pass_n, sums, counts, features, feature_sums):
     """The wave's finished paths added to their block pixel's sums (radiance, illuminance and
-    its square; counts: finite samples) in path order, which is sample order, as the megakernel
-    sums them; with AOVs (feature_sums has rows), each kept sample's features too, and the ray
-    the megakernel traces again for them. Returns (non-finite samples dropped, rays traced)."""
+    its square; counts: finite samples) in path order, which is sample order; with AOVs
+    (feature_sums has rows), each kept sample's features too, and the camera ray traced again
+    for them. Returns (non-finite samples dropped, rays traced)."""
     aovs = feature_sums.shape[0] > 0
     l0, l1, l2 = LUMINANCE[0], LUMINANCE[1], LUMINANCE[2]
     dropped = 0

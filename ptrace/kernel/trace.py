@@ -2,7 +2,7 @@
 compiled face (accel.compiled). These small kernels are the only code compiled once per backend;
 every other stage is compiled once for all of them. A scene with cut-out materials gets the
 variants that trace past the surfaces a ray passes through (ptrace.cutouts), each ray with its
-key as the megakernel keys it; the others never compile that code."""
+key (ptrace.integrator.RAY_KEYS); the others never compile that code."""
 import numpy as np
 from numba import njit
 

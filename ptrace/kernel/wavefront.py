@@ -101,7 +101,7 @@ class Wavefront:
             mode = codes.LIGHTS_POWER     # records without the tree (integrator.light_mode)
         self.hemisphere = bool(options.hemisphere)
         general = not area_only or mode != codes.LIGHTS_ALL or self.hemisphere
-        if general:     # any light: the megakernel's records, whole
+        if general:     # any light: the full records
             self.surfaces, self.lights = materials, lights
             findable = lights.findable
         else:           # area lights: records of just what the stages read
@@ -132,20 +132,22 @@ class Wavefront:
     def _wave(self):
         wave = getattr(self._local, "wave", None)
         if wave is None:
-            wave = self._local.wave = Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
+            wave = self._local.wave = self.new_wave()
         return wave
+
+    def new_wave(self):
+        """A wave's arrays for this render (each thread keeps its own, used again for every
+        wave)."""
+        return Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
 
     def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count,
               features):
-        """The megakernel's render_pixels, as waves: samples first_sample .. + pass_n - 1 of
-        each pixel added to the sums at rows, and their AOVs to features if it has rows ((n, 8),
-        else (0, 8)). Returns (dropped, rays traced)."""
+        """Samples first_sample .. + pass_n - 1 of each pixel added to the sums at rows, and
+        their AOVs to features if it has rows ((n, 8), else (0, 8)). Returns (dropped, rays
+        traced)."""
         wave, scratch = self._wave(), new_scratch(self.accel)
-        floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
-        shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
-        shadow_key, cutouts = wave.shadow_key, self.cutouts
-        shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
-        accel, mis, starts = self.accel, self.mis, wave.starts
+        floats, ints, queue = wave.floats, wave.ints, wave.queue
+        shapes, options = self.shapes, self.options
         sums = np.zeros((pixel_x.shape[0], 5))
         aovs = features.shape[0] > 0
         feature_sums = np.zeros((pixel_x.shape[0] if aovs else 0, 8))
@@ -156,59 +158,65 @@ class Wavefront:
             size = min(self.wave_paths, total - start)
             camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
                          size, floats, ints, queue)
-            n = size
             if aovs:   # the camera rays' first hits, before any stage moves on from them
-                if cutouts:
-                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
-                                  n)
-                else:
-                    closest_stage(accel, scratch, floats, ints, queue, n)
-                features_stage(shapes, self.materials, floats, ints, n, wave.features)
+                self._closest(wave, scratch, size)
+                features_stage(shapes, self.materials, floats, ints, size, wave.features)
             if self.normals:   # the camera rays' hits, coloured by their normals
-                if cutouts:
-                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
-                                  n)
-                else:
-                    closest_stage(accel, scratch, floats, ints, queue, n)
-                normals_stage(shapes, floats, ints, n)
-                n = 0
-            while n:
-                if cutouts:
-                    visible_stage(accel, scratch, shapes, surfaces, options, floats, ints, queue,
-                                  n)
-                else:
-                    closest_stage(accel, scratch, floats, ints, queue, n)
-                n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue,
-                                   n, after, starts)
-                if not n:
-                    break
-                shadows = n = 0
-                for kind, stage in self.stages:   # each kind's paths, through its kernel
-                    first, end = starts[kind], starts[kind + 1]
-                    if end > first:
-                        shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
-                                           after[first:end], end - first, shadow, shadow_path,
-                                           shadow_key, shadows, queue, n)
-                if shadows and self.hemisphere:   # the hemisphere's rays, and what they find
-                    if cutouts:
-                        visible_probe_stage(accel, scratch, shapes, surfaces, options, ints,
-                                            shadow, shadow_path, shadow_key, shadows,
-                                            wave.probe_prim, wave.probe_uv)
-                    else:
-                        probe_stage(accel, scratch, shadow, shadows, wave.probe_prim,
-                                    wave.probe_uv)
-                    probe_found_stage(shapes, surfaces, lights, floats, shadow, shadow_path,
-                                      wave.probe_prim, wave.probe_uv, shadows)
-                elif shadows:
-                    if cutouts:
-                        shadowed_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
-                                       shadow_path, shadow_key, shadows, blocked)
-                    else:
-                        any_stage(accel, scratch, shadow, shadows, blocked)
-                    shadow_stage(floats, shadow, shadow_path, blocked, shadows)
+                self._closest(wave, scratch, size)
+                normals_stage(shapes, floats, ints, size)
+            else:
+                self.paths(wave, scratch, size)
             wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts,
                                                  wave.features, feature_sums)
             dropped += wave_dropped
             rays += wave_rays
         add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features)
         return dropped, rays
+
+    def _closest(self, wave, scratch, n):
+        """The closest hits of the n queued paths' rays (past cut-out surfaces if the scene
+        has them)."""
+        if self.cutouts:
+            visible_stage(self.accel, scratch, self.shapes, self.surfaces, self.options,
+                          wave.floats, wave.ints, wave.queue, n)
+        else:
+            closest_stage(self.accel, scratch, wave.floats, wave.ints, wave.queue, n)
+
+    def paths(self, wave, scratch, n):
+        """Carry the wave's n queued paths, whose rays are set (slots as camera_stage leaves
+        them: throughput 1, no radiance, vertex 0, one ray), to their ends: each path's
+        radiance in its R, G, B rows and the rays it traced in its RAYS row."""
+        floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
+        shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
+        shadow_key, cutouts = wave.shadow_key, self.cutouts
+        shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
+        accel, mis, starts = self.accel, self.mis, wave.starts
+        while n:
+            self._closest(wave, scratch, n)
+            n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
+                               after, starts)
+            if not n:
+                break
+            shadows = n = 0
+            for kind, stage in self.stages:   # each kind's paths, through its kernel
+                first, end = starts[kind], starts[kind + 1]
+                if end > first:
+                    shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
+                                       after[first:end], end - first, shadow, shadow_path,
+                                       shadow_key, shadows, queue, n)
+            if shadows and self.hemisphere:   # the hemisphere's rays, and what they find
+                if cutouts:
+                    visible_probe_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
+                                        shadow_path, shadow_key, shadows, wave.probe_prim,
+                                        wave.probe_uv)
+                else:
+                    probe_stage(accel, scratch, shadow, shadows, wave.probe_prim, wave.probe_uv)
+                probe_found_stage(shapes, surfaces, lights, floats, shadow, shadow_path,
+                                  wave.probe_prim, wave.probe_uv, shadows)
+            elif shadows:
+                if cutouts:
+                    shadowed_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
+                                   shadow_path, shadow_key, shadows, blocked)
+                else:
+                    any_stage(accel, scratch, shadow, shadows, blocked)
+                shadow_stage(floats, shadow, shadow_path, blocked, shadows)

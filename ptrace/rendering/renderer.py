@@ -1,7 +1,7 @@
 """render(): validate the settings, pick an executor, assemble the image.
 
 The work itself is ptrace.rendering.tiles (the pass schedule and the render job, through the
-compiled path loop of ptrace.integrator); an executor runs it in this process
+wavefront's compiled stages, ptrace.kernel); an executor runs it in this process
 (ptrace.rendering.executors) or on a Dask cluster (ptrace.rendering.distributed), and
 ptrace.rendering.timing clocks the phases. Random numbers are keyed by (seed, pixel, sample,
 dimension), and pass sizes depend only on -s and -a, so an image does not depend on threads, chunks,

@@ -17,7 +17,6 @@ LIGHT_SAMPLERS = ("auto", "all", "power", "bvh")   # --light-sampler
 LIGHT_SAMPLER_CODES = {"auto": codes.LIGHTS_AUTO, "all": codes.LIGHTS_ALL,
                        "power": codes.LIGHTS_POWER, "bvh": codes.LIGHTS_BVH}
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
-LOOPS = ("wavefront", "megakernel")   # --loop: the path loop (ptrace.kernel, ptrace.integrator)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
 # take them as int64; within these ranges every sample has its own random numbers: the Sobol
@@ -60,10 +59,7 @@ class Settings:
     BSDF's sample combined by multiple importance sampling) or "light" (the course's light sampling
     alone); sampler: "sobol" (Owen-scrambled Sobol', stratified) or "independent" (the course's
     uniform random numbers); bvh_split: the BVH's split, "mean" (at the mean centroid, the course's
-    suggestion) or "sah" (binned surface area heuristic); only with accel="bvh". loop:
-    "wavefront" (waves of paths through small stage kernels compiled only for what the scene
-    uses: ptrace.kernel) or "megakernel" (one compiled loop carries each path to its end:
-    ptrace.integrator); the same image bit for bit.
+    suggestion) or "sah" (binned surface area heuristic); only with accel="bvh".
     light_sampler: "all" (at each vertex -l samples of every light, one of each point or
     directional light: the course's estimator), "power" (-l samples at each vertex, each of one
     light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or
@@ -86,7 +82,6 @@ class Settings:
     sampler: str = "sobol"
     bvh_split: str = "mean"
     light_sampler: str = "auto"
-    loop: str = "wavefront"
 
     def __post_init__(self):
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
@@ -100,8 +95,7 @@ class Settings:
                                     ("direct", "direct-light estimator", DIRECT),
                                     ("sampler", "sampler", SAMPLERS),
                                     ("light_sampler", "light sampler", LIGHT_SAMPLERS),
-                                    ("bvh_split", "BVH split", BVH_SPLITS),
-                                    ("loop", "path loop", LOOPS)):
+                                    ("bvh_split", "BVH split", BVH_SPLITS)):
             value = getattr(self, name)
             if value not in choices:
                 raise PtraceError(f"unknown {what} {value!r}; choose one of "
@@ -139,7 +133,7 @@ class Settings:
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
         known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
-                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler", "loop"}
+                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")

@@ -1,6 +1,6 @@
 """The work of a render, apart from who runs it: the pass schedule with adaptive sampling's
 decisions between passes, and the render job (RenderJob: the backend built once, the kernel's
-records, and the trace of a set of pixels through the compiled path loop) that the in-process
+records, and the trace of a set of pixels as waves through the compiled stages) that the in-process
 executor, a Dask worker (for one tile) and the viewer's sessions run.
 
 Knows nothing of Dask. Per pixel a render keeps four sums: radiance (RGB), illuminance and its
@@ -15,15 +15,13 @@ import numba
 import numpy as np
 
 import accel
-from accel.compiled import new_scratch
 
-from ..integrator import camera_record, render_pixels, scene_records
-from ..jit import COLD_COMPILE_SECONDS, WAVEFRONT_COMPILE_SECONDS, is_cold
+from ..integrator import camera_record, scene_records
+from ..jit import COLD_COMPILE_SECONDS, is_cold
 from ..kernel import wavefront
-from ..kernel.trace import closest_stage
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
-NO_FEATURES = np.zeros((0, 8))   # render_pixels' features when no AOVs are asked for
+NO_FEATURES = np.zeros((0, 8))   # a block's features when no AOVs are asked for
 BLOCK_PATHS = 4096       # (pixel, sample) pairs per kernel call (at least one pixel): Ctrl-C
                          # and the progress bar act between calls; a call holds no memory that
                          # depends on -s, -l or -m (a path keeps its state in registers)
@@ -94,11 +92,10 @@ class Passes:
 
 
 class _Threads:
-    """A pool of Python threads that run render_pixels (compiled with nogil) on blocks of pixels:
-    one kernel call per block, handed out as threads free up, so both cores stay busy to the
-    end however uneven the blocks' cost. Used instead of numba's prange: with the whole path
-    inlined into its body, prange's parallel lowering cost most of the first run's compile
-    time (about 7.5 of 10 s for the naive backend on 2 cores), and it splits the range
+    """A pool of Python threads that trace blocks of pixels (each block's waves through stage
+    kernels compiled with nogil): one block at a time per thread, handed out as threads free
+    up, so both cores stay busy to the end however uneven the blocks' cost. Used instead of
+    numba's prange, whose parallel lowering costs compile time and which splits a range
     statically. Resized to numba's thread count (-t) on each use."""
 
     def __init__(self):
@@ -154,12 +151,10 @@ class RenderJob:
         self.camera = camera_record(camera)
         self.rays_traced = 0
         self.build_seconds = self.records_seconds = 0.0
-        self.wavefront = None
-        if settings.loop == "wavefront":
-            self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
-                                                 wavefront.used_kinds(scene),
-                                                 wavefront.simple(scene),
-                                                 settings.light_mode(scene))
+        self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
+                                             wavefront.used_kinds(scene),
+                                             wavefront.simple(scene),
+                                             settings.light_mode(scene))
         self._counting = threading.Lock()
 
     @classmethod
@@ -172,12 +167,8 @@ class RenderJob:
         lap = lap if lap is not None else (lambda phase: None)
         lap("compile")
         if notice is not None:
-            cold, seconds = is_cold(accel.record_class(settings.accel)), COLD_COMPILE_SECONDS
-            if settings.loop == "wavefront":
-                cold = is_cold(accel.record_class(settings.accel), closest_stage)
-                seconds = WAVEFRONT_COMPILE_SECONDS
-            if cold:
-                notice(f"compiling kernels (first run only, about {seconds} s)")
+            if is_cold(accel.record_class(settings.accel)):
+                notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
         lap("build")
         start = time.perf_counter()
         backend = accel.build(settings.accel, scene.geometry, **settings.accel_options())
@@ -212,7 +203,6 @@ class RenderJob:
         gets the per-pixel sums of the AOVs (ptrace.features). Returns (non-finite samples
         dropped, rays traced) of this call. A call keeps its state to itself (and the count of
         rays_traced is locked), so several threads may trace one job at once."""
-        shapes, materials, lights = self.records
         sum_rgb, sum_l, sum_l2, count = sums
         pixel_x = np.ascontiguousarray(pixel_x, dtype=np.int64)
         pixel_y = np.ascontiguousarray(pixel_y, dtype=np.int64)
@@ -221,14 +211,9 @@ class RenderJob:
         features = NO_FEATURES if features is None else features
 
         def block(start, end):
-            if self.wavefront is not None:
-                return end - start, self.wavefront.trace(
-                    pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample,
-                    pass_n, sum_rgb, sum_l, sum_l2, count, features)
-            return end - start, render_pixels(
-                shapes, materials, lights, self.camera, self.options, self.accel,
-                new_scratch(self.accel), pixel_x[start:end], pixel_y[start:end], rows[start:end],
-                first_sample, pass_n, sum_rgb, sum_l, sum_l2, count, features)
+            return end - start, self.wavefront.trace(
+                pixel_x[start:end], pixel_y[start:end], rows[start:end], first_sample, pass_n,
+                sum_rgb, sum_l, sum_l2, count, features)
 
         size = max(1, BLOCK_PATHS // pass_n)
         blocks = [(start, min(start + size, pixel_x.shape[0]))

@@ -201,7 +201,7 @@ def _cache_without_the_render_kernel(cache_dir):
     import accel.bvh
     import ptrace.integrator
     import ptrace.kernel.trace
-    for module, dispatcher in ((ptrace.integrator, ptrace.integrator.render_pixels),
+    for module, dispatcher in ((ptrace.integrator, ptrace.integrator.surface),
                                (ptrace.kernel.trace, ptrace.kernel.trace.closest_stage),
                                (accel.bvh, accel.bvh._build)):
         source = dispatcher._cache._cache_path

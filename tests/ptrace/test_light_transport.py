@@ -218,9 +218,9 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before)
 
 
 def test_memory_does_not_grow_with_samples_light_samples_or_depth():
-    """The README's memory promise: a path keeps its state in the compiled loop's locals, so
-    the peak memory of a render (beyond the scene, the accelerator and the per-pixel sums) does
-    not grow with -s, -l or -m. Measured as the growth of the process's peak RSS during a
+    """The README's memory promise: a thread keeps one wave of paths, whose size -l can only
+    shrink, so the peak memory of a render (beyond the scene, the accelerator and the per-pixel
+    sums) does not grow with -s, -l or -m. Measured as the growth of the process's peak RSS during a
     render in a fresh process (the kernels come from numba's cache), small against large, and
     at -s 16 -l 8192 (where the wavefront renderer once sent batches of 131,072 rays past its
     65,536 bound) on a small window."""

@@ -69,7 +69,7 @@ from scipy.stats import norm
 import ptrace
 import ptrace.rendering.renderer
 from benchmarks.mitsuba_reference import PIXEL_CASES, PIXEL_DEPTH, REFERENCES, pixel_case
-from ptrace.integrator import LUMINANCE
+from ptrace.environment import LUMINANCE
 
 ALPHA = 1e-3          # family-wise false-alarm rate, per case
 SPP = 1024            # ptrace's samples per pixel for the family test

@@ -1,4 +1,4 @@
-"""Russian roulette follows its rule exactly, path by path, on the compiled kernel.
+"""Russian roulette follows its rule exactly, path by path, through the compiled stages.
 
 In the furnace (tests/ptrace/scenes_by_hand.furnace: a diffuse sphere of albedo a seen from
 inside, a point light at its centre) every BSDF sample multiplies the throughput by exactly a,
@@ -13,39 +13,42 @@ import math
 
 import numpy as np
 import pytest
-from numba import njit
 
 import accel
 import ptrace
 from accel.compiled import new_scratch
-from ptrace.integrator import scene_records, trace_path
+from ptrace.kernel import layout
 from ptrace.rendering.settings import Settings
+from ptrace.rendering.tiles import RenderJob
 
 from scenes_by_hand import furnace
 
 ALBEDO, POWER = 0.9, 2.0
 
 
-@njit(cache=True)
-def _paths(shapes, materials, lights, options, record, n, radiance, rays):
-    """trace_path for n paths of pixel 0 from the sphere's centre, straight up: each path's
-    radiance and ray count."""
-    scratch = new_scratch(record)
-    for s in range(n):
-        r, g, b, traced = trace_path(shapes, materials, lights, options, record, scratch, 0, s,
-                                     0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, math.inf)
-        radiance[s] = r
-        rays[s] = traced
-
-
 def run_paths(n, **options):
-    scene, _ = furnace(ALBEDO, POWER)
+    """n paths of pixel 0 (samples 0 .. n - 1) from the sphere's centre, straight up, through
+    the wavefront's stages: each path's radiance and the rays it traced."""
+    scene, camera = furnace(ALBEDO, POWER)
     settings = Settings.from_options(accel="naive", max_depth=40, **options)
-    backend = accel.build("naive", scene.geometry)
-    shapes, materials, lights = scene_records(scene)
+    job = RenderJob(scene, accel.build("naive", scene.geometry), settings, camera)
+    wavefront = job.wavefront
     radiance, rays = np.empty(n), np.empty(n, dtype=np.int64)
-    _paths(shapes, materials, lights, settings.kernel_options(), backend.compiled, n, radiance,
-           rays)
+    wave, scratch = wavefront.new_wave(), new_scratch(job.accel)
+    for start in range(0, n, wave.size):
+        size = min(wave.size, n - start)
+        slots = np.arange(size)
+        floats, ints = wave.floats, wave.ints
+        floats[:, :size] = 0.0
+        floats[[layout.DY, layout.TMAX, layout.TR, layout.TG, layout.TB], :size] = (
+            [[1.0], [math.inf], [1.0], [1.0], [1.0]])
+        ints[:, :size] = 0
+        ints[layout.SAMPLE, :size] = start + slots
+        ints[layout.RAYS, :size] = 1
+        wave.queue[:size] = slots
+        wavefront.paths(wave, scratch, size)
+        radiance[start:start + size] = floats[layout.R, :size]
+        rays[start:start + size] = ints[layout.RAYS, :size]
     return radiance, rays, settings
 
 
