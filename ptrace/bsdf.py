@@ -12,10 +12,9 @@ import math
 
 from numba import njit
 
-from .gltf_brdf import gltf_eval, gltf_pdf, gltf_sample
+from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
 from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, REFRACTION
 
-INV_PI = 1.0 / math.pi
 SQRT_PI = math.sqrt(math.pi)
 
 

@@ -27,11 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
+from .environment import LUMINANCE
 from .light_tree import ONE_MINUS_EPSILON, build_light_tree, tree_pmf, tree_sample
 from .lights import choose
 from .scene import AREA, PHYSICAL, POINT, SPOT
-
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _entries(scene, prims, prim_power):

@@ -240,14 +240,7 @@ def sample_emitter(shapes, materials, prims, cdf, prim_pdf, px, py, pz, u0, u1, 
     """A point on the emissive primitives as seen from p, the primitive chosen by power (u0)
     and the point by sample_primitive (u1, u2): (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf per
     unit solid angle, the choice's probability included)."""
-    lo, hi = 0, prims.shape[0] - 1
-    while lo < hi:        # the first k with u0 < cdf[k]
-        mid = (lo + hi) // 2
-        if u0 < cdf[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    prim = prims[lo]
+    prim = prims[choose(cdf, u0)]
     er, eg, eb, wx, wy, wz, dist, pdf = sample_primitive(shapes, materials, prim, px, py, pz,
                                                          u1, u2)
     if not pdf > 0.0:
