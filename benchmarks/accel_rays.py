@@ -67,7 +67,7 @@ BUILD = {"naive": ("naive", {}),
          "bvh sah mt": ("bvh", {"split": "sah", "triangle": "moller-trumbore"}),
          "embree": ("embree", {})}
 MT = ("bvh mean mt", "bvh sah mt")
-# issue 14's targets: (what, ray kind, meshes, numerator, denominator, at least); "{split}" is
+# the targets: (what, ray kind, meshes, numerator, denominator, at least); "{split}" is
 # "mean" (the default split, which decides pass/FAIL) and "sah" (shown beside it)
 TARGET_MESHES = ("meshedit/cow.dae", "sky/CBbunny.dae", "keenan/building.dae",
                  "meshedit/maxplanck.dae")
@@ -287,7 +287,7 @@ def summary_table(results, args):
 def targets_table(results, args):
     t = max(args.threads)
     by_label = {r["label"]: r for r in results}
-    lines = [f"## Targets (issue 14), {t} threads", "",
+    lines = [f"## Targets, {t} threads", "",
              ("Pass/FAIL is decided on the default split (mean); the sah split is shown beside "
               "it. bvh and naive use the watertight test unless the row says Möller–Trumbore. "
               "The CBbunny shadow rays go to its own area light."), "",

@@ -1,4 +1,4 @@
-"""What each kept change of the BVH traversal bought (issue 14.3): bvh rays per second at several
+"""What each kept change of the BVH traversal bought: bvh rays per second at several
 commits, side by side with Embree, in one run.
 
     python studies/bvh_changes.py [--rays 1000000] [--repeats 5] [--threads 2]
@@ -333,7 +333,7 @@ def main(argv=None):
     parser.add_argument("--splits", nargs="+", default=["mean", "sah"], choices=["mean", "sah"])
     parser.add_argument("--revisions", nargs="+", metavar="COMMIT=LABEL",
                         help="the revisions to compare, oldest first; COMMIT 'tree' is this tree "
-                             "(default: REVISIONS, the kept changes of issue 14.3)")
+                             "(default: REVISIONS, the kept changes)")
     parser.add_argument("--leaf-sizes", type=int, nargs="*", default=[8],
                         help="other max_leaf_size values to time in this tree (default 8)")
     parser.add_argument("--renders", type=int, default=len(RENDERS),
@@ -361,7 +361,7 @@ def main(argv=None):
                 revision.close()
     labels = [label for _, label in revisions_wanted]
     commits = ", ".join(f"{label}: {commit or 'this tree'}" for commit, label in revisions_wanted)
-    text = report.header("BVH traversal changes side by side (issue 14.3)") + (
+    text = report.header("BVH traversal changes side by side") + (
         f"{args.rays:,} rays per batch, {args.threads} threads, median of {args.repeats} runs "
         f"taken in turns (each revision's process, then Embree's, per repeat); closest hit "
         f"through the compiled face (`accel.compiled.run_intersect`) at every revision and for "

@@ -1,4 +1,4 @@
-"""Issue 12's targets, side by side: an older checkout of ptrace against this tree, in one run.
+"""The speed targets, side by side: an older checkout of ptrace against this tree, in one run.
 
     git worktree add /tmp/old 62c98f2          # the last wavefront commit
     python studies/side_by_side.py /tmp/old  # prints each figure, writes /tmp/targets.json

@@ -1,4 +1,4 @@
-"""Feature buffers (--aov) and the opt-in denoiser (--denoise), issue 16 item 4."""
+"""Feature buffers (--aov) and the opt-in denoiser (--denoise)."""
 import builtins
 import math
 import pathlib

@@ -1,4 +1,4 @@
-"""Materials, textures and lights that mesh files carry (issue 15, items 3 and 4): the texture
+"""Materials, textures and lights that mesh files carry: the texture
 lookup, what each file field becomes, and the physical lights of glTF."""
 import dataclasses
 import json

@@ -1,4 +1,4 @@
-"""Extreme numbers from flags and files (issue 43, item 1), library text on stderr (item 2) and
+"""Extreme numbers from flags and files, library text on stderr (item 2) and
 a killed render's temporary file (item 3).
 
 Every number from a flag or a file is finite and within ptrace.io.limits.LIMIT (1e30: its

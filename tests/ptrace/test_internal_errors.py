@@ -1,4 +1,4 @@
-"""The README's promise that bugs are told apart from user errors (issue 17, item 1): a PtraceError
+"""The README's promise that bugs are told apart from user errors: a PtraceError
 (the user's input or flags) is one line on stderr and exit code 2; anything else escaping the CLI is
 `ptrace: internal error: ...` with its traceback and exit code 1. (A Dask tile task's side of this
 is in test_distributed.py.)"""

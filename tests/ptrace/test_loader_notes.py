@@ -1,4 +1,4 @@
-"""The user hears what the loader ignored, changed or assumed (issue 15: "tell the user"):
+"""The user hears what the loader ignored, changed or assumed:
 `ptrace: note: ...` on stderr once per kind after the summary, in --info, silenced by -q; a face
 with NaN coordinates is dropped with a note that says NaN, never silently."""
 import json

@@ -1,4 +1,4 @@
-"""A library changes nothing process-wide behind its user's back (issue 17, item 2): importing
+"""A library changes nothing process-wide behind its user's back: importing
 ptrace (with its CLI and distributed modules) and rendering in-process leaves the logging
 configuration, warning filters, signal handlers, numpy's error state, numba's thread count, the
 floating-point mode and the environment as they were. (malloc's settings cannot be read back;

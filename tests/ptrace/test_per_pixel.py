@@ -1,4 +1,4 @@
-"""ptrace against Mitsuba 3, pixel by pixel (issue 13, item 5), in the manner of Mitsuba's own
+"""ptrace against Mitsuba 3, pixel by pixel, in the manner of Mitsuba's own
 test_renders.py: a z-test per pixel of ptrace's pixel mean against the reference's, with a
 Šidák-corrected threshold over all the pixels tested.
 

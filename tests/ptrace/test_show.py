@@ -1,4 +1,4 @@
-"""Notebook display (issue 16, item 3): ptrace.show(image) shows itself through IPython's
+"""Notebook display: ptrace.show(image) shows itself through IPython's
 _repr_png_ with the course's curve; ptrace.render still returns a plain numpy array."""
 import io
 
