@@ -63,7 +63,7 @@ def test_a_textured_emitters_light_follows_its_texture_not_its_mirror_image():
     uv[2], uv[3] = corner_uv[[0, 1, 2]], corner_uv[[0, 2, 3]]
     scene = dataclasses.replace(scene, uv=uv, textures=Textures.from_images([texture]))
     camera = looking_down(2.5, width=24, screen_dist=10.0)
-    image = ptrace.render(scene, camera=camera, resolution=(24, 24), spp=48, light_samples=2,
+    image = ptrace.render(scene, camera=camera, resolution=(24, 24), spp=192, light_samples=2,
                           max_depth=1, seed=5)[..., 0]
     # the lit rectangle x, z in [-3/8, 0) at y = 1, by the midpoint rule
     g = (np.arange(48) + 0.5) / 48 * 0.375 - 0.375
@@ -83,7 +83,7 @@ def test_a_textured_emitters_light_follows_its_texture_not_its_mirror_image():
             part = floor_seen & (sx * centre[..., 0] > 0) & (sz * centre[..., 2] > 0)
             means[sx, sz] = (image[part].mean(), expected[part].mean())
     for key, (got, want) in means.items():
-        assert got == pytest.approx(want, rel=0.04), (key, means)
+        assert got == pytest.approx(want, rel=0.04), (key, got / want, means)
     # the lit quadrant's side is much the brighter: the test can see a mirror
     assert means[-1, -1][1] > 1.3 * max(means[1, -1][1], means[-1, 1][1])
 
@@ -127,14 +127,14 @@ def test_stacked_blend_surfaces_each_pass_a_ray_on_their_own(stack):
     alpha = 0.5
     camera = looking_down(5.0, width=24, screen_dist=24.0)
     image = ptrace.render(_blend_scene(alpha, stack), camera=camera, resolution=(24, 24),
-                          spp=64, max_depth=1, seed=3)
+                          spp=256, max_depth=1, seed=3)
     floor = 0.5 / math.pi * 2.0
     points = pixel_hits_on_floor(camera)
     # pixels whose ray crosses both layers well inside the quads (|x|, |z| < 1.5 at y = 2)
     inside = (np.abs(points[..., 0]) < 1.0) & (np.abs(points[..., 2]) < 1.0)
     assert inside.sum() >= 64
     lit = image[..., 0][inside]
-    assert lit.mean() == pytest.approx((1 - alpha) ** 4 * floor, rel=0.12), lit.mean() / floor
+    assert lit.mean() == pytest.approx((1 - alpha) ** 4 * floor, rel=0.1), lit.mean() / floor
 
 
 # -- 3. -b alone and -d alone make a lens -----------------------------------------------------
@@ -338,9 +338,10 @@ def test_a_sphere_light_mostly_below_the_horizon_lights_the_floor_as_quadrature_
     0.5): every floor point sees its cap above the floor, with its centre below the point's
     tangent plane. Each pixel's value is albedo / pi x 3 x the irradiance from the visible
     cap (numpy quadrature over the hemisphere, as a function of the distance from the
-    sphere's axis); rings of floor pixels match it to a few percent. With light sampling
-    alone (direct="light"), every light sampler's choice of the sphere and the point it
-    samples on it carry the whole estimate; with MIS, BSDF samples share it."""
+    sphere's axis); rings of floor pixels, and each eighth of a ring, match it to a few
+    percent. With light sampling alone (direct="light"), every light sampler's choice of the
+    sphere and the point it samples on it carry the whole estimate; with MIS, BSDF samples
+    share it."""
     centre_y, radius = -0.6, 1.0
     floor = floor_plane(0.5, half=6.0)
     scene = make_scene(vertices=floor["vertices"], faces=floor["faces"],
@@ -348,17 +349,24 @@ def test_a_sphere_light_mostly_below_the_horizon_lights_the_floor_as_quadrature_
                        materials=floor["materials"] + [dict(kind=EMISSION, emission=(3, 3, 3))],
                        material_index=[0, 0, 1])
     camera = looking_down(4.0, width=24, screen_dist=14.0)
-    image = ptrace.render(scene, camera=camera, resolution=(24, 24), spp=32, light_samples=2,
+    image = ptrace.render(scene, camera=camera, resolution=(24, 24), spp=64, light_samples=4,
                           max_depth=1, seed=11, light_sampler=sampler,
                           direct=direct)[..., 0]
     rhos, table = _sphere_table(centre_y, radius)
-    points = sub_pixel_floor_points(camera, k=3)
+    points = sub_pixel_floor_points(camera, k=4)
     rho = np.hypot(points[..., 0], points[..., 2])
     expected = (0.5 / math.pi * 3.0 * np.interp(rho, rhos, table)).mean(axis=-1)
-    cap = math.sqrt(radius ** 2 - centre_y ** 2)           # the cap's rim on the floor: 0.8
-    ring = np.hypot(*[pixel_hits_on_floor(camera)[..., k] for k in (0, 2)])
-    for low, high in ((1.0, 1.4), (1.4, 2.0), (2.0, 3.0)):
-        part = (ring > max(low, cap + 0.15)) & (ring < high)
-        assert part.sum() > 20, (low, part.sum())
+    hits = pixel_hits_on_floor(camera)
+    ring, angle = np.hypot(hits[..., 0], hits[..., 2]), np.arctan2(hits[..., 2], hits[..., 0])
+    # rings, and eighths of the ring 1.2 .. 2.5 (a sampler that misses part of the sphere's
+    # cone can be right on average around the sphere and wrong on each side of it); pixels
+    # nearer than 1.2 straddle the steep light just outside the cap's rim (0.8)
+    parts = {f"ring {low}": (ring > low) & (ring < high)
+             for low, high in ((1.2, 1.6), (1.6, 2.2), (2.2, 3.0))}
+    for k in range(8):
+        parts[f"eighth {k}"] = ((ring > 1.2) & (ring < 2.5) & (angle >= k * math.pi / 4 - math.pi)
+                                & (angle < (k + 1) * math.pi / 4 - math.pi))
+    for name, part in parts.items():
+        assert part.sum() > 15, (name, part.sum())
         assert image[part].mean() == pytest.approx(expected[part].mean(), rel=0.04), (
-            low, image[part].mean(), expected[part].mean())
+            name, image[part].mean() / expected[part].mean())
