@@ -53,9 +53,12 @@ MUTANTS = {
         ["tests/ptrace/test_bsdf.py"]),
     "image-written-in-place": (
         "the output image is written straight to its target, not through a temporary file",
-        [("ptrace/image.py", "oiio.ImageOutput.create(temporary)", "oiio.ImageOutput.create(path)"),
-         ("ptrace/image.py", "output.open(temporary, spec)", "output.open(path, spec)"),
-         ("ptrace/image.py", "os.replace(temporary, path)", "pass")],
+        [("ptrace/image.py", "_write_temporary(temporary, pixels, pixel_type, names,   #",
+          "_write_temporary(path, pixels, pixel_type, names,   #"),
+         ("ptrace/image.py", "temporary = entry[0] = _link(unnamed, directory, path)",
+          "temporary = entry[0] = None"),
+         ("ptrace/image.py", "                    os.replace(temporary, path)\n",
+          "                    pass\n")],
         ["tests/ptrace/test_image.py"]),
     "dropped-cosine": (
         "the path throughput drops the cosine of the sampled direction",
