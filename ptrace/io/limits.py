@@ -45,3 +45,12 @@ def problem(values, limit=LIMIT):
     if not math.isfinite(value):
         return f"{value:g} is not a finite number"
     return f"{value:g} is " + (LIMIT_WORDS if limit == LIMIT else f"beyond ±{limit:g}")
+
+
+def is_float(word):
+    """Whether a word of a file reads as a number (float() takes it)."""
+    try:
+        float(word)
+        return True
+    except ValueError:
+        return False

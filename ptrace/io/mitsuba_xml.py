@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .files import require_regular_file
-from .limits import problem
+from .limits import is_float, problem
 from .mitsuba_spectra import spectrum_to_rgb
 from .mitsuba_transforms import Transform, describe, parse_transform
 
@@ -321,7 +321,7 @@ class Reader:
         try:
             values = np.array([float(w) for w in words], dtype=np.float64)
         except ValueError:
-            bad = next(w for w in words if not _is_float(w))
+            bad = next(w for w in words if not is_float(w))
             raise SceneError(path, f"{describe(element)}: {bad[:40]!r} in its {what} is not a "
                                    f"number") from None
         wrong = problem(values)
@@ -395,10 +395,3 @@ class Reader:
             raise SceneError(path, f"{describe(element)}: a spectrum needs two or more "
                                    f"wavelength:value pairs, wavelengths increasing")
         return Colour(spectrum_to_rgb(pairs[:, 0], pairs[:, 1], emitter))
-
-def _is_float(word):
-    try:
-        float(word)
-        return True
-    except ValueError:
-        return False

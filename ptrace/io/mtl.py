@@ -14,6 +14,7 @@ import numpy as np
 from ..errors import SceneError
 from ..scene import CLAMP, DIFFUSE, EMISSION, GLASS, GLOSSY, MICROFACET, MIRROR, REPEAT
 from . import files
+from .limits import is_float
 from .materials import (
     DEFAULT_ALBEDO,
     MIN_ALPHA,
@@ -238,7 +239,7 @@ def read_map(statement, field, where, directory, mtl_path, pool, notes):
         args = []
         while len(args) < count and i + 1 + len(args) < len(words) - 1:
             word = words[i + 1 + len(args)]
-            if option in ("-o", "-s", "-t") and not _is_float(word):
+            if option in ("-o", "-s", "-t") and not is_float(word):
                 break
             args.append(word)
         i += 1 + len(args)
@@ -274,10 +275,3 @@ def read_map(statement, field, where, directory, mtl_path, pool, notes):
     changed = not (np.array_equal(scale, np.ones(2)) and np.array_equal(offset, np.zeros(2)))
     return texture, ((scale, offset) if changed else None)
 
-
-def _is_float(word):
-    try:
-        float(word)
-        return True
-    except ValueError:
-        return False
