@@ -11,6 +11,7 @@ import pathlib
 import numpy as np
 import pytest
 from files_by_hand import QUAD, QUAD_FACES, QUAD_UV_GLTF, gltf
+from test_gltf_alpha_normals import FLOOR, RED, SIZE, SUN  # its floor, sun and red floor
 
 import ptrace
 from ptrace.scene import BLEND_CUT, DIFFUSE, EMISSION, Textures
@@ -182,14 +183,6 @@ def test_b_without_d_and_d_without_b_still_make_a_lens(tmp_path):
 
 # -- 4. and 5. glTF normal texture scale, and a MASK alpha equal to its cutoff ----------------
 
-FLOOR = dict(positions=QUAD * [2.0, 2.0, 0.0] + [0.0, 0.0, -1.0],
-             indices=QUAD_FACES.reshape(-1), uv=QUAD_UV_GLTF, material=0)
-SUN = {"extensions": {"KHR_lights_punctual": {"lights": [{"type": "directional",
-                                                          "intensity": 2.0}]}},
-       "extensionsUsed": ["KHR_lights_punctual"]}
-RED = {"name": "floor", "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.1, 0.1, 1.0],
-                                                 "metallicFactor": 0.0, "roughnessFactor": 1.0}}
-SIZE = 24
 
 
 def _png(pixels, mode):
