@@ -136,6 +136,7 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     from ..rendering.settings import (
         BVH_SPLITS,
         DIRECT,
+        GUIDING,
         INTEGRATORS,
         LIGHT_SAMPLER_CODES,
         LIGHT_SAMPLERS,
@@ -173,6 +174,11 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
              "emissive primitive chosen by a light BVH for the shading point) or auto (all for "
              f"a scene of at most {AUTO_EVERY_LIGHT} lights, the emissive primitives counting "
              f"as one; else {many}; the default)")
+    add("--guiding", choices=GUIDING, default="off",
+        help="path guiding: on (training passes, up to a quarter of -s, learn where light "
+             "comes from; the rest sample bounces from the guide and the BSDF), auto (on "
+             "unless training shows it does not lower the variance) or off (the default); "
+             "in-process renders of the path integrator without -H or -a")
     add("-r", "--resolution", nargs=2, type=int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=(800, 600),
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
@@ -302,7 +308,8 @@ def settings_of(args):
         spp=args.spp, accel=args.accel, integrator=args.integrator, seed=args.seed,
         light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
         hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
-        light_sampler=args.light_sampler, bvh_split=args.bvh_split)
+        light_sampler=args.light_sampler, bvh_split=args.bvh_split,
+        guiding=getattr(args, "guiding", "off"))
 
 
 def plan(args, files_of):

@@ -17,6 +17,7 @@ from ..integrator import (
     DIM_CHOOSE,
     DIM_CHOOSE_PRIM,
     DIM_GLASS,
+    DIM_GUIDE,
     DIM_LIGHT,
     DIM_RR,
     DIM_SELECT,
@@ -41,6 +42,7 @@ from ..lights import (
 )
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
 from ..textures import mapped_normal, surface_albedo
+from .guide import guide_leaf, guide_pdf, guide_sample, remember
 from .layout import (
     DELTA,
     DX,
@@ -162,12 +164,13 @@ def queue_ray(shadow, shadow_path, shadow_key, s, ox, oy, oz, dx, dy, dz, tmax, 
 _STAGES = {}
 
 
-def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
+def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided=False):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
         shadows, kept = stage(shapes, materials, lights, options, mis, floats, ints, queue, n,
-                              shadow, shadow_path, shadow_key, shadows, out, kept)
+                              shadow, shadow_path, shadow_key, shadows, out, kept, guide,
+                              history, depth)
 
     shades the n queued vertices, appending their shadow rays to the shadow queue from row
     `shadows` on and the paths that bounce to out from `kept` on; returns both new counts.
@@ -179,18 +182,25 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
     `general`), the shadow queue gets the course's uniform hemisphere rays instead of light
     samples: -l for each light that is not emissive geometry (at least -l), each carrying
     f cos / (pdf n) times the throughput, the weight of the emission it will find
-    (stages.probe_found_stage)."""
-    key = (kind, general, mode, hemisphere)
+    (stages.probe_found_stage).
+
+    With `guided` (a kind that is not delta, without -H), the bounce is drawn from the guide
+    (ptrace.kernel.guide.GuideArrays) with probability guide.alpha and from the BSDF otherwise,
+    and weighted by the mixture's pdf, which the light samples' MIS weights use too; with
+    guide.record set, each bounce is remembered in `history` (its first `depth` vertices) for
+    the guide's records. Without it, guide, history and depth are not read."""
+    key = (kind, general, mode, hemisphere, guided)
     if key in _STAGES:
         return _STAGES[key]
     KIND, GENERAL, MODE, HEMI = kind, general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
+    GUIDED = guided and not DELTA_KIND and not hemisphere
 
     @njit(cache=True, nogil=True, _nrt=False)
     def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, shadow,
-              shadow_path, shadow_key, shadows, out, kept):
+              shadow_path, shadow_key, shadows, out, kept, guide, history, depth):
         light_count = lights.radiance.shape[0] if not DELTA_KIND else 0
         samples = options.light_samples
         max_depth = options.max_depth
@@ -226,6 +236,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                 alpha, metallic = materials.alpha[m], materials.metallic[m]
             base = vertex * DIMS_PER_VERTEX
             rays = 0
+            if GUIDED:
+                leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, px, py, pz)
+                mix = guide.alpha
             if HEMI and light_count:    # -H: the course's uniform hemisphere sampling
                 count = 0
                 for light in range(light_count):
@@ -308,8 +321,11 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
                                            wix, wiy, wiz)
                     scale = wiz / (weight * pdf)
                     if options.mis and not delta_light:
-                        scale *= power_heuristic(weight * pdf, bsdf_pdf(
-                            KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz))
+                        other = bsdf_pdf(KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix,
+                                         wiy, wiz)
+                        if GUIDED:   # the bounce's pdf is the mixture's
+                            other = (1.0 - mix) * other + mix * guide_pdf(guide, leaf, wx, wy, wz)
+                        scale *= power_heuristic(weight * pdf, other)
                     ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
                     sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
                     if dist != math.inf:
@@ -334,9 +350,30 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
             if LOBES:
                 u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS,
                                base + DIM_GLASS)
-            wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
-                KIND, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
-                materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2, u3)
+            if GUIDED and sample_1d(options, pixel, sample, sample, base + DIM_GUIDE,
+                                    base + DIM_GUIDE) < mix:
+                # the guide's direction, weighted by the mixture's pdf
+                wx, wy, wz, guided_pdf = guide_sample(guide, leaf, u1, u2)
+                wix = wx * xx + wy * xy + wz * xz
+                wiy = wx * yx + wy * yy + wz * yz
+                wiz = wx * nx + wy * ny + wz * nz
+                fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
+                                       materials.k, materials.specular, m, wox, woy, woz, wix,
+                                       wiy, wiz)
+                pdf = mix * guided_pdf + (1.0 - mix) * bsdf_pdf(
+                    KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+            else:
+                wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
+                    KIND, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
+                    materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2,
+                    u3)
+                if GUIDED and pdf > 1e-11:
+                    wx = wix * xx + wiy * yx + wiz * nx
+                    wy = wix * xy + wiy * yy + wiz * ny
+                    wz = wix * xz + wiy * yz + wiz * nz
+                    length = math.sqrt(wx * wx + wy * wy + wz * wz)
+                    pdf = (1.0 - mix) * pdf + mix * guide_pdf(guide, leaf, wx / length,
+                                                              wy / length, wz / length)
             if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
                 continue
             weight = abs(wiz) / pdf
@@ -364,6 +401,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False):
             floats[TMIN, i], floats[TMAX, i] = 0.0, math.inf
             floats[TR, i], floats[TG, i], floats[TB, i] = tr, tg, tb
             floats[PDF, i] = pdf
+            if GUIDED and guide.record:
+                remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb)
             ints[DELTA, i] = DELTA_KIND
             ints[KEY, i] = base
             ints[RAYS, i] += 1

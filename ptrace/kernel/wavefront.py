@@ -29,6 +29,7 @@ from ..scene import (
     MIRROR,
     REFRACTION,
 )
+from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
 from .layout import Wave
 from .shading import shading_stage
 from .stages import (
@@ -54,6 +55,8 @@ from .trace import (
 # and larger ones gained nothing (benchmarks/results/wavefront_gate.md)
 WAVE_PATHS = 4096
 SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.8 MB)
+
+GUIDE_DEPTH = 8    # (--guiding) the vertices of a path that training records, at most
 
 SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR)   # all but EMISSION
 
@@ -90,10 +93,14 @@ class Wavefront:
     """What a render job's wavefront needs beside the pixels: the stage records (built once
     from the job's kernel records) and each thread's wave buffers."""
 
-    def __init__(self, records, options, camera, accel_record, kinds, area_only, mode):
+    def __init__(self, records, options, camera, accel_record, kinds, area_only, mode,
+                 guided=False):
         """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
         primitives have; area_only: its lights are area lights alone and its surfaces
-        untextured (simple); mode: its light sampler (Settings.light_mode)."""
+        untextured (simple); mode: its light sampler (Settings.light_mode); guided: the
+        non-delta kinds' bounces mix the path guide (self.guide, a
+        ptrace.kernel.guide.GuideArrays that ptrace.guiding sets between passes) with the
+        BSDF, and while self.trainer is set each block's records go to trainer.add."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
         self.materials = materials     # the full record: the AOVs read it
@@ -116,9 +123,14 @@ class Wavefront:
         # the shading kernels of the kinds the scene has: no other is ever compiled (none at
         # all for the normals integrator)
         self.normals = options.mode == codes.NORMALS
+        self.guided = bool(guided) and not self.normals and not self.hemisphere
         self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode,
-                                                                   self.hemisphere))
+                                                                   self.hemisphere,
+                                                                   self.guided))
                                                for kind in kinds if kind in SHADED]
+        self.guide = uniform_guide()
+        self.trainer = None
+        self.depth = max(1, min(GUIDE_DEPTH, options.max_depth)) if self.guided else 1
         self.hit_stage = None if self.normals else hit_stage(general)
         # cut-out surfaces: the backend's stages that trace past them (the records hold an
         # empty cutoff array when no material is cut)
@@ -138,7 +150,11 @@ class Wavefront:
     def new_wave(self):
         """A wave's arrays for this render (each thread keeps its own, used again for every
         wave)."""
-        return Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
+        wave = Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
+        columns = self.wave_paths * self.depth if self.guided else 1
+        wave.history = np.zeros((HISTORY_ROWS, columns))   # (guided) the vertices to record
+        wave.records = np.zeros((RECORD_ROWS, columns))
+        return wave
 
     def trace(self, pixel_x, pixel_y, rows, first_sample, pass_n, sum_rgb, sum_l, sum_l2, count,
               features):
@@ -154,6 +170,7 @@ class Wavefront:
         counts = np.zeros(pixel_x.shape[0], dtype=np.int64)
         total = pixel_x.shape[0] * pass_n
         dropped = rays = 0
+        trainer, records = self.trainer, []
         for start in range(0, total, self.wave_paths):
             size = min(self.wave_paths, total - start)
             camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
@@ -166,11 +183,16 @@ class Wavefront:
                 normals_stage(shapes, floats, ints, size)
             else:
                 self.paths(wave, scratch, size)
+                if trainer is not None:
+                    kept = record_stage(floats, size, wave.history, self.depth, wave.records)
+                    records.append(wave.records[:, :kept].copy())
             wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts,
                                                  wave.features, feature_sums)
             dropped += wave_dropped
             rays += wave_rays
         add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features)
+        if trainer is not None and rows.shape[0]:
+            trainer.add((first_sample, int(rows[0])), np.concatenate(records, axis=1))
         return dropped, rays
 
     def _closest(self, wave, scratch, n):
@@ -191,6 +213,8 @@ class Wavefront:
         shadow_key, cutouts = wave.shadow_key, self.cutouts
         shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
         accel, mis, starts = self.accel, self.mis, wave.starts
+        guide, history, depth = self.guide, wave.history, self.depth
+        snapshot = self.trainer is not None
         while n:
             self._closest(wave, scratch, n)
             n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
@@ -203,7 +227,7 @@ class Wavefront:
                 if end > first:
                     shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
                                        after[first:end], end - first, shadow, shadow_path,
-                                       shadow_key, shadows, queue, n)
+                                       shadow_key, shadows, queue, n, guide, history, depth)
             if shadows and self.hemisphere:   # the hemisphere's rays, and what they find
                 if cutouts:
                     visible_probe_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
@@ -220,3 +244,5 @@ class Wavefront:
                 else:
                     any_stage(accel, scratch, shadow, shadows, blocked)
                 shadow_stage(floats, shadow, shadow_path, blocked, shadows)
+            if snapshot and n:    # the radiance the bounces' records start from
+                snapshot_stage(floats, ints, queue, n, history, depth)

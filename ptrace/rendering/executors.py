@@ -3,6 +3,7 @@ through one ptrace.rendering.tiles.RenderJob. (The Dask executor, ptrace.renderi
 sends tiles of the same passes to workers that trace them through their own RenderJob.)"""
 import time
 
+from ..guiding import train
 from .tiles import RenderJob
 
 
@@ -23,7 +24,13 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
 
     nonfinite = 0
     interrupted = False
+    guiding = None
     try:
+        if settings.guiding != "off":   # training passes, then the rest of -s with the guide
+            training, guiding = train(job, pixel_x, pixel_y, settings.spp, settings.guiding,
+                                      on_block)
+            guiding["training_seconds"] = time.perf_counter() - start
+            passes.spp -= training
         for first_sample, pass_n, active in passes:
             phases.count("passes")
             nonfinite += job.trace(pixel_x[active], pixel_y[active], first_sample, pass_n,
@@ -34,4 +41,4 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
     render_seconds = job.records_seconds + time.perf_counter() - start
     return dict(build_seconds=job.build_seconds, render_seconds=render_seconds,
                 rays=job.rays_traced, accel=job.backend.stats(), nonfinite=nonfinite,
-                interrupted=interrupted)
+                interrupted=interrupted, **({} if guiding is None else {"guiding": guiding}))

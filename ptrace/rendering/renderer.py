@@ -154,6 +154,8 @@ def _render(scene, settings, width, height, crop, camera, progress, stats, clien
     pixel_y = ys.reshape(-1).astype(np.int64)
     n_pixels = pixel_x.shape[0]
     sums = new_sums(n_pixels)
+    if settings.guiding != "off" and client is not None:
+        raise PtraceError("guiding (--guiding) renders in-process only, not on a Dask cluster")
     if aovs is not None and client is not None:
         raise PtraceError("AOVs (--aov, --denoise) are rendered in-process only, not on a Dask "
                           "cluster")

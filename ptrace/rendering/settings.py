@@ -16,6 +16,7 @@ SAMPLERS = ("sobol", "independent")   # --sampler
 LIGHT_SAMPLERS = ("auto", "all", "power", "bvh")   # --light-sampler
 LIGHT_SAMPLER_CODES = {"auto": codes.LIGHTS_AUTO, "all": codes.LIGHTS_ALL,
                        "power": codes.LIGHTS_POWER, "bvh": codes.LIGHTS_BVH}
+GUIDING = ("off", "on", "auto")       # --guiding
 BVH_SPLITS = ("mean", "sah")          # --bvh-split (accel.bvh.SPLITS; checked by a test)
 
 # The ranges of the integer settings (the CLI's flags and render()'s keywords alike). The kernels
@@ -65,7 +66,10 @@ class Settings:
     light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or
     emissive primitive chosen by a light BVH for that vertex, ptrace.light_bvh) or "auto" (all
     while a scene has at most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives
-    counting as one, else ptrace.integrator.AUTO_MANY).
+    counting as one, else ptrace.integrator.AUTO_MANY). guiding: "off", "on" (path guiding,
+    ptrace.guiding: training passes of -s learn where light comes from, and the rest sample
+    bounces from the guide and the BSDF) or "auto" (on, unless training shows the guide does
+    not lower the variance); with the path integrator, in-process, without -H or -a.
     """
     spp: int = 1
     accel: str = "bvh"
@@ -82,6 +86,7 @@ class Settings:
     sampler: str = "sobol"
     bvh_split: str = "mean"
     light_sampler: str = "auto"
+    guiding: str = "off"
 
     def __post_init__(self):
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
@@ -95,11 +100,16 @@ class Settings:
                                     ("direct", "direct-light estimator", DIRECT),
                                     ("sampler", "sampler", SAMPLERS),
                                     ("light_sampler", "light sampler", LIGHT_SAMPLERS),
+                                    ("guiding", "guiding mode", GUIDING),
                                     ("bvh_split", "BVH split", BVH_SPLITS)):
             value = getattr(self, name)
             if value not in choices:
                 raise PtraceError(f"unknown {what} {value!r}; choose one of "
                                   f"{', '.join(choices)}")
+        if self.guiding != "off" and (self.integrator != "path" or self.hemisphere
+                                      or self.adaptive is not None):
+            raise PtraceError("guiding (--guiding) works with the path integrator only, without "
+                              "hemisphere sampling (-H) or adaptive sampling (-a)")
         if self.bvh_split != "mean" and self.accel != "bvh":
             raise PtraceError(f"a BVH split applies only to the bvh accelerator, not "
                               f"{self.accel}")
@@ -133,7 +143,7 @@ class Settings:
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
         known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
-                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler"}
+                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler", "guiding"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")

@@ -154,7 +154,8 @@ class RenderJob:
         self.wavefront = wavefront.Wavefront(records, self.options, self.camera, self.accel,
                                              wavefront.used_kinds(scene),
                                              wavefront.simple(scene),
-                                             settings.light_mode(scene))
+                                             settings.light_mode(scene),
+                                             settings.guiding != "off")
         self._counting = threading.Lock()
 
     @classmethod

@@ -1,0 +1,220 @@
+"""The path guide's compiled side: where a point falls in the guide's spatial tree, a direction
+drawn from the directional quadtree of that leaf, the density of any direction, and the two
+stages that turn a training wave's vertices into records for ptrace.guiding.
+
+The guide (GuideArrays) is flat arrays. The spatial tree: node j is a leaf where axis[j] < 0,
+else its children are child[j] (below split[j] on that axis) and child[j] + 1; a leaf's root[j]
+is its quadtree's root node (or, in the tree being filled, the leaf's number). The directional
+quadtrees share q_child (N, 4) and q_energy (N, 4): quadrant q = 2 iy + ix of a node covers
+[ix/2, ix/2 + 1/2) x [iy/2, iy/2 + 1/2) of the node's square, q_child -1 where the quadrant is not
+divided. The square maps to the sphere by the equal-area map cos theta = 2 x - 1, phi = 2 pi y,
+so a density on the square is a density in solid angle times 4 pi. A sample warps one 2D
+random point down the quadtree, rescaled at each level, and guide_pdf is exactly the density of
+that warp. No recursion; nothing allocates.
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from .layout import VERTEX, R
+
+GuideArrays = namedtuple("GuideArrays", ["axis", "split", "child", "root", "q_child",
+                                         "q_energy", "alpha", "record"])
+
+# the rows of a wave's vertex history (one column per path slot and recorded vertex): the
+# vertex, the unit direction it left by, the mixture pdf of that direction, the throughput after
+# the bounce, the path's radiance when the bounce ray left, and whether the column is set
+(H_PX, H_PY, H_PZ, H_DX, H_DY, H_DZ, H_PDF, H_TR, H_TG, H_TB, H_LR, H_LG, H_LB,
+ H_VALID) = range(14)
+HISTORY_ROWS = 14
+RECORD_ROWS = 7     # a record: position (3), unit direction (3), luminance of Li / pdf
+INV_FOUR_PI = 0.25 / math.pi
+
+
+def uniform_guide(alpha=0.0, record=False):
+    """A guide of one spatial leaf whose quadtree is uniform over the sphere."""
+    return GuideArrays(np.full(1, -1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=np.int64),
+                       np.zeros(1, dtype=np.int64), np.full((1, 4), -1, dtype=np.int64),
+                       np.ones((1, 4)), float(alpha), int(bool(record)))
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_leaf(axis, split, child, root, px, py, pz):
+    """root[] of the spatial leaf holding point p."""
+    node = 0
+    while axis[node] >= 0:
+        a = axis[node]
+        c = px if a == 0 else (py if a == 1 else pz)
+        node = child[node] + (0 if c < split[node] else 1)
+    return root[node]
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def square_to_sphere(x, y):
+    """The unit direction of point (x, y) of the unit square (equal-area map)."""
+    z = 2.0 * x - 1.0
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = 2.0 * math.pi * y
+    return r * math.cos(phi), r * math.sin(phi), z
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sphere_to_square(dx, dy, dz):
+    """The point of the unit square of unit direction d (the inverse of square_to_sphere), both
+    coordinates in [0, 1)."""
+    x = min(max(0.5 * (dz + 1.0), 0.0), 0.9999999999999999)
+    phi = math.atan2(dy, dx)
+    if phi < 0.0:
+        phi += 2.0 * math.pi
+    y = min(max(phi / (2.0 * math.pi), 0.0), 0.9999999999999999)
+    return x, y
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rescale(u, low, share):
+    """u in [low, low + share) rescaled to [0, 1)."""
+    return min((u - low) / share, 0.9999999999999999)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def quadtree_sample(q_child, q_energy, node, u1, u2):
+    """A point of the unit square drawn from quadtree `node` with the 2D random point (u1, u2):
+    (x, y, density on the square). At each node the first number picks the left or right
+    half by their energies, the second the lower or upper quadrant of that half, each then
+    rescaled to [0, 1) for the next level; a quadrant that is not divided is uniform."""
+    ox = oy = 0.0
+    size = 1.0
+    pdf = 1.0
+    while True:
+        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
+                          q_energy[node, 3])
+        total = e0 + e1 + e2 + e3
+        if not total > 0.0:
+            return ox + size * u1, oy + size * u2, pdf
+        left = (e0 + e2) / total
+        if u1 < left:
+            ix = 0
+            u1 = _rescale(u1, 0.0, left)
+            low, high = e0, e2
+        else:
+            ix = 1
+            u1 = _rescale(u1, left, 1.0 - left)
+            low, high = e1, e3
+        lower = low / (low + high)
+        if u2 < lower:
+            iy = 0
+            u2 = _rescale(u2, 0.0, lower)
+            e = low
+        else:
+            iy = 1
+            u2 = _rescale(u2, lower, 1.0 - lower)
+            e = high
+        pdf *= 4.0 * e / total
+        size *= 0.5
+        ox += ix * size
+        oy += iy * size
+        node = q_child[node, 2 * iy + ix]
+        if node < 0:
+            return ox + size * u1, oy + size * u2, pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def quadtree_pdf(q_child, q_energy, node, x, y):
+    """The density on the unit square of quadtree_sample at point (x, y)."""
+    pdf = 1.0
+    while True:
+        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
+                          q_energy[node, 3])
+        total = e0 + e1 + e2 + e3
+        if not total > 0.0:
+            return pdf
+        ix = 1 if x >= 0.5 else 0
+        iy = 1 if y >= 0.5 else 0
+        x = min(2.0 * x - ix, 0.9999999999999999)
+        y = min(2.0 * y - iy, 0.9999999999999999)
+        q = 2 * iy + ix
+        pdf *= 4.0 * q_energy[node, q] / total
+        if pdf == 0.0:
+            return 0.0
+        node = q_child[node, q]
+        if node < 0:
+            return pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_sample(guide, node, u1, u2):
+    """A unit direction drawn from the guide's quadtree `node`: (dx, dy, dz, pdf in solid
+    angle)."""
+    x, y, pdf = quadtree_sample(guide.q_child, guide.q_energy, node, u1, u2)
+    dx, dy, dz = square_to_sphere(x, y)
+    return dx, dy, dz, pdf * INV_FOUR_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_pdf(guide, node, dx, dy, dz):
+    """The solid-angle density of guide_sample from quadtree `node` at unit direction d."""
+    x, y = sphere_to_square(dx, dy, dz)
+    return quadtree_pdf(guide.q_child, guide.q_energy, node, x, y) * INV_FOUR_PI
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def snapshot_stage(floats, ints, queue, n, history, depth):
+    """For each of the n queued paths (those that bounced, after their vertex's light samples
+    were added), its radiance so far into its current vertex's history column: what the path
+    gathers after this is what its bounce ray brought back."""
+    for k in range(n):
+        i = queue[k]
+        v = ints[VERTEX, i] - 1
+        if v < depth:
+            col = i * depth + v
+            for c in range(3):
+                history[H_LR + c, col] = floats[R + c, i]
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def record_stage(floats, size, history, depth, out):
+    """The records of a finished wave's first `size` slots into out (RECORD_ROWS, at least
+    size x depth): for each set history column, the vertex, its bounce direction, and the
+    mean over R, G, B of the radiance the bounce brought back (what the path gathered after it,
+    divided by the throughput after it) divided by the bounce's pdf. Clears the columns; returns
+    the count, in slot and vertex order."""
+    count = 0
+    for i in range(size):
+        for v in range(depth):
+            col = i * depth + v
+            if history[H_VALID, col] == 0.0:
+                continue
+            history[H_VALID, col] = 0.0
+            li = 0.0
+            for c in range(3):
+                t = history[H_TR + c, col]
+                if t > 0.0:
+                    li += (floats[R + c, i] - history[H_LR + c, col]) / t
+            weight = li / (3.0 * history[H_PDF, col])
+            if not (weight > 0.0 and weight < math.inf):
+                weight = 0.0
+            out[0, count] = history[H_PX, col]
+            out[1, count] = history[H_PY, col]
+            out[2, count] = history[H_PZ, col]
+            out[3, count] = history[H_DX, col]
+            out[4, count] = history[H_DY, col]
+            out[5, count] = history[H_DZ, col]
+            out[6, count] = weight
+            count += 1
+    return count
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb):
+    """Path slot i's bounce at `vertex` (from 1) into its history column, if within depth."""
+    v = vertex - 1
+    if v < depth:
+        col = i * depth + v
+        history[H_PX, col], history[H_PY, col], history[H_PZ, col] = px, py, pz
+        history[H_DX, col], history[H_DY, col], history[H_DZ, col] = dx, dy, dz
+        history[H_PDF, col] = pdf
+        history[H_TR, col], history[H_TG, col], history[H_TB, col] = tr, tg, tb
+        history[H_VALID, col] = 1.0
+
