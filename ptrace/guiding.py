@@ -6,7 +6,8 @@ on x, y, z in turn, and a directional quadtree per leaf over the equal-area squa
 sphere. While an iteration renders, the records (position, direction, luminance of the radiance
 the bounce brought back over its pdf) are counted per leaf of the tree being filled and their
 energy summed into a fixed RESOLUTION x RESOLUTION grid of directions per leaf. At the end of an
-iteration each leaf's quadtree is made from its grid (a quadrant is divided while it holds more
+iteration each leaf's quadtree is made from its grid (the energy of every iteration so far:
+each record is an unbiased estimate whatever pdf drew it) (a quadrant is divided while it holds more
 than ENERGY_SHARE of the leaf's energy, down to the grid's cells), and that guide samples the
 next iteration; then each leaf that counted more than SPLIT_SAMPLES x sqrt(passes of the
 iteration) records splits (its children counted as halves, again, up to MAX_LEAVES leaves) for
@@ -72,8 +73,11 @@ class SpatialTree:
 
     def refine(self, counts, threshold):
         """Split each leaf whose count passes threshold, its children counted as halves, until
-        none does or the tree has MAX_LEAVES leaves."""
-        pending = [(j, float(c)) for j, c in zip(self.leaves(), counts)]
+        none does or the tree has MAX_LEAVES leaves. Returns, for each leaf of the new tree (in
+        leaf order), the number of the old leaf it lies in and its share of that leaf's volume."""
+        old = self.leaves()
+        origin = {j: (k, 1.0) for k, j in enumerate(old)}
+        pending = [(j, float(c)) for j, c in zip(old, counts)]
         leaves = len(pending)
         while pending and leaves < MAX_LEAVES:
             j, count = pending.pop(0)
@@ -95,8 +99,10 @@ class SpatialTree:
                 self.upper.append(high)
                 self.depth.append(self.depth[j] + 1)
                 pending.append((first + side, 0.5 * count))
+                origin[first + side] = (origin[j][0], 0.5 * origin[j][1])
             self.axis[j], self.split[j], self.child[j] = a, middle, first
             leaves += 1
+        return [origin[j] for j in self.leaves()]
 
 
 @njit(cache=True, nogil=True)
@@ -176,11 +182,16 @@ class Trainer:
         self.records = 0
         self.begin()
 
-    def begin(self):
-        """Start an iteration: zero counts and grids over the tree's leaves."""
+    def begin(self, origin=None):
+        """Start an iteration: zero counts, and grids over the tree's leaves that start from
+        the last iteration's energy (origin: each leaf's old leaf and share, from
+        SpatialTree.refine), or from zero."""
         leaves = len(self.tree.leaves())
         self.counts = np.zeros(leaves, dtype=np.int64)
-        self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
+        if origin is None:
+            self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
+        else:
+            self.grid = np.array([self.grid[k] * share for k, share in origin])
         self._arrays = self.tree.arrays()
 
     def add(self, key, records):
@@ -205,8 +216,7 @@ class Trainer:
         q_child, q_energy, roots = build_quadtrees(self.grid, ENERGY_SHARE)
         axis, split, child, root = self.tree.arrays(roots)
         guide = GuideArrays(axis, split, child, root, q_child, q_energy, float(alpha), 1)
-        self.tree.refine(self.counts, self.split_samples * math.sqrt(passes))
-        self.begin()
+        self.begin(self.tree.refine(self.counts, self.split_samples * math.sqrt(passes)))
         return guide
 
 
@@ -233,7 +243,9 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     schedule(spp) (under mode "auto", from 2 passes, the first unguided so the guided ones'
     variance can be compared with it), on samples spp - training .. spp - 1. Sets the guide
     the rest of the render samples with (under "auto", alpha 0 when the last guided iteration's
-    relative_variance is not below the first's). Returns (training samples, figures)."""
+    relative_variance is not below the first's). Returns (training samples, figures, images):
+    images, for combine, holds each guided iteration's samples, relative variance and mean
+    radiance per pixel."""
     from .rendering.tiles import new_sums
     wavefront = job.wavefront
     plan = schedule(spp, 2 if mode == "auto" else 1)
@@ -241,8 +253,9 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     bounds = job.scene.geometry.bounds()
     figures = dict(iterations=plan, training_samples=total, records=0, guide_bytes=0,
                    variance=[], guided=True)
+    images = []
     if not plan or bounds is None:
-        return 0, figures
+        return 0, figures, images
     trainer = Trainer(*bounds)
     rows = np.arange(pixel_x.shape[0])
     first = spp - total
@@ -255,7 +268,10 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
                 job.trace(pixel_x, pixel_y, first, 1, sums, rows, on_chunk)
                 trainer.merge()
                 first += 1
-            figures["variance"].append(relative_variance(*sums[1:]))
+            variance = relative_variance(*sums[1:])
+            figures["variance"].append(variance)
+            if wavefront.guide.alpha > 0 and math.isfinite(variance):
+                images.append((passes, variance, sums[0] / np.maximum(sums[3], 1)[:, None]))
             wavefront.guide = trainer.finish(passes)
     finally:
         wavefront.trainer = None
@@ -266,4 +282,24 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     wavefront.guide = GuideArrays(*guide[:6], ALPHA if figures["guided"] else 0.0, 0)
     figures.update(records=trainer.records, guide_bytes=guide_bytes(guide),
                    leaves=len(trainer.tree.leaves()))
-    return total, figures
+    return total, figures, images if figures["guided"] else []
+
+
+def combine(sums, images):
+    """The final passes' sums (rgb, l, l2, count) rescaled in place so that their mean per
+    pixel is the combination of their image with the training iterations' images, each
+    weighted by its samples over its relative_variance (the 2019 course's inverse-variance
+    combination); the counts stay the final passes'. Returns the weights, the final image's
+    last."""
+    sum_rgb, sum_l, sum_l2, count = sums
+    variance = relative_variance(sum_l, sum_l2, count)
+    if not images or not math.isfinite(variance) or not variance > 0:
+        return []
+    n = np.maximum(count, 1)[:, None]
+    weights = [samples / v for samples, v, _ in images] + [float(np.mean(count)) / variance]
+    total = sum(weights)
+    mean = sum_rgb / n * (weights[-1] / total)
+    for w, (_, _, image) in zip(weights, images):
+        mean += image * (w / total)
+    sum_rgb[:] = mean * n
+    return [w / total for w in weights]

@@ -5,7 +5,8 @@
     guiding_door.xml      a closed room lit only through a door left ajar from a lamp in the next
                           room, out of the camera's sight (after Veach's scene)
 
-Each has a glossy variant (*_glossy.xml) whose floor is rough plastic. Run: python scenes/make_guiding.py (writes beside this file).
+Each has a glossy variant (*_glossy.xml) whose floor is rough plastic.
+Run: python scenes/make_guiding.py (writes beside this file).
 """
 from pathlib import Path
 
@@ -45,7 +46,8 @@ def header(origin, target, fov, size, depth):
     <float name="fov" value="{fov}"/>
     <transform name="to_world"><lookat origin="{origin}" target="{target}" up="0 1 0"/></transform>
     <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/></film>
+    <film type="hdrfilm"><integer name="width" value="{size}"/>
+      <integer name="height" value="{size}"/></film>
   </sensor>"""
 
 

@@ -18,7 +18,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .layout import VERTEX, R
+from .layout import MAT, VERTEX, R
 
 GuideArrays = namedtuple("GuideArrays", ["axis", "split", "child", "root", "q_child",
                                          "q_energy", "alpha", "record"])
@@ -161,13 +161,15 @@ def guide_pdf(guide, node, dx, dy, dz):
 
 @njit(cache=True, nogil=True, _nrt=False)
 def snapshot_stage(floats, ints, queue, n, history, depth):
-    """For each of the n queued paths (those that bounced, after their vertex's light samples
-    were added), its radiance so far into its current vertex's history column: what the path
-    gathers after this is what its bounce ray brought back."""
+    """After the hit stage, for each of the n paths it ran over (those that bounced into it),
+    its radiance so far into the history column of the vertex its ray left: the emission that
+    ray found is counted as the light samples' (direct light stays with the light sampler), and
+    what the path gathers after this is the indirect light the bounce brought back. A path the
+    hit stage ended (material -1) is still at that vertex; one that goes on has moved past it."""
     for k in range(n):
         i = queue[k]
-        v = ints[VERTEX, i] - 1
-        if v < depth:
+        v = ints[VERTEX, i] - (2 if ints[MAT, i] >= 0 else 1)
+        if 0 <= v < depth:
             col = i * depth + v
             for c in range(3):
                 history[H_LR + c, col] = floats[R + c, i]

@@ -217,8 +217,11 @@ class Wavefront:
         snapshot = self.trainer is not None
         while n:
             self._closest(wave, scratch, n)
+            hits = n
             n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
                                after, starts)
+            if snapshot:   # the radiance the bounces' records start from
+                snapshot_stage(floats, ints, queue, hits, history, depth)
             if not n:
                 break
             shadows = n = 0
@@ -244,5 +247,3 @@ class Wavefront:
                 else:
                     any_stage(accel, scratch, shadow, shadows, blocked)
                 shadow_stage(floats, shadow, shadow_path, blocked, shadows)
-            if snapshot and n:    # the radiance the bounces' records start from
-                snapshot_stage(floats, ints, queue, n, history, depth)

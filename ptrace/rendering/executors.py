@@ -3,7 +3,7 @@ through one ptrace.rendering.tiles.RenderJob. (The Dask executor, ptrace.renderi
 sends tiles of the same passes to workers that trace them through their own RenderJob.)"""
 import time
 
-from ..guiding import train
+from ..guiding import combine, train
 from .tiles import RenderJob
 
 
@@ -27,14 +27,16 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
     guiding = None
     try:
         if settings.guiding != "off":   # training passes, then the rest of -s with the guide
-            training, guiding = train(job, pixel_x, pixel_y, settings.spp, settings.guiding,
-                                      on_block)
+            training, guiding, images = train(job, pixel_x, pixel_y, settings.spp,
+                                              settings.guiding, on_block)
             guiding["training_seconds"] = time.perf_counter() - start
             passes.spp -= training
         for first_sample, pass_n, active in passes:
             phases.count("passes")
             nonfinite += job.trace(pixel_x[active], pixel_y[active], first_sample, pass_n,
                                    passes.sums, active, on_block, features)[0]
+        if guiding is not None:    # the training iterations' images, by inverse variance
+            guiding["weights"] = combine(passes.sums, images)
     except KeyboardInterrupt:
         interrupted = True
     # the records were the first part of the render's seconds

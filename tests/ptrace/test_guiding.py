@@ -1,0 +1,202 @@
+"""Path guiding: the quadtree's samples follow its pdf, the pdf integrates to one over the sphere,
+a guide trained on light from one small direction concentrates there, training is the same
+whatever order blocks hand their records in, and guided renders keep the unguided mean and the
+same image whatever the threads."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import stats
+
+import ptrace
+from ptrace.guiding import RESOLUTION, Trainer, build_quadtrees, schedule
+from ptrace.kernel.guide import (
+    GuideArrays,
+    guide_leaf,
+    guide_pdf,
+    guide_sample,
+    quadtree_pdf,
+    quadtree_sample,
+)
+
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
+
+
+def peaked_grid(seed=1, leaves=1):
+    """Grids of directional energy: a bright blob, a dimmer one, a floor of noise and empty
+    cells, so the quadtree divides unevenly and has quadrants of zero energy."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:RESOLUTION, 0:RESOLUTION] / RESOLUTION
+    grids = []
+    for _ in range(leaves):
+        cx, cy = rng.uniform(0.2, 0.8, 2)
+        g = 50 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 0.002)
+        g += 5 * np.exp(-((x - 0.1) ** 2 + (y - 0.9) ** 2) / 0.01)
+        g = (g + rng.uniform(0, 0.05, g.shape)) * (x < 0.75)
+        grids.append(g.reshape(-1))
+    return np.array(grids)
+
+
+def square_pdf_grid(q_child, q_energy, node):
+    """The quadtree's density at every grid cell's centre (it is constant on each cell)."""
+    centres = (np.arange(RESOLUTION) + 0.5) / RESOLUTION
+    return np.array([[quadtree_pdf(q_child, q_energy, node, x, y) for x in centres]
+                     for y in centres])
+
+
+def test_the_quadtree_divides_where_the_energy_is_and_its_pdf_integrates_to_one():
+    q_child, q_energy, roots = build_quadtrees(peaked_grid(), 0.01)
+    assert q_child.shape[0] > 20     # divided, down to cells near the blob
+    pdf = square_pdf_grid(q_child, q_energy, roots[0])
+    assert np.isclose(pdf.sum() / RESOLUTION ** 2, 1.0, rtol=1e-12)
+    assert (pdf == 0).any() and pdf.max() > 100      # empty quadrants, a sharp peak
+
+
+def test_samples_follow_the_pdf_chi_square():
+    q_child, q_energy, roots = build_quadtrees(peaked_grid(seed=3), 0.01)
+    rng = np.random.default_rng(7)
+    n = 40000
+    xs, ys = np.empty(n), np.empty(n)
+    for k, (u1, u2) in enumerate(rng.random((n, 2))):
+        x, y, pdf = quadtree_sample(q_child, q_energy, roots[0], u1, u2)
+        xs[k], ys[k] = x, y
+        if k < 2000:   # the density the warp returns is the pdf's at the point
+            assert pdf == pytest.approx(quadtree_pdf(q_child, q_energy, roots[0], x, y),
+                                        rel=1e-9)
+    bins = 16
+    observed = np.histogram2d(ys, xs, bins=bins, range=[[0, 1], [0, 1]])[0].reshape(-1)
+    cells = square_pdf_grid(q_child, q_energy, roots[0]) / RESOLUTION ** 2
+    step = RESOLUTION // bins
+    expected = cells.reshape(bins, step, bins, step).sum(axis=(1, 3)).reshape(-1) * n
+    assert not observed[expected == 0].any()
+    keep = expected >= 5
+    rest = ~keep
+    obs = np.append(observed[keep], observed[rest].sum())
+    exp = np.append(expected[keep], expected[rest].sum())
+    statistic, p = stats.chisquare(obs, exp * obs.sum() / exp.sum())
+    assert p > 1e-4, (statistic, p)
+
+
+def one_leaf_guide(grid):
+    q_child, q_energy, roots = build_quadtrees(grid, 0.01)
+    return GuideArrays(np.full(1, -1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=np.int64),
+                       roots[:1].copy(), q_child, q_energy, 0.5, 0)
+
+
+def test_the_solid_angle_pdf_integrates_to_one_over_the_sphere_and_matches_its_samples():
+    guide = one_leaf_guide(peaked_grid(seed=5))
+    rng = np.random.default_rng(2)
+    z = rng.uniform(-1, 1, 200000)
+    phi = rng.uniform(0, 2 * np.pi, z.size)
+    r = np.sqrt(1 - z * z)
+    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    values = np.array([guide_pdf(guide, 0, *d) for d in dirs])
+    estimate = values.mean() * 4 * np.pi   # E[pdf / uniform pdf]
+    error = values.std() * 4 * np.pi / math.sqrt(values.size)
+    assert abs(estimate - 1.0) < 4 * error + 1e-3, (estimate, error)
+    for u1, u2 in rng.random((500, 2)):
+        dx, dy, dz, pdf = guide_sample(guide, 0, u1, u2)
+        assert dx * dx + dy * dy + dz * dz == pytest.approx(1.0, abs=1e-12)
+        assert pdf == pytest.approx(guide_pdf(guide, 0, dx, dy, dz), rel=1e-9)
+
+
+def light_records(rng, n, light, cone):
+    """Records at points of the unit box over uniform directions, each with the radiance
+    divided by the uniform pdf: 1 within `cone` radians of `light`, else 0."""
+    p = rng.uniform(-1, 1, (n, 3))
+    z = rng.uniform(-1, 1, n)
+    phi = rng.uniform(0, 2 * np.pi, n)
+    r = np.sqrt(1 - z * z)
+    d = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    lit = d @ light > math.cos(cone)
+    return np.vstack([p.T, d.T, lit * 4 * np.pi])
+
+
+def test_a_guide_trained_on_one_small_distant_light_concentrates_toward_it():
+    rng = np.random.default_rng(4)
+    light = np.array([0.3, 0.8, -0.52])
+    light /= np.linalg.norm(light)
+    trainer = Trainer(-np.ones(3), np.ones(3), split_samples=2000)
+    for block in range(8):
+        trainer.add((0, block), light_records(rng, 5000, light, math.radians(3)))
+    guide = trainer.finish(1)
+    assert len(trainer.tree.leaves()) > 1       # the tree split for the next iteration
+    # the guide's mass within 15 degrees of the light, from its own samples at a few points
+    for point in ([0.5, 0.5, 0.5], [-0.7, 0.1, -0.4]):
+        leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, *point)
+        near = 0
+        for u1, u2 in rng.random((2000, 2)):
+            d = np.array(guide_sample(guide, leaf, u1, u2)[:3])
+            near += d @ light > math.cos(math.radians(15))
+        assert near / 2000 > 0.9     # uniform directions: 0.017
+        assert guide_pdf(guide, leaf, *light) > 50 / (4 * math.pi)
+
+
+def test_training_is_the_same_whatever_order_blocks_hand_their_records_in():
+    rng = np.random.default_rng(9)
+    light = np.array([0.0, 1.0, 0.0])
+    blocks = [light_records(rng, 3000, light, 0.3) for _ in range(12)]
+    guides = []
+    for order in (range(12), [5, 11, 0, 3, 9, 1, 7, 2, 10, 4, 8, 6]):
+        trainer = Trainer(-np.ones(3), np.ones(3), split_samples=500)
+        for k in order:
+            trainer.add((0, k), blocks[k])
+            if k % 5 == 0:
+                trainer.merge()      # a pass's merge while others are still to come
+        trainer.finish(1)
+        for k in order:            # a second iteration on the refined tree
+            trainer.add((1, k), blocks[(k + 3) % 12])
+        guides.append(trainer.finish(2))
+    for a, b in zip(*guides):
+        assert np.array_equal(a, b)
+
+
+def test_the_training_schedule_doubles_within_a_quarter_of_the_samples():
+    assert schedule(64) == [1, 2, 4, 8]
+    assert schedule(16) == [1, 2]
+    assert schedule(3) == []
+    assert schedule(64, first=2) == [2, 4, 8]
+
+
+@pytest.fixture(scope="module")
+def ceiling():
+    return ptrace.load(str(SCENES / "guiding_ceiling.xml"))
+
+
+def render(scene, seed, guiding, **keywords):
+    options = dict(spp=32, max_depth=4, resolution=(24, 24), seed=seed, guiding=guiding)
+    options.update(keywords)
+    stats_ = {}
+    image = ptrace.render(scene, stats=stats_, **options)
+    return image, stats_
+
+
+def test_guided_and_unguided_means_agree_on_the_ceiling_lamp_box(ceiling):
+    """Per seed, the image's mean over each quadrant: guided and unguided estimates of the same
+    four numbers, compared by Welch's t over eight seeds each."""
+    means = {"off": [], "on": []}
+    for guiding in means:
+        for seed in range(8):
+            image, figures = render(ceiling, seed, guiding)
+            quadrants = image.mean(axis=2).reshape(2, 12, 2, 12).mean(axis=(1, 3)).reshape(-1)
+            means[guiding].append(quadrants)
+            if guiding == "on":
+                assert figures["guiding"]["guided"] and figures["guiding"]["records"] > 0
+    off, on = np.array(means["off"]), np.array(means["on"])
+    t, p = stats.ttest_ind(on, off, equal_var=False)
+    assert (np.abs(t) < 5).all(), (t, on.mean(0), off.mean(0))
+    assert off.mean() > 0.05      # the box is lit (indirectly)
+
+
+def test_a_guided_render_is_the_same_whatever_the_threads(ceiling):
+    one = render(ceiling, 3, "on", threads=1)[0]
+    two = render(ceiling, 3, "on", threads=2)[0]
+    assert np.array_equal(one, two)
+
+
+def test_guiding_refuses_what_it_does_not_support(ceiling):
+    with pytest.raises(ptrace.PtraceError, match="guiding"):
+        ptrace.render(ceiling, spp=4, guiding="on", adaptive=(4, 0.1))
+    with pytest.raises(ptrace.PtraceError, match="guiding mode"):
+        ptrace.render(ceiling, spp=4, guiding="sometimes")
