@@ -43,6 +43,9 @@ BENCHMARKS = {
     "many_lights": Benchmark("a room of 64 area lights and 1024 emissive tiles: MSE x seconds "
                              "of each light sampler against every light at every vertex",
                              in_all=False),
+    "guiding": Benchmark("path guiding: relative MSE against wall time, training included, of "
+                         "unguided and guided ptrace and Mitsuba 3 on scenes lit indirectly",
+                         in_all=False),
 }
 
 # modules of the package that are not benchmarks

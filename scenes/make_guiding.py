@@ -23,6 +23,8 @@ def bsdfs(glossy):
         f'  <bsdf type="diffuse" id="white"><rgb name="reflectance" value="{WHITE}"/></bsdf>',
         f'  <bsdf type="diffuse" id="red"><rgb name="reflectance" value="{RED}"/></bsdf>',
         f'  <bsdf type="diffuse" id="green"><rgb name="reflectance" value="{GREEN}"/></bsdf>',
+        # the lamps' emitting fronts reflect nothing: ptrace's never do, Mitsuba's would
+        '  <bsdf type="diffuse" id="lamp"><rgb name="reflectance" value="0 0 0"/></bsdf>',
         f"  {floor}"])
 
 
@@ -41,13 +43,14 @@ def cube(bsdf, transform):
 
 def header(origin, target, fov, size, depth):
     return f"""<scene version="3.0.0">
+  <default name="res" value="{size}"/>
   <integrator type="path"><integer name="max_depth" value="{depth}"/></integrator>
   <sensor type="perspective">
     <float name="fov" value="{fov}"/>
     <transform name="to_world"><lookat origin="{origin}" target="{target}" up="0 1 0"/></transform>
     <sampler type="independent"><integer name="sample_count" value="16"/></sampler>
-    <film type="hdrfilm"><integer name="width" value="{size}"/>
-      <integer name="height" value="{size}"/></film>
+    <film type="hdrfilm"><integer name="width" value="$res"/>
+      <integer name="height" value="$res"/></film>
   </sensor>"""
 
 
@@ -60,7 +63,7 @@ def ceiling(glossy):
         rect("white", '<translate z="-1"/>'),
         rect("red", '<rotate y="1" angle="90"/><translate x="-1"/>'),
         rect("green", '<rotate y="1" angle="-90"/><translate x="1"/>'),
-        rect("white", '<scale value="0.25"/><rotate x="1" angle="-90"/><translate y="0.9"/>',
+        rect("lamp", '<scale value="0.25"/><rotate x="1" angle="-90"/><translate y="0.9"/>',
              emit="40 40 40"),
         rect("white", '<scale value="0.25"/><rotate x="1" angle="90"/><translate y="0.899"/>'),
         cube("white", '<scale x="0.3" y="0.6" z="0.3"/><rotate y="1" angle="20"/>'
@@ -104,7 +107,7 @@ def door(glossy):
                            '<translate x="3"/>'))
     w.append(rect("white", '<scale x="1" y="1"/><translate x="2" z="-1.5"/>'))
     # the lamp: a small square under the far room's ceiling, facing down
-    w.append(rect("white", '<scale value="0.2"/><rotate x="1" angle="90"/>'
+    w.append(rect("lamp", '<scale value="0.2"/><rotate x="1" angle="90"/>'
                            '<translate x="2.3" y="0.98"/>', emit="150 150 150"))
     w.append(rect("white", '<scale value="0.2"/><rotate x="1" angle="-90"/>'
                            '<translate x="2.3" y="0.981"/>'))

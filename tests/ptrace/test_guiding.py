@@ -200,3 +200,17 @@ def test_guiding_refuses_what_it_does_not_support(ceiling):
         ptrace.render(ceiling, spp=4, guiding="on", adaptive=(4, 0.1))
     with pytest.raises(ptrace.PtraceError, match="guiding mode"):
         ptrace.render(ceiling, spp=4, guiding="sometimes")
+
+
+def test_auto_trains_from_an_unguided_pass_and_keeps_the_guide_only_if_it_lowered_the_variance(
+        ceiling):
+    image, figures = render(ceiling, 2, "auto", spp=64)
+    guiding = figures["guiding"]
+    assert guiding["iterations"] == [2, 4, 8]
+    variance = guiding["variance"]
+    assert len(variance) == 3 and all(math.isfinite(v) for v in variance)
+    assert guiding["guided"] == (variance[-1] < variance[0])
+    # the combination's weights: the guided training passes' and the final image's, summing to 1
+    if guiding["guided"]:
+        assert len(guiding["weights"]) == 3 and sum(guiding["weights"]) == pytest.approx(1.0)
+    assert np.isfinite(image).all() and image.mean() > 0.05
