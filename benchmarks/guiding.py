@@ -68,7 +68,7 @@ def main(argv=None):
              "first). Mitsuba: `path`, llvm_ad_rgb, max_depth one more than ptrace's -m.", ""]
     for name, depth in CASES:
         path = SCENES / name
-        scene = ptrace.load(str(path))
+        scene = ptrace.load(str(path), defines={"res": str(size)})   # the whole view
         reference = ptrace.render(scene, spp=reference_spp, max_depth=depth,
                                   resolution=(size, size), seed=99)
         for guiding in ("off", "on"):   # warm-up: compile

@@ -159,6 +159,28 @@ def guide_pdf(guide, node, dx, dy, dz):
     return quadtree_pdf(guide.q_child, guide.q_energy, node, x, y) * INV_FOUR_PI
 
 
+@njit(cache=True, _nrt=False, forceinline=True)
+def folded_pdf(guide, node, dx, dy, dz, nx, ny, nz):
+    """The solid-angle density of folded_sample at unit direction d above the surface of unit
+    normal n: the guide's density at d plus at d mirrored through the surface (0 below it)."""
+    c = dx * nx + dy * ny + dz * nz
+    if c < 0.0:
+        return 0.0
+    return guide_pdf(guide, node, dx, dy, dz) + guide_pdf(
+        guide, node, dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def folded_sample(guide, node, u1, u2, nx, ny, nz):
+    """A direction of guide_sample, mirrored through the surface of unit normal n when it
+    points below it (a BSDF that only reflects would waste it): (dx, dy, dz, folded_pdf)."""
+    dx, dy, dz, _ = guide_sample(guide, node, u1, u2)
+    c = dx * nx + dy * ny + dz * nz
+    if c < 0.0:
+        dx, dy, dz = dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
+    return dx, dy, dz, folded_pdf(guide, node, dx, dy, dz, nx, ny, nz)
+
+
 @njit(cache=True, nogil=True, _nrt=False)
 def snapshot_stage(floats, ints, queue, n, history, depth):
     """After the hit stage, for each of the n paths it ran over (those that bounced into it),

@@ -42,7 +42,7 @@ from ..lights import (
 )
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
 from ..textures import mapped_normal, surface_albedo
-from .guide import guide_leaf, guide_pdf, guide_sample, remember
+from .guide import folded_pdf, folded_sample, guide_leaf, remember
 from .layout import (
     DELTA,
     DX,
@@ -185,7 +185,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     (stages.probe_found_stage).
 
     With `guided` (a kind that is not delta, without -H), the bounce is drawn from the guide
-    (ptrace.kernel.guide.GuideArrays) with probability guide.alpha and from the BSDF otherwise,
+    (ptrace.kernel.guide.GuideArrays), folded above the surface (every such kind only
+    reflects), with probability guide.alpha and from the BSDF otherwise,
     and weighted by the mixture's pdf, which the light samples' MIS weights use too; with
     guide.record set, each bounce is remembered in `history` (its first `depth` vertices) for
     the guide's records. Without it, guide, history and depth are not read."""
@@ -324,7 +325,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                         other = bsdf_pdf(KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix,
                                          wiy, wiz)
                         if GUIDED:   # the bounce's pdf is the mixture's
-                            other = (1.0 - mix) * other + mix * guide_pdf(guide, leaf, wx, wy, wz)
+                            other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
+                                                                           wz, nx, ny, nz)
                         scale *= power_heuristic(weight * pdf, other)
                     ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
                     sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
@@ -353,7 +355,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             if GUIDED and sample_1d(options, pixel, sample, sample, base + DIM_GUIDE,
                                     base + DIM_GUIDE) < mix:
                 # the guide's direction, weighted by the mixture's pdf
-                wx, wy, wz, guided_pdf = guide_sample(guide, leaf, u1, u2)
+                wx, wy, wz, guided_pdf = folded_sample(guide, leaf, u1, u2, nx, ny, nz)
                 wix = wx * xx + wy * xy + wz * xz
                 wiy = wx * yx + wy * yy + wz * yz
                 wiz = wx * nx + wy * ny + wz * nz
@@ -372,8 +374,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                     wy = wix * xy + wiy * yy + wiz * ny
                     wz = wix * xz + wiy * yz + wiz * nz
                     length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                    pdf = (1.0 - mix) * pdf + mix * guide_pdf(guide, leaf, wx / length,
-                                                              wy / length, wz / length)
+                    pdf = (1.0 - mix) * pdf + mix * folded_pdf(guide, leaf, wx / length,
+                                                               wy / length, wz / length, nx, ny,
+                                                               nz)
             if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
                 continue
             weight = abs(wiz) / pdf

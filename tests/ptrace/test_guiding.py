@@ -13,6 +13,8 @@ import ptrace
 from ptrace.guiding import RESOLUTION, Trainer, build_quadtrees, schedule
 from ptrace.kernel.guide import (
     GuideArrays,
+    folded_pdf,
+    folded_sample,
     guide_leaf,
     guide_pdf,
     guide_sample,
@@ -99,6 +101,25 @@ def test_the_solid_angle_pdf_integrates_to_one_over_the_sphere_and_matches_its_s
         dx, dy, dz, pdf = guide_sample(guide, 0, u1, u2)
         assert dx * dx + dy * dy + dz * dz == pytest.approx(1.0, abs=1e-12)
         assert pdf == pytest.approx(guide_pdf(guide, 0, dx, dy, dz), rel=1e-9)
+
+
+def test_the_folded_guide_stays_above_the_surface_and_its_pdf_integrates_to_one_there():
+    guide = one_leaf_guide(peaked_grid(seed=6))
+    normal = np.array([0.48, -0.6, 0.64])
+    rng = np.random.default_rng(3)
+    for u1, u2 in rng.random((500, 2)):
+        dx, dy, dz, pdf = folded_sample(guide, 0, u1, u2, *normal)
+        assert dx * normal[0] + dy * normal[1] + dz * normal[2] >= 0.0
+        assert pdf == pytest.approx(folded_pdf(guide, 0, dx, dy, dz, *normal), rel=1e-9)
+    z = rng.uniform(-1, 1, 200000)
+    phi = rng.uniform(0, 2 * np.pi, z.size)
+    r = np.sqrt(1 - z * z)
+    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    values = np.array([folded_pdf(guide, 0, *d, *normal) for d in dirs])
+    assert not values[dirs @ normal < 0].any()
+    estimate = values.mean() * 4 * np.pi
+    error = values.std() * 4 * np.pi / math.sqrt(values.size)
+    assert abs(estimate - 1.0) < 4 * error + 1e-3, (estimate, error)
 
 
 def light_records(rng, n, light, cone):
