@@ -252,7 +252,8 @@ def parse(argv):
     for flag, given in (("--info", args.info), ("--aov", args.aov is not None),
                         ("--workers", args.workers is not None),
                         ("--scheduler", args.scheduler is not None),
-                        ("--dashboard", args.dashboard)):
+                        ("--dashboard", args.dashboard),
+                        ("--guiding", args.guiding != "off")):
         if given:
             raise PtraceError(f"ptrace view renders in this process and has no {flag}")
     return args

@@ -235,3 +235,18 @@ def test_auto_trains_from_an_unguided_pass_and_keeps_the_guide_only_if_it_lowere
     if guiding["guided"]:
         assert len(guiding["weights"]) == 3 and sum(guiding["weights"]) == pytest.approx(1.0)
     assert np.isfinite(image).all() and image.mean() > 0.05
+
+
+def test_the_commands_refuse_guiding_where_it_does_not_work_in_one_line(tmp_path, capsys):
+    from ptrace.app import cli, options
+    scene = str(SCENES / "guiding_ceiling.xml")
+    out = str(tmp_path / "x.png")
+    for argv in ([scene, "--guiding", "on", "-a", "4", "0.1", "-f", out],
+                 [scene, "--guiding", "on", "-H", "-f", out],
+                 [scene, "--guiding", "maybe", "-f", out],
+                 ["view", scene, "--no-browser", "--guiding", "auto"]):
+        assert cli.main(argv) == options.EXIT_USAGE == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.startswith("ptrace: error: "), err
+        assert "guiding" in err
+    assert list(tmp_path.iterdir()) == []
