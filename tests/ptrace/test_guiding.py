@@ -182,11 +182,11 @@ def test_the_training_schedule_doubles_within_a_quarter_of_the_samples():
 
 @pytest.fixture(scope="module")
 def ceiling():
-    return ptrace.load(str(SCENES / "guiding_ceiling.xml"))
+    return ptrace.load(str(SCENES / "guiding_ceiling.xml"), defines={"res": "32"})   # whole view
 
 
 def render(scene, seed, guiding, **keywords):
-    options = dict(spp=32, max_depth=4, resolution=(24, 24), seed=seed, guiding=guiding)
+    options = dict(spp=32, max_depth=4, resolution=(32, 32), seed=seed, guiding=guiding)
     options.update(keywords)
     stats_ = {}
     image = ptrace.render(scene, stats=stats_, **options)
@@ -195,18 +195,20 @@ def render(scene, seed, guiding, **keywords):
 
 def test_guided_and_unguided_means_agree_on_the_ceiling_lamp_box(ceiling):
     """Per seed, the image's mean over each quadrant: guided and unguided estimates of the same
-    four numbers, compared by Welch's t over eight seeds each."""
+    four numbers, compared by Welch's t over eight seeds each. (Leaving the guide's pdf out of a
+    BSDF-sampled bounce's mixture gave t = -5.2 and -7.3 on the upper quadrants; this code gave
+    |t| <= 1.5.)"""
     means = {"off": [], "on": []}
     for guiding in means:
         for seed in range(8):
-            image, figures = render(ceiling, seed, guiding)
-            quadrants = image.mean(axis=2).reshape(2, 12, 2, 12).mean(axis=(1, 3)).reshape(-1)
+            image, figures = render(ceiling, seed, guiding, spp=64)
+            quadrants = image.mean(axis=2).reshape(2, 16, 2, 16).mean(axis=(1, 3)).reshape(-1)
             means[guiding].append(quadrants)
             if guiding == "on":
                 assert figures["guiding"]["guided"] and figures["guiding"]["records"] > 0
     off, on = np.array(means["off"]), np.array(means["on"])
     t, p = stats.ttest_ind(on, off, equal_var=False)
-    assert (np.abs(t) < 5).all(), (t, on.mean(0), off.mean(0))
+    assert (np.abs(t) < 4.5).all(), (t, on.mean(0), off.mean(0))
     assert off.mean() > 0.05      # the box is lit (indirectly)
 
 
