@@ -175,7 +175,33 @@ def _guard_cache_files():
     index_file._load_index = guarded_load_index
     cache.load_overload = guarded_load_overload
     cache.save_overload = guarded_save_overload
+    index_file.save = _locked(index_file.save, exclusive=True)
+    index_file.load = _locked(index_file.load, exclusive=False)
     index_file._ptrace_guarded = True
+
+
+def _locked(method, exclusive):
+    """An IndexDataCacheFile method run holding a lock on its index (a .lock file beside it):
+    numba saves an entry as two replaced files (the index, then the data file it names), so two
+    processes compiling two kernels of one index at once (two closures of a stage, two
+    backends' records) could leave an index naming the other's data, and a third process reading
+    between the two writes could load one kernel for another's arguments. Saves are exclusive,
+    loads shared. Where no lock can be had (no fcntl, a read-only folder) numba's own way
+    stands."""
+    def locked(self, *args):
+        try:
+            import fcntl
+            handle = open(self._index_path + ".lock", "ab")
+        except (ImportError, OSError):
+            return method(self, *args)
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+            except OSError:   # a filesystem without locks
+                pass
+            return method(self, *args)     # closing the file releases the lock
+    locked.__wrapped__ = method
+    return locked
 
 
 _DEPENDENCY_FOLDERS = []

@@ -151,3 +151,29 @@ def test_an_edit_to_a_called_module_recompiles_its_callers(tmp_path):
     again = python(RUN_CALLER, env, tmp_path)
     assert again.stdout.strip() == "14", again.stderr
     assert python(RUN_CALLER, env, tmp_path).stdout.strip() == "14"   # and cached so
+
+
+def test_a_cache_entry_is_saved_whole_while_another_process_reads_the_index(tmp_path):
+    """numba saves an entry as an index and a data file, each replaced on its own; ptrace holds
+    a lock on the index across both (and across a load's two reads), so a save waits while a
+    load holds it and a load never sees an index naming data not yet written."""
+    import fcntl
+    import threading
+
+    from numba.core.caching import IndexDataCacheFile
+    cache_file = IndexDataCacheFile(str(tmp_path), "kernel-1.py311", ("stamp", 1))
+    saved = threading.Event()
+
+    def save():
+        cache_file.save(("signature",), ("compiled", 1))
+        saved.set()
+
+    with open(cache_file._index_path + ".lock", "ab") as reader:
+        fcntl.flock(reader, fcntl.LOCK_SH)      # another process loading
+        thread = threading.Thread(target=save)
+        thread.start()
+        assert not saved.wait(0.5), "the save did not wait for the load's lock"
+        assert not os.path.exists(cache_file._index_path)
+    thread.join(10)
+    assert saved.is_set()
+    assert cache_file.load(("signature",)) == ("compiled", 1)
