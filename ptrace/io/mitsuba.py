@@ -16,6 +16,7 @@ import accel
 from ..budget import BudgetError
 from ..environment import Environment
 from ..errors import SceneError
+from ..rendering.settings import RANGES
 from ..scene import (
     DIRECTIONAL,
     EMISSION,
@@ -240,13 +241,17 @@ class Builder:
         if sensor.type not in ("perspective", "thinlens"):
             sensor.fail(f"sensor type {sensor.type!r} is not supported (ptrace renders "
                         f"perspective and thinlens)")
+        from ..rendering.renderer import MAX_SIDE
         film = self._one(sensor, "film")
-        width, height = 768, 576
+        width, height = 768, 576        # Mitsuba's film without a <film>
         if film is not None:
             width, height = film.integer("width", 768), film.integer("height", 576)
-            if not (width >= 1 and height >= 1):
-                film.fail("width and height must be at least 1")
+            if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+                film.fail(f"width and height must be from 1 to {MAX_SIDE}, not "
+                          f"{width}x{height}")
+        if not self.cameras:    # the first sensor's, as Mitsuba renders the first
             self.settings["resolution"] = (width, height)
+        if film is not None:
             if any(film.has(k) for k in ("crop_offset_x", "crop_offset_y", "crop_width",
                                          "crop_height")):
                 self.notes.append("<film>: its crop window ignored: ptrace renders the whole "
@@ -255,9 +260,18 @@ class Builder:
                 child._read.update(child.params)
             film._read.update(film.params)
         sampler = self._one(sensor, "sampler")
+        spp = 4     # Mitsuba's independent sampler without a <sampler>
         if sampler is not None:
-            self.settings["spp"] = sampler.integer("sample_count", 4)
+            spp = sampler.integer("sample_count", 4)
+            low, high = RANGES["spp"]
+            if not low <= spp <= high:
+                sampler.fail(f"sample_count must be from {low} to {high}, not {spp}")
             sampler._read.update(sampler.params)
+            self.notes.append(f"<sampler type=\"{sampler.type}\">: ptrace draws its own "
+                              f"points (--sampler, Owen-scrambled Sobol' by default) for its "
+                              f"sample_count: the same expected image")
+        if not self.cameras:
+            self.settings["spp"] = spp
         yfov = self._yfov(sensor, width / height)
         matrix = sensor.transform("to_world").matrix
         axes = matrix[:3, :3] @ np.diag([-1.0, 1.0, -1.0])    # Mitsuba: left, up, forward
@@ -326,6 +340,12 @@ class Builder:
         depth = integrator.integer("max_depth", -1)
         if integrator.type == "direct":
             depth = 2
+        elif integrator.has("rr_depth"):
+            rr_depth = integrator.integer("rr_depth")
+            low, high = RANGES["rr_depth"]
+            if not low <= rr_depth:
+                integrator.fail(f"rr_depth {rr_depth} is less than {low}")
+            self.settings["rr_depth"] = min(rr_depth, high)
         elif integrator.type != "path":
             self.notes.append(f"<integrator type=\"{integrator.type}\">: rendered by ptrace's "
                               f"path tracer")
@@ -348,7 +368,9 @@ class Builder:
         material_index = np.concatenate(self.tri_materials + [np.array(self.sphere_materials,
                                                                        np.int32)])
         uv = np.concatenate(self.uvs) if self.materials.textured and self.uvs else None
-        self._settings_note()
+        if "max_depth" not in self.settings:    # Mitsuba's path tracer without an <integrator>
+            self.settings["max_depth"] = -1
+        defaults = self._render_defaults()
         if not self.lights and self.environment is None and \
                 not any(r["kind"] == EMISSION for r in self.materials.records):
             self.notes.append("no emitters in the scene: the image is black, as Mitsuba's")
@@ -363,24 +385,34 @@ class Builder:
                       lights=Lights.from_records(self.lights), notes=self.notes, uv=uv,
                       textures=Textures.from_images(self.pool.images, self.pool.wraps,
                                                     self.pool.names),
-                      file_cameras=tuple(self.cameras))
+                      file_cameras=tuple(self.cameras), render_defaults=defaults)
         if self.environment is not None:
             scene = scene.with_environment(self.environment)
         return scene
 
-    def _settings_note(self):
-        settings = self.settings
+    def _render_defaults(self):
+        """Scene.render_defaults of the file's first sensor's film and sampler and of its
+        integrator (Mitsuba's own defaults where the file leaves one out), with a note that
+        says them as ptrace's flags: max_depth counts the camera's segment, -m does not; an
+        unbounded max_depth (-1) is ptrace's largest -m."""
+        settings = dict(self.settings)
+        depth = settings.pop("max_depth")
+        high = RANGES["max_depth"][1]
+        settings["max_depth"] = high if depth < 0 else min(max(depth - 1, 0), high)
+        if depth == 0:
+            self.notes.append("<integrator>: max_depth 0 (Mitsuba renders nothing) rendered as "
+                              "-m 0: the emitters seen, nothing lit")
         flags = []
         if "resolution" in settings:
             flags.append("-r {} {}".format(*settings["resolution"]))
         if "spp" in settings:
             flags.append(f"-s {settings['spp']}")
-        depth = settings.get("max_depth")
-        if depth is not None:
-            flags.append("-m 10000" if depth < 0 else f"-m {max(depth - 1, 0)}")
-        if flags:
-            self.notes.append(f"the file's film, sampler and integrator ask for "
-                              f"{' '.join(flags)}; ptrace renders what its flags say")
+        flags.append(f"-m {settings['max_depth']}")
+        if "rr_depth" in settings:
+            flags.append(f"roulette from depth {settings['rr_depth']}")
+        self.notes.append(f"the file's sensor and integrator render with {', '.join(flags)} "
+                          f"where the command line does not say")
+        return settings
 
 
 def latlong_from_mitsuba(image, rotation):

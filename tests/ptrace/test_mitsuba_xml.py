@@ -162,7 +162,9 @@ def test_a_0_6_scene_with_its_old_names(tmp_path):
     # sRGB 0.5 is linear 0.214
     np.testing.assert_allclose(scene.materials.albedo[0], [0.21404] * 3, rtol=1e-4)
     notes = "\n".join(scene.notes)
-    assert "-r 40 30 -s 32 -m 5" in notes and "rendered by ptrace's path tracer" in notes
+    assert scene.render_defaults == {"resolution": (40, 30), "spp": 32, "max_depth": 5}
+    assert "-r 40 30, -s 32, -m 5" in notes and "rendered by ptrace's path tracer" in notes
+    assert "<sampler type=\"ldsampler\">: ptrace draws its own" in notes
 
 
 def test_moment_renders_its_nested_integrator(tmp_path):
@@ -695,3 +697,70 @@ def test_cornell_box_mean_agrees_with_mitsuba(tmp_path, box, spp):
                  str(path)]) == 0
     ratio = float(read_image(out)[:, :, :3].mean() / reference.mean())
     assert ratio == pytest.approx(1.0, abs=0.03), ratio
+
+
+# --- the file's film, sampler and integrator as the render's defaults -----------------------
+
+LIT_FLOOR = """
+<integrator type="path">{integrator}</integrator>
+<sensor type="perspective">
+  <float name="fov" value="40"/>
+  <transform name="to_world"><lookat origin="0, 3, 0.01" target="0, 0, 0" up="0, 1, 0"/>
+  </transform>
+  <sampler type="independent"><integer name="sample_count" value="3"/></sampler>
+  <film type="hdrfilm"><integer name="width" value="6"/><integer name="height" value="4"/>
+  </film>
+</sensor>
+<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="5"/>
+  </transform><bsdf type="diffuse"/></shape>
+<emitter type="point"><point name="position" x="0" y="2" z="0"/>
+  <rgb name="intensity" value="10"/></emitter>
+"""
+
+
+def test_the_files_settings_are_the_render_defaults(tmp_path):
+    """film 6x4, sample_count 3, max_depth 1 (the emitters seen: the lit floor black) and
+    rr_depth 7 are what ptrace.render uses unless its caller says otherwise."""
+    path = write(tmp_path, LIT_FLOOR.format(
+        integrator='<integer name="max_depth" value="1"/><integer name="rr_depth" value="7"/>'))
+    scene = ptrace.load(path)
+    assert scene.render_defaults == {"resolution": (6, 4), "spp": 3, "max_depth": 0,
+                                     "rr_depth": 7}
+    stats = {}
+    image = ptrace.render(scene, stats=stats)
+    assert image.shape == (4, 6, 3) and stats["spp"] == 3
+    assert image.max() == 0     # -m 0: a point light is never seen, the floor not lit
+    stats = {}
+    image = ptrace.render(scene, resolution=(5, 3), spp=2, max_depth=1, stats=stats)
+    assert image.shape == (3, 5, 3) and stats["spp"] == 2 and image.min() > 0
+
+
+def test_mitsubas_own_defaults_where_the_file_leaves_them_out(tmp_path):
+    """No <integrator>: Mitsuba's path tracer of unbounded depth (ptrace's largest -m); a
+    sensor without film or sampler: 768x576 and 4 samples; no sensor: ptrace's own."""
+    bare = ptrace.load(write(tmp_path, '<sensor type="perspective"/><shape type="sphere"/>'))
+    assert bare.render_defaults == {"resolution": (768, 576), "spp": 4, "max_depth": 10_000}
+    sensorless = ptrace.load(write(tmp_path, '<shape type="sphere"/>', name="s.xml"))
+    assert sensorless.render_defaults == {"max_depth": 10_000}
+    deep = ptrace.load(write(tmp_path, '<integrator type="path"><integer name="max_depth" '
+                                       'value="99999"/></integrator>', name="d.xml"))
+    assert deep.render_defaults["max_depth"] == 10_000
+
+
+def test_the_command_line_takes_the_files_settings_unless_given(tmp_path, capsys):
+    path = write(tmp_path, LIT_FLOOR.format(integrator='<integer name="max_depth" value="1"/>'))
+    out = tmp_path / "o.exr"
+    assert main(["-q", "-f", str(out), str(path)]) == 0
+    assert capsys.readouterr().out.startswith("6x4 spp 3 ")
+    assert read_image(out).shape[:2] == (4, 6) and read_image(out)[:, :, :3].max() == 0
+    assert main(["-q", "-r", "5", "3", "-s", "2", "-m", "1", "-f", str(out), str(path)]) == 0
+    assert capsys.readouterr().out.startswith("5x3 spp 2 ")
+    assert read_image(out).shape[:2] == (3, 5) and read_image(out)[:, :, :3].min() > 0
+
+
+def test_the_files_settings_are_said_in_a_note(tmp_path, capsys):
+    path = write(tmp_path, LIT_FLOOR.format(integrator='<integer name="max_depth" value="4"/>'))
+    assert main(["-r", "2", "2", "-f", str(tmp_path / "o.png"), str(path)]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "-r 6 4, -s 3, -m 3" in
+             line]
+    assert len(notes) == 1 and notes[0].startswith("ptrace: note: ")
