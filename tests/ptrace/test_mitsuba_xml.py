@@ -764,3 +764,44 @@ def test_the_files_settings_are_said_in_a_note(tmp_path, capsys):
     notes = [line for line in capsys.readouterr().err.splitlines() if "-r 6 4, -s 3, -m 3" in
              line]
     assert len(notes) == 1 and notes[0].startswith("ptrace: note: ")
+
+
+# --- line numbers ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["unknown_plugin", "undefined_name", "singular_transform",
+                                  "missing_file", "unknown_ref", "wrong_type"])
+def test_a_refusal_names_the_line_of_its_element(tmp_path, capsys, case):
+    """The element at fault sits on line 4 (after the <scene> line and two comment lines)."""
+    body, fragment = REFUSALS[case]
+    path = write(tmp_path, f"<!-- one -->\n<!-- two -->\n{body}")
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert str(caught.value).startswith(f"{path}:4: ") and fragment in str(caught.value)
+    assert caught.value.path == str(path)
+    assert main(["-q", "-f", str(tmp_path / "out.png"), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"ptrace: error: {caught.value}\n"
+
+
+def test_the_line_is_the_one_of_the_element_in_its_own_file(tmp_path):
+    """A fault in an included file names that file and the line there; a nested value names
+    its own line, not its plugin's."""
+    write(tmp_path, '\n\n<shape type="cube">\n<transform name="to_world">\n<scale z="0"/>\n'
+                    '</transform></shape>', name="part.xml")
+    path = write(tmp_path, '<include filename="part.xml"/>')
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert caught.value.path.endswith("part.xml") and caught.value.line == 5
+    assert str(caught.value).startswith(f"{caught.value.path}:5: ")
+    path = write(tmp_path, '<shape type="sphere">\n\n<float name="radius"\n value="x"/>'
+                           '</shape>', name="value.xml")
+    with pytest.raises(ptrace.SceneError, match=r"value\.xml:4: <float name=\"radius\">"):
+        ptrace.load(path)
+
+
+def test_xml_that_is_not_well_formed_names_the_parsers_line(tmp_path):
+    path = tmp_path / "broken.xml"
+    path.write_text('<scene version="3.0.0">\n<shape type="sphere">\n</scene>\n')
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert str(caught.value).startswith(f"{path}:3: not well-formed XML")
