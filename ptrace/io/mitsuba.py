@@ -13,6 +13,7 @@ import numpy as np
 
 import accel
 
+from .. import budget
 from ..budget import BudgetError
 from ..environment import Environment
 from ..errors import SceneError
@@ -77,6 +78,7 @@ class Builder:
         if self.reader.upgrade:
             self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
                               f"upgrades it")
+        self._count_meshes(scene)
         for plugin in scene.children:
             handler = getattr(self, "_" + plugin.tag, None)
             if handler is not None:
@@ -86,6 +88,23 @@ class Builder:
         return self._finish()
 
     # --- shapes ---------------------------------------------------------------------------
+
+    def _count_meshes(self, scene):
+        """Check the memory budget (ptrace.budget) for the triangles of every mesh file the
+        scene places (mitsuba_shapes.file_triangles), before any of them is read; each is
+        charged again as it is read."""
+        total, count = 0, 0
+        for shape in scene.children:
+            if shape.tag == "shape" and shape.type in ("obj", "ply", "serialized") and \
+                    shape.params.get("filename") is not None:
+                path = self.reader.resolve(shape, shape.string("filename"))
+                total += shapes.file_triangles(shape, path)
+                count += 1
+        if count:
+            budget.current().charge(
+                self.path, f"the {total:,} triangles of its {count} mesh "
+                           f"file{'s' if count > 1 else ''}", 0,
+                total * budget.LOAD_BYTES_PER_TRIANGLE)
 
     def _shape(self, shape):
         if shape.type not in SHAPES:

@@ -12,9 +12,10 @@ import numpy as np
 
 from .. import budget
 from ..errors import SceneError
-from . import obj
+from . import obj, ply
 from .limits import problem
 from .meshes import _drop_non_finite, _read_with_trimesh
+from .mitsuba_serialized import serialized_triangles
 
 DISK_SIDES = 128
 BACKING = 1e-4     # how far behind an emitter its back lies, as a fraction of its size
@@ -61,6 +62,24 @@ def disk():
                    np.stack([np.ones(DISK_SIDES), share[:-1]], axis=1),
                    np.stack([np.ones(DISK_SIDES), share[1:]], axis=1)], axis=1)
     return vertices, faces, uv
+
+
+def file_triangles(shape, path):
+    """The triangles an obj, ply or serialized shape's file holds, counted before it is read:
+    a PLY's header's faces, a serialized mesh's header, an OBJ's faces fan-triangulated (a
+    face of n corners is n - 2 triangles)."""
+    if shape.type == "serialized":
+        return serialized_triangles(path, shape.integer("shape_index", 0))
+    if shape.type == "ply":
+        with open(path, "rb") as stream:
+            return max(ply.read_header(path, stream.read(ply.MAX_HEADER)).get(
+                "face", (0,))[0], 0)
+    count = 0
+    with open(path, "rb") as stream:
+        for line in stream:
+            if line[:1] == b"f" and line[1:2] in (b" ", b"\t"):
+                count += max(len(line.split(b"#", 1)[0].split()) - 3, 0)
+    return count
 
 
 def mesh_file(shape, path, notes, want_uv=False):

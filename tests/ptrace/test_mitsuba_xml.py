@@ -396,6 +396,30 @@ def test_the_memory_budget_counts_every_mesh_placed(tmp_path):
         ptrace.load(path, max_memory=3 * per_quad - 1)
 
 
+def test_the_memory_budget_counts_the_meshes_before_reading_any(tmp_path):
+    """The budget is checked for every mesh file's triangles (a PLY's and a serialized
+    mesh's header, an OBJ's faces) before any file is read: an OBJ whose face points past its
+    vertices is not reached when the PLY after it claims too many faces."""
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n")
+    (tmp_path / "big.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex "
+                                       b"3\nproperty float x\nproperty float y\nproperty "
+                                       b"float z\nelement face 1000000\nproperty list uchar "
+                                       b"int vertex_indices\nend_header\n")
+    square = ([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], None)
+    (tmp_path / "m.serialized").write_bytes(serialized([square]))
+    path = write(tmp_path, "".join(
+        f'<shape type="{kind}"><string name="filename" value="{name}"/></shape>'
+        for kind, name in (("obj", "bad.obj"), ("serialized", "m.serialized"),
+                           ("ply", "big.ply"))))
+    per = ptrace.budget.LOAD_BYTES_PER_TRIANGLE
+    with pytest.raises(ptrace.budget.BudgetError) as caught:
+        ptrace.load(path, max_memory=10 ** 6 * per)
+    assert caught.value.path == str(path)
+    assert "the 1,000,003 triangles of its 3 mesh files" in caught.value.message
+    with pytest.raises(ptrace.SceneError, match="bad.obj"):     # within the budget: read
+        ptrace.load(path, max_memory=2 * 10 ** 6 * per)
+
+
 # --- materials ------------------------------------------------------------------------------
 
 def material_of(tmp_path, bsdf):
