@@ -275,6 +275,13 @@ class Builder:
                                          "crop_height")):
                 self.notes.append("<film>: its crop window ignored: ptrace renders the whole "
                                   "image (-p crops)")
+            filters = [c for c in film.children if c.tag == "rfilter"] + \
+                [v for v in film.params.values() if isinstance(v, Plugin) and v.tag == "rfilter"]
+            kind = filters[0].type if filters else "gaussian"
+            if kind != "box":
+                self.notes.append(f"<film>: its {kind} reconstruction filter (Mitsuba's default: "
+                                  f"gaussian) not applied: ptrace's pixels weigh their samples "
+                                  f"equally (a box), the same mean, a sharper image")
             for child in film.children:
                 child._read.update(child.params)
             film._read.update(film.params)

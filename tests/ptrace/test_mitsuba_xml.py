@@ -782,6 +782,14 @@ def test_the_command_line_takes_the_files_settings_unless_given(tmp_path, capsys
     assert read_image(out).shape[:2] == (3, 5) and read_image(out)[:, :, :3].min() > 0
 
 
+def test_a_reconstruction_filter_other_than_a_box_is_noted(tmp_path):
+    film = '<sensor type="perspective"><film type="hdrfilm">{}</film></sensor>'
+    for rfilter, noted in (("", True), ('<rfilter type="tent"/>', True),
+                           ('<rfilter type="box"/>', False)):
+        notes = "\n".join(ptrace.load(write(tmp_path, film.format(rfilter))).notes)
+        assert ("reconstruction filter" in notes) == noted, rfilter
+
+
 def test_the_files_settings_are_said_in_a_note(tmp_path, capsys):
     path = write(tmp_path, LIT_FLOOR.format(integrator='<integer name="max_depth" value="4"/>'))
     assert main(["-r", "2", "2", "-f", str(tmp_path / "o.png"), str(path)]) == 0
