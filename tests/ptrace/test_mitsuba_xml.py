@@ -420,6 +420,40 @@ def test_the_memory_budget_counts_the_meshes_before_reading_any(tmp_path):
         ptrace.load(path, max_memory=2 * 10 ** 6 * per)
 
 
+def binary_ply(path, vertices, faces, extra=()):
+    """A binary little-endian PLY of float x y z (and the named extra float columns of each
+    vertex row after them) and faces of any size."""
+    names = ["x", "y", "z", *extra]
+    head = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {len(vertices)}\n" + \
+        "".join(f"property float {n}\n" for n in names) + f"element face {len(faces)}\n" + \
+        "property list uchar int vertex_indices\nend_header\n"
+    body = np.asarray(vertices, "<f4").tobytes()
+    body += b"".join(struct.pack("<B", len(f)) + np.asarray(f, "<i4").tobytes() for f in faces)
+    path.write_bytes(head.encode() + body)
+
+
+def test_a_binary_ply_is_read_as_mitsuba_reads_it(tmp_path):
+    """A binary PLY of triangles is read straight (its vertices unmerged, its u v kept), the
+    same triangles as trimesh reads; one with a quad goes through trimesh, fan-triangulated."""
+    from ptrace.io import mitsuba_shapes
+    rows = [[0, 0, 0, 0, 0, 0.5], [1, 0, 0, 1, 0, 0.5], [1, 1, 0, 1, 1, 0.5],
+            [0, 1, 0, 0, 1, 0.5], [0, 1, 0, 0, 1, 0.5]]          # a duplicate vertex
+    binary_ply(tmp_path / "t.ply", rows, [[0, 1, 2], [0, 2, 4]], extra=("u", "v", "w"))
+    parts = mitsuba_shapes._binary_ply(str(tmp_path / "t.ply"))
+    assert len(parts["vertices"]) == 5
+    np.testing.assert_array_equal(parts["faces"], [[0, 1, 2], [0, 2, 4]])
+    np.testing.assert_allclose(parts["uv"][1], [[0, 0], [1, 1], [0, 1]])
+    scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
+                                        'value="t.ply"/></shape>'))
+    np.testing.assert_allclose(scene.geometry.vertices[scene.geometry.faces],
+                               np.array(rows)[:, :3][[[0, 1, 2], [0, 2, 4]]])
+    binary_ply(tmp_path / "q.ply", np.array(rows)[:4, :3], [[0, 1, 2, 3]])
+    assert mitsuba_shapes._binary_ply(str(tmp_path / "q.ply")) is None
+    scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
+                                        'value="q.ply"/></shape>', name="q.xml"))
+    assert scene.triangle_count == 2
+
+
 # --- materials ------------------------------------------------------------------------------
 
 def material_of(tmp_path, bsdf):
