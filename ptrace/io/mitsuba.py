@@ -75,6 +75,7 @@ class Builder:
 
     def build(self):
         scene = self.reader.read()
+        self.notes.extend(self.reader.notes)
         if self.reader.upgrade:
             self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
                               f"upgrades it")

@@ -5,7 +5,8 @@ parser (defusedxml: no entity declarations, no DTDs, no external references); `$
 attribute is replaced by its value from `-D name=value` (the `defines`) or the file's own
 `<default name=.. value=..>`; `<include>` and `<path>` read only inside the scene's folder;
 `<ref>` finds an `id` anywhere in the scene; every value element (`<float>`, `<integer>`,
-`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` (a constant, or wavelength:value pairs),
+`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` (a constant, wavelength:value pairs, or a file of
+them),
 `<point>`, `<vector>`, `<transform>`) becomes a checked Python value. Files of version 0.4 to
 0.6 are upgraded as Mitsuba 3 upgrades them: camelCase parameter names become snake_case,
 `<lookAt>` becomes `<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one
@@ -22,7 +23,7 @@ import numpy as np
 from ..errors import SceneError
 from .files import require_regular_file
 from .limits import is_float, problem
-from .mitsuba_spectra import spectrum_to_rgb
+from .mitsuba_spectra import blackbody_rgb, spectrum_to_rgb
 from .mitsuba_transforms import (
     ElementError,
     Transform,
@@ -38,6 +39,7 @@ VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point
               "transform", "srgb")
 MAX_INCLUDE_DEPTH = 32
 MAX_NESTING = 64
+MAX_SPECTRUM_FILE = 1 << 20     # bytes of a <spectrum filename=..> file
 NAME = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
 
 
@@ -145,6 +147,7 @@ class Reader:
         self.ids, self.refs, self.including = {}, [], []
         self.upgrade = False
         self.version = None
+        self.notes = []     # what the parse converted, for the loader's notes
 
     # --- files ----------------------------------------------------------------------------
 
@@ -361,6 +364,10 @@ class Reader:
             return parse_transform(self, element, path)
         if tag == "string":
             return self.required(element, "value", path)
+        if tag == "spectrum" and element.get("filename") is not None:
+            return self._spectrum_file(element, path, emitter)
+        if tag == "spectrum" and element.get("type") is not None:
+            return self._spectrum_plugin(element, path, emitter)
         text = self.required(element, "value", path) if tag not in ("point", "vector") \
             else attr("value")
         if tag == "boolean":
@@ -416,6 +423,55 @@ class Reader:
                     raise at(path, element, f": {item[:40]!r} is not a "
                                             f"wavelength:value pair")
                 pairs.append(pair)
+        return self._spectrum_rgb(element, path, pairs, emitter)
+
+    def _spectrum_file(self, element, path, emitter):
+        """The RGB colour of <spectrum filename=..>: a text file of one wavelength and one
+        value a line (lines starting with # are comments), read as Mitsuba reads it."""
+        name = self.attribute(element, "filename", path)
+        target = self._resolve(describe(element), path, name,
+                               getattr(element, "sourceline", None))
+        require_regular_file(target)
+        if os.path.getsize(target) > MAX_SPECTRUM_FILE:
+            raise at(path, element, f": {name!r} is larger than a spectrum's "
+                                    f"{MAX_SPECTRUM_FILE:,} bytes")
+        try:
+            with open(target, encoding="utf-8", errors="replace") as stream:
+                lines = stream.read().splitlines()
+        except OSError as error:
+            raise at(path, element, f": cannot read {name!r}: "
+                                    f"{error.strerror or error}") from None
+        pairs = []
+        for number, line in enumerate(lines, 1):
+            if line.strip() and not line.lstrip().startswith("#"):
+                pair = self.numbers(element, path, line, f"line {number} of {name!r}")
+                if pair.size != 2:
+                    raise at(path, element, f": line {number} of {name!r} is not a "
+                                            f"wavelength and a value")
+                pairs.append(pair)
+        return self._spectrum_rgb(element, path, pairs, emitter)
+
+    def _spectrum_plugin(self, element, path, emitter):
+        """The RGB colour of <spectrum type="blackbody"> (its temperature in kelvin) on an
+        emitter, as Mitsuba's spectral variants render it (its RGB variants cannot)."""
+        kind = self.attribute(element, "type", path)
+        if kind != "blackbody":
+            raise at(path, element, f": spectrum type {kind[:40]!r} is not supported (ptrace "
+                                    f"reads blackbody, values and files)")
+        if not emitter:
+            raise at(path, element, ": a blackbody spectrum outside an emitter")
+        temperature = None
+        for child in element:
+            if child.tag == "float" and self.attribute(child, "name", path) == "temperature":
+                temperature = self.number(child, path, self.required(child, "value", path),
+                                          "value")
+        if temperature is None or not temperature > 0:
+            raise at(path, element, ": a blackbody needs a temperature above 0 kelvin")
+        self.notes.append(f"{describe(element)}: converted to RGB as Mitsuba's spectral "
+                          f"variants see it (its RGB variants cannot render a blackbody)")
+        return Colour(blackbody_rgb(temperature))
+
+    def _spectrum_rgb(self, element, path, pairs, emitter):
         pairs = np.array(pairs).reshape(-1, 2)
         if len(pairs) < 2 or np.any(np.diff(pairs[:, 0]) <= 0):
             raise at(path, element, ": a spectrum needs two or more "

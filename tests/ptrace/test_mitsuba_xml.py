@@ -110,6 +110,53 @@ def test_spectra_convert_to_rgb_as_mitsubas_rgb_variants_do(tmp_path, pairs):
         np.testing.assert_allclose(mine, np.array(reference), rtol=2e-3)
 
 
+def test_a_spectrum_from_a_file_converts_as_mitsubas_does(tmp_path):
+    """A file of wavelength value lines (comments with #) is the spectrum of its pairs, the
+    RGB Mitsuba's RGB variant gives it; a line that is not two numbers is refused naming it."""
+    (tmp_path / "s.spd").write_text("# wavelength value\n400 0.1\n500 0.8\n\n600 0.2\n700 0.9\n")
+    path = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum name='
+                           '"reflectance" filename="s.spd"/></bsdf></shape>')
+    ours = ptrace.load(path).materials.albedo[0]
+    pairs = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum name='
+                            '"reflectance" value="400:0.1, 500:0.8, 600:0.2, 700:0.9"/></bsdf>'
+                            '</shape>', name="pairs.xml")
+    np.testing.assert_array_equal(ours, ptrace.load(pairs).materials.albedo[0])
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    theirs = mi.traverse(mi.load_file(str(path)).shapes()[0].bsdf())["reflectance.value"]
+    np.testing.assert_allclose(ours, np.array(theirs), rtol=2e-3)
+    (tmp_path / "s.spd").write_text("400 0.1\n500\n")
+    with pytest.raises(ptrace.SceneError, match=r"scene.xml:2: .*line 2 of 's.spd' is not"):
+        ptrace.load(path)
+
+
+def test_a_blackbody_emitter_is_what_mitsubas_spectral_variant_renders(tmp_path):
+    """A 3000 K blackbody's RGB (Mitsuba's RGB variants refuse it) against the radiance
+    Mitsuba's scalar_spectral renders of it seen straight on, within its noise (3 %)."""
+    path = write(tmp_path, '<integrator type="path"/><sensor type="perspective"><float name='
+                           '"fov" value="10"/><transform name="to_world"><lookat origin="0,0,5"'
+                           ' target="0,0,0"/></transform><film type="hdrfilm"><integer name='
+                           '"width" value="4"/><integer name="height" value="4"/></film>'
+                           '</sensor><shape type="rectangle"><emitter type="area"><spectrum '
+                           'type="blackbody" name="radiance"><float name="temperature" value='
+                           '"3000"/></spectrum></emitter></shape>')
+    scene = ptrace.load(path)
+    ours = scene.materials.emission[scene.material_index[0]]
+    assert any("blackbody" in note for note in scene.notes)
+    bad = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum type="blackbody"'
+                          ' name="reflectance"><float name="temperature" value="3000"/>'
+                          '</spectrum></bsdf></shape>', name="bad.xml")
+    with pytest.raises(ptrace.SceneError, match="blackbody spectrum outside an emitter"):
+        ptrace.load(bad)
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_spectral")
+    try:
+        image = np.array(mi.render(mi.load_file(str(path)), spp=256))[1:3, 1:3, :3]
+    finally:
+        mi.set_variant("scalar_rgb")
+    np.testing.assert_allclose(ours, image.reshape(-1, 3).mean(axis=0), rtol=0.03)
+
+
 def test_include_reads_the_included_scene(tmp_path):
     (tmp_path / "parts").mkdir()
     write(tmp_path / "parts", '<shape type="sphere"><float name="radius" value="3"/></shape>',
