@@ -40,6 +40,7 @@ from .mitsuba_xml import Colour, Plugin, Reader
 
 SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 # integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
+UPSAMPLE, FINE_ENVMAP = 4, 2048      # latlong_from_mitsuba's resampling of small maps
 INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
                "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
 
@@ -252,7 +253,7 @@ class Builder:
             pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
         scale = emitter.float("scale", 1.0)
         image = latlong_from_mitsuba(np.asarray(pixels[:, :, :3], np.float64),
-                                     transform.matrix[:3, :3]) * scale
+                                     transform.inverse[:3, :3]) * scale
         return Environment(np.maximum(image, 0.0), name=path)
 
     # --- sensor and settings --------------------------------------------------------------
@@ -442,21 +443,27 @@ class Builder:
         return settings
 
 
-def latlong_from_mitsuba(image, rotation):
-    """ptrace's lat-long image (ptrace.environment's mapping) of a Mitsuba envmap image under
-    the rotation of its to_world: each pixel's direction looked up, bilinearly, where Mitsuba
-    finds it (u = atan2(x, -z) / 2 pi, v = acos(y) / pi in the envmap's own frame)."""
+def latlong_from_mitsuba(image, inverse):
+    """ptrace's lat-long image (ptrace.environment's mapping) of a Mitsuba envmap image whose
+    to_world's inverse (as Mitsuba keeps it: Transform.inverse) is the 3 x 3 `inverse`: each
+    pixel's direction d looked up, bilinearly, where Mitsuba finds it (v = inverse d, not
+    normalised, as Mitsuba's; u = atan2(v.x, -v.z) / 2 pi, v = acos(v.y) / pi; column
+    u * W - 1/2, row v * (H - 1), as Mitsuba's envmap looks them up). A map narrower than
+    FINE_ENVMAP columns comes out up to UPSAMPLE times finer on each side, so that ptrace's
+    bilinear lookup of it stays close to Mitsuba's of the original at sharp edges."""
     rows, columns = image.shape[:2]
-    y, x = np.meshgrid((np.arange(rows) + 0.5) / rows, (np.arange(columns) + 0.5) / columns,
-                       indexing="ij")
+    scale = max(1, min(UPSAMPLE, FINE_ENVMAP // columns))
+    y, x = np.meshgrid((np.arange(rows * scale) + 0.5) / (rows * scale),
+                       (np.arange(columns * scale) + 0.5) / (columns * scale), indexing="ij")
     theta, phi = y * np.pi, x * 2 * np.pi - np.pi    # ptrace: phi = atan2(-dz, dx)
     d = np.stack([np.sin(theta) * np.cos(phi), np.cos(theta), -np.sin(theta) * np.sin(phi)],
                  axis=-1)
-    local = d @ np.linalg.inv(rotation).T
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    local = d @ np.asarray(inverse).T
     u = (np.arctan2(local[..., 0], -local[..., 2]) / (2 * np.pi)) % 1.0
     v = np.arccos(np.clip(local[..., 1], -1.0, 1.0)) / np.pi
-    fx, fy = u * columns - 0.5, np.clip(v * rows - 0.5, 0, rows - 1)
+    # Mitsuba's rows run from pole to pole (row 0 at v = 0, the last at v = 1), its columns
+    # are cells (column i centred at u = (i + 0.5) / columns)
+    fx, fy = u * columns - 0.5, np.clip(v * (rows - 1), 0, rows - 1)
     x0, y0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
     tx, ty = (fx - x0)[..., None], (fy - y0)[..., None]
     x1, y1 = (x0 + 1) % columns, np.minimum(y0 + 1, rows - 1)

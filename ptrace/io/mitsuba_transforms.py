@@ -42,10 +42,13 @@ def describe(element):
 
 
 class Transform:
-    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates."""
+    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates, and its
+    inverse as Mitsuba keeps it (inverse: a rotation's is its transpose, whatever its axis)."""
 
-    def __init__(self, matrix):
+    def __init__(self, matrix, inverse=None):
         self.matrix = np.asarray(matrix, dtype=np.float64)
+        self.inverse = np.linalg.inv(self.matrix) if inverse is None else \
+            np.asarray(inverse, dtype=np.float64)
 
     def apply(self, points):
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -63,7 +66,7 @@ class Transform:
 def parse_transform(reader, element, path):
     """The Transform of a <transform> element: each step left-multiplies what came before (the
     first step is applied first); reader gives the steps' attributes ($name substituted)."""
-    matrix = np.eye(4)
+    matrix, steps = np.eye(4), []
     for step in element:
         if not isinstance(step.tag, str):
             continue
@@ -72,7 +75,8 @@ def parse_transform(reader, element, path):
             raise at(path, step, f": unknown transform <{tag}> in "
                                  f"{describe(element)} (known: "
                                  f"{', '.join(TRANSFORM_TAGS)})")
-        matrix = _step(reader, step, tag, path) @ matrix
+        steps.append((tag, _step(reader, step, tag, path)))
+        matrix = steps[-1][1] @ matrix
     if not np.isfinite(matrix).all():
         raise at(path, element, ": the matrix overflows to infinity")
     linear = matrix[:3, :3]
@@ -83,7 +87,10 @@ def parse_transform(reader, element, path):
     if not size > 0 or abs(np.linalg.det(linear / size)) < 1e-12:
         raise at(path, element, ": the transform is not invertible "
                                 "(it flattens space: determinant 0)")
-    return Transform(matrix)
+    inverse = np.eye(4)
+    for tag, step in steps:     # Mitsuba's: a rotation's inverse is its transpose
+        inverse = inverse @ (step.T if tag == "rotate" else np.linalg.inv(step))
+    return Transform(matrix, inverse)
 
 
 def _vector3(reader, step, path, default):
@@ -112,7 +119,11 @@ def _step(reader, step, tag, path):
         length = float(np.linalg.norm(axis))
         if not length > 0:
             raise at(path, step, ": the axis of rotation is zero")
-        out[:3, :3] = rotation(axis / length, math.radians(angle))
+        if abs(length - 1.0) > 1e-6:
+            getattr(reader, "notes", []).append(
+                f"{describe(step)}: its axis is not of unit length: Mitsuba 3 does not "
+                f"normalise it (so it scales and shears as well as turns), nor does ptrace")
+        out[:3, :3] = rotation(axis, math.radians(angle))
     elif tag == "matrix":
         values = reader.numbers(step, path, reader.required(step, "value", path))
         if values.size == 16:
@@ -142,7 +153,8 @@ def _lookat(reader, step, path):
 
 
 def rotation(axis, angle):
-    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis."""
+    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis (of
+    another axis, Mitsuba's matrix of the same formula: cos I + (1 - cos) a a^T + sin [a]x)."""
     x, y, z = axis
     c, s = math.cos(angle), math.sin(angle)
     t = 1.0 - c
