@@ -40,7 +40,7 @@ from .mitsuba_xml import Colour, Plugin, Reader
 
 SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 # integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
-UPSAMPLE, FINE_ENVMAP = 4, 2048      # latlong_from_mitsuba's resampling of small maps
+UPSAMPLE, FINE_ENVMAP = 16, 2048     # latlong_from_mitsuba's resampling of small maps
 INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
                "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
 

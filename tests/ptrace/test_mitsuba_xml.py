@@ -629,7 +629,7 @@ def test_an_envmap_looks_up_what_mitsubas_looks_up(tmp_path):
         si.wi = mi.Vector3f(*(-d))
         theirs = np.array(emitter.eval(si))
         errors.append(np.abs(np.array(environment_radiance(ours, *d)) - theirs).max())
-    # ptrace's lookup of the map resampled 4 times finer: close, not the same bits; the image
+    # ptrace's lookup of the map resampled finer: close, not the same bits; the image
     # spans 0 to 2
     assert np.median(errors) < 0.002 and np.max(errors) < 0.05, (np.median(errors),
                                                                   np.max(errors))
