@@ -76,33 +76,33 @@ def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, 
            notice=None, aovs=None, max_memory=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
-    spp (default 1), resolution, max_depth and rr_depth not given are the scene's own
-    (scene.render_defaults: a Mitsuba scene's film, sampler and integrator) where it has them.
-    resolution is (W, H), default the camera's own size, or without a camera the scene's or the
-    course's 800x600; camera (a ptrace.Camera: ptrace.course_camera, ptrace.look_at, ...)
-    replaces the scene's default camera (ptrace.pointing.default_camera: the course's for a
-    course scene, a size other than 800x600 being a crop of the same focal length, not a
-    rescale; for a mesh file, one that frames the scene's bounds at that size), and a given
-    resolution other than its own keeps its focal length in pixels; crop (x, y, dx, dy) renders
-    only that cell (y counted from the bottom, like the course) and returns it alone; options
-    are the light transport flags of ptrace.rendering.settings.Settings: light_samples (-l,
-    default 1), max_depth (-m, default 1), adaptive (-a, (batch, tolerance) or None), hemisphere
-    (-H) and roulette (default True; False runs every path to max_depth, for comparisons: the
-    course has no such flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with
-    accel="bvh"). stats, if a dict, receives build and render seconds, rays traced, per-pixel
-    sample counts ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C
-    interrupted the render, "phases" ({phase: wall seconds} of
-    ptrace.rendering.timing.IN_PROCESS_PHASES, or DASK_PHASES with a client: they cover this
-    call without overlapping) and "counts" (passes and kernel calls in-process, functions numba
-    compiled; tasks on Dask). client renders on a Dask cluster; notice, if given, is called with
-    a one-line message when the kernels must be compiled first (a cold numba cache). aovs, if a
-    dict, receives the feature buffers of ptrace.features ("albedo" and "normal" (H, W, 3),
-    "depth" (H, W)), averaged per pixel over the same samples as the image, at the cost of one
-    more ray per sample (in-process only); the image is the same bits with or without them.
-    max_memory (bytes, a size such as "4G", or a ptrace.budget.Budget; default half the
-    machine's memory, see ptrace.budget) bounds the estimate of what the render needs (the
-    scene, the backend's structure, the per-pixel buffers): past it, a BudgetError names the
-    scene and the figures.
+    spp (default 1), max_depth and rr_depth not given, and resolution without a camera, are
+    the scene's own (scene.render_defaults: a Mitsuba scene's film, sampler and integrator)
+    where it has them.
+    resolution is (W, H), default the camera's own size, or without a camera the course's
+    800x600; camera (a ptrace.Camera: ptrace.course_camera, ptrace.look_at, ...) replaces
+    the scene's default camera (ptrace.pointing.default_camera: the course's for a course scene,
+    a size other than 800x600 being a crop of the same focal length, not a rescale; for a mesh
+    file, one that frames the scene's bounds at that size), and a given resolution other than
+    its own keeps its focal length in pixels; crop (x, y, dx, dy) renders only that cell (y
+    counted from the bottom, like the course) and returns it alone; options are the light transport
+    flags of ptrace.rendering.settings.Settings: light_samples (-l, default 1), max_depth (-m,
+    default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
+    (default True; False runs every path to max_depth, for comparisons: the course has no such
+    flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
+    if a dict, receives build and render seconds, rays traced, per-pixel sample counts
+    ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C interrupted
+    the render, "phases" ({phase: wall seconds} of ptrace.rendering.timing.IN_PROCESS_PHASES, or
+    DASK_PHASES with a client: they cover this call without overlapping) and "counts" (passes
+    and kernel calls in-process, functions numba compiled; tasks on Dask). client renders on a
+    Dask cluster; notice, if given, is called with a one-line message when the kernels must be
+    compiled first (a cold numba cache). aovs, if a dict, receives the feature buffers of
+    ptrace.features ("albedo" and "normal" (H, W, 3), "depth" (H, W)), averaged per pixel over
+    the same samples as the image, at the cost of one more ray per sample (in-process only);
+    the image is the same bits with or without them. max_memory (bytes, a size such as "4G", or
+    a ptrace.budget.Budget; default half the machine's memory, see ptrace.budget) bounds the
+    estimate of what the render needs (the scene, the backend's structure, the per-pixel
+    buffers): past it, a BudgetError names the scene and the figures.
     """
     phases = Phases(IN_PROCESS_PHASES if client is None else DASK_PHASES)
     phases.enter("setup")
