@@ -43,6 +43,9 @@ BENCHMARKS = {
     "many_lights": Benchmark("a room of 64 area lights and 1024 emissive tiles: MSE x seconds "
                              "of each light sampler against every light at every vertex",
                              in_all=False),
+    "mitsuba_scenes": Benchmark("ptrace and Mitsuba 3 on the project's Mitsuba XML scenes: mean "
+                                "ratio, per-pixel z-test and times side by side",
+                                requires="mitsuba", in_all=False),
 }
 
 # modules of the package that are not benchmarks
