@@ -19,20 +19,22 @@ import tempfile
 # the runs; re-measure it when the kernels change much).
 COLD_COMPILE_SECONDS = 60
 
-_NOTES = []   # one line per kind, in the order they happened
+_NOTES = {}   # kind -> (its first note, the files it concerned), in the order they happened
 
 
-def _note(text):
-    if text not in _NOTES:
-        _NOTES.append(text)
+def _note(text, kind=None, path=None):
+    """Note `text`, once per kind (default: the text itself), counting the files it concerns."""
+    _NOTES.setdefault(kind or text, (text, set()))[1].add(path)
 
 
 def cache_notes(clear=False):
-    """The notes about numba's cache so far (a fallback folder, a corrupt file recompiled);
-    clear=True empties the list, so that each is told once."""
-    notes = list(_NOTES)
+    """The notes about numba's cache so far (a fallback folder, corrupt files recompiled), one
+    line per kind, each with how many more files it concerned; clear=True empties the list, so
+    that each is told once."""
+    notes = [text if len(paths) < 2 else f"{text} (and {len(paths) - 1} more files like it)"
+             for text, paths in _NOTES.values()]
     if clear:
-        del _NOTES[:]
+        _NOTES.clear()
     return notes
 
 
@@ -154,7 +156,8 @@ def _guard_cache_files():
             return load_index(self)
         except Exception as error:   # noqa: BLE001 - garbage in the file: any unpickling error
             _note(f"numba's cache: {self._index_path} could not be read "
-                  f"({type(error).__name__}); recompiling and rewriting it")
+                  f"({type(error).__name__}); recompiling and rewriting it", "index",
+                  self._index_path)
             return {}
 
     def guarded_load_overload(self, sig, target_context):
@@ -162,7 +165,8 @@ def _guard_cache_files():
             return load_overload(self, sig, target_context)
         except Exception as error:   # noqa: BLE001 - as above, for a data file
             _note(f"numba's cache: a compiled kernel in {self._cache_path} could not be read "
-                  f"({type(error).__name__}); recompiling it")
+                  f"({type(error).__name__}); recompiling it", "data",
+                  (self._cache_path, self._name, repr(sig)))
             return None
 
     def guarded_save_overload(self, sig, data):
@@ -170,7 +174,8 @@ def _guard_cache_files():
             return save_overload(self, sig, data)
         except Exception as error:   # noqa: BLE001 - a full or read-only cache folder
             _note(f"numba's cache: a compiled kernel could not be saved in {self._cache_path} "
-                  f"({error}); it is compiled again next run")
+                  f"({error}); it is compiled again next run", "save",
+                  (self._cache_path, self._name, repr(sig)))
 
     index_file._load_index = guarded_load_index
     cache.load_overload = guarded_load_overload
