@@ -22,7 +22,6 @@ from .materials import (
     check_numbers,
     conductor_from_colour,
     linear_rgb,
-    read_image_file,
 )
 
 IGNORED = ("ka", "map_ka", "map_ks", "map_ns", "map_d", "map_bump", "bump", "norm", "disp",
@@ -266,8 +265,8 @@ def read_map(statement, field, where, directory, mtl_path, pool, notes):
     if remark:
         notes.append(f"<{label}>: {remark}")
     try:
-        pixels, encoded = read_image_file(path, f"{name!r} ({field} of <{where}>)", mtl_path)
-        texture = pool.add(pixels, srgb=True, wrap=wrap, name=name, key=path, encoded=encoded)
+        texture = pool.add_file(path, srgb=True, wrap=wrap, name=name,
+                                what=f"{name!r} ({field} of <{where}>)", model=mtl_path)
     except ValueError as error:
         notes.append(f"<{label}>: the texture could not be read as an image ({error}): "
                      f"ignored (the material's colour alone)")
