@@ -91,7 +91,7 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
     material_index = np.zeros(len(faces), np.int32)
     defaulted = 0
     file_uv = uv if has_uv.any() else None    # as the file gives them (Mitsuba's obj reads)
-    uv = uv.copy()
+    copied = False
     for key in sorted(set(zip(material_of_face.tolist(), has_uv.tolist()))):
         material, with_uv = key
         chosen = (material_of_face == material) & (has_uv == with_uv)
@@ -117,6 +117,8 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
                              f"its texture is not applied to them")
             if transform is not None and with_uv:
                 scale, offset = transform
+                if not copied:      # file_uv stays as the file gives them
+                    uv, copied = uv.copy(), True
                 uv[chosen] = uv[chosen] * scale + offset
         record_key = (name if name in library else None, record.get("albedo_texture", -1),
                       record.get("emission_texture", -1))
