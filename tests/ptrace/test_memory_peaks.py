@@ -136,9 +136,9 @@ def test_an_environment_map_costs_its_image_and_tables(tmp_path):
 
 
 def test_a_binary_ply_and_its_accelerators_per_triangle(tmp_path):
-    """A 400k-triangle binary PLY read straight into the flat arrays, then each backend built
+    """A 200k-triangle binary PLY read straight into the flat arrays, then each backend built
     over it: the peak over the process before the load, per triangle."""
-    n_tri = 400_000
+    n_tri = 200_000
     write_ply(tmp_path / "big.ply", *grid_mesh(n_tri))
     write_ply(tmp_path / "tiny.ply", *grid_mesh(2))
     figures = measure("ply", tmp_path / "big.ply", "bvh", "embree")
@@ -147,8 +147,8 @@ def test_a_binary_ply_and_its_accelerators_per_triangle(tmp_path):
 
 
 def test_an_obj_per_triangle(tmp_path):
-    """A 200k-triangle OBJ of `v` and `f` lines: the reader's peak per triangle."""
-    n_tri = 200_000
+    """A 100k-triangle OBJ of `v` and `f` lines: the reader's peak per triangle."""
+    n_tri = 100_000
     write_obj(tmp_path / "big.obj", *grid_mesh(n_tri))
     write_obj(tmp_path / "tiny.obj", *grid_mesh(2))
     figures = measure("obj", tmp_path / "big.obj")
