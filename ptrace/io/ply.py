@@ -137,6 +137,8 @@ def read_plain_binary(path, data):
         return None
     (n_vertices, vertex_properties), (n_faces, face_properties) = \
         elements["vertex"], elements["face"]
+    if n_vertices < 0 or n_faces < 0:
+        return None
     names = [p[-1] for p in vertex_properties]
     if any(len(p) != 2 or p[0] not in SCALAR_TYPES for p in vertex_properties) or \
             not {"x", "y", "z"} <= set(names) or ATTRIBUTE_NAMES & set(names) or \
