@@ -54,6 +54,7 @@ slab_test = make_slab_test(WIDTH)
 # the root's payload and the miss's primitive as int64 values, not literals: a literal argument
 # compiles each traversal helper once more for it (_blocks_closest three times, not once)
 ROOT, MISS = np.int64(0), np.int64(NO_HIT)
+BINARY_FIELDS = ("lower", "upper", "child_or_first", "count", "order")
 
 
 BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_tri", "centers",
@@ -296,25 +297,17 @@ class BVHAccelerator(compiled.CompiledFace):
         self.split = split
         self.triangle = triangle
         start = time.perf_counter()
-        prim_lower, prim_upper = geometry.primitive_bounds()
-        centroid = 0.5 * (prim_lower + prim_upper)
-        # Pad every box by a hair (1e-9 of the scene's largest coordinate) so the slab test's
-        # rounding can never reject a hit that the primitive test accepts.
-        scale = max(np.abs(prim_lower).max(initial=0.0), np.abs(prim_upper).max(initial=0.0))
-        prim_lower = np.ascontiguousarray(prim_lower - 1e-9 * scale)
-        prim_upper = np.ascontiguousarray(prim_upper + 1e-9 * scale)
-        (self.lower, self.upper, self.child_or_first, self.count, self.order,
-         self.max_depth) = _build(prim_lower, prim_upper, centroid, max_leaf_size,
-                                  MEAN_SPLIT_DEPTH, split == "sah")
-        # the build returns views of buffers sized for 2n - 1 nodes: copy to free the rest
-        self.lower, self.upper = self.lower.copy(), self.upper.copy()
-        self.child_or_first, self.count = self.child_or_first.copy(), self.count.copy()
-        wide = _wide_rows(self.lower, self.upper, self.child_or_first, self.count)
+        tree = self._binary_tree()
+        self.max_depth = tree[5]
+        count = tree[3]
+        self._tree_stats = (int(count.shape[0]), int((count > 0).sum()),
+                            int(count.max(initial=0)))
+        wide = _wide_rows(*tree[:4])
         self._nodes, payloads = _node_rows(wide.shape[0])
-        self._blocks, self._prims = _fill_rows(wide, self._nodes, payloads, self.order,
+        self._blocks, self._prims = _fill_rows(wide, self._nodes, payloads, tree[4],
                                                geometry.triangle_count, geometry.vertices,
                                                geometry.faces)
-        del wide
+        del wide, tree, count     # the binary tree is rebuilt if asked for (_binary_tree)
         self._build_seconds = time.perf_counter() - start
         # A wide row at level L comes from a binary node at depth >= L, and popping it leaves
         # at most (WIDTH - 1) L + WIDTH entries on a traversal stack: depth < STACK_SIZE - 1
@@ -323,6 +316,33 @@ class BVHAccelerator(compiled.CompiledFace):
             raise RuntimeError("BVH deeper than the traversal stack")
         self.compiled = BVHRecord(self._nodes, payloads, self._blocks, self._prims,
                                   geometry.triangle_count, geometry.centers, geometry.radii, test)
+
+    def _binary_tree(self):
+        """(lower, upper, child_or_first, count, order, max_depth) of the binary tree that the
+        wide rows fold, as accel.bvh_build lays it out. The build is deterministic, so the
+        tree is made again from the geometry when asked for rather than kept beside the rows;
+        the primitives' boxes and centroids are freed before the tree is trimmed."""
+        prim_lower, prim_upper = self.geometry.primitive_bounds()
+        centroid = 0.5 * (prim_lower + prim_upper)
+        # Pad every box by a hair (1e-9 of the scene's largest coordinate) so the slab test's
+        # rounding can never reject a hit that the primitive test accepts.
+        scale = max(np.abs(prim_lower).max(initial=0.0), np.abs(prim_upper).max(initial=0.0))
+        prim_lower -= 1e-9 * scale
+        prim_upper += 1e-9 * scale
+        lower, upper, child_or_first, count, order, max_depth = _build(
+            prim_lower, prim_upper, centroid, self.max_leaf_size, MEAN_SPLIT_DEPTH,
+            self.split == "sah")
+        del prim_lower, prim_upper, centroid
+        # the build returns views of buffers sized for 2n - 1 nodes: copy to free the rest
+        return lower.copy(), upper.copy(), child_or_first.copy(), count.copy(), order, max_depth
+
+    def __getattr__(self, name):
+        """The binary tree's arrays (lower, upper, child_or_first, count, order), for tests
+        and studies: made again on first use (_binary_tree) and kept from then on."""
+        if name in BINARY_FIELDS and "geometry" in self.__dict__:
+            self.__dict__.update(zip(BINARY_FIELDS, self._binary_tree()[:5]))
+            return self.__dict__[name]
+        raise AttributeError(name)
 
     def wide_tree(self):
         """The traversal's tree as float64 arrays, for tests and studies: (lower, upper) of
@@ -345,13 +365,13 @@ class BVHAccelerator(compiled.CompiledFace):
         return _mean(visits), _mean(tests)
 
     def stats(self):
-        nodes = int(self.lower.shape[0])
+        nodes, leaves, largest = self._tree_stats
         arrays = (self._nodes, self._blocks, self._prims)   # what traversal reads
         return {**self.geometry_stats(), "split": self.split,
                 "triangle": self.triangle, "width": WIDTH,
                 "nodes": nodes, "wide_nodes": int(self._nodes.shape[0]),
-                "leaves": int((self.count > 0).sum()),
+                "leaves": leaves,
                 "triangle_blocks": int(self._blocks.shape[0]),
                 "max_depth": int(self.max_depth), "max_leaf_size": self.max_leaf_size,
-                "largest_leaf": int(self.count.max(initial=0)),
+                "largest_leaf": largest,
                 "bytes": int(sum(a.nbytes for a in arrays))}

@@ -70,11 +70,18 @@ class Geometry:
         return self.triangle_count + self.sphere_count
 
     def primitive_bounds(self):
-        """(lower, upper) corners of each primitive's box, shape (P, 3) each."""
-        corners = self.vertices[self.faces]  # (F, 3, 3)
-        lower = np.concatenate([corners.min(axis=1), self.centers - self.radii[:, None]])
-        upper = np.concatenate([corners.max(axis=1), self.centers + self.radii[:, None]])
-        return lower.reshape(-1, 3), upper.reshape(-1, 3)
+        """(lower, upper) corners of each primitive's box, shape (P, 3) each (computed a chunk
+        of triangles at a time: no (F, 3, 3) array of corners)."""
+        n_tri, n_sph = self.triangle_count, self.sphere_count
+        lower = np.empty((n_tri + n_sph, 3))
+        upper = np.empty((n_tri + n_sph, 3))
+        for first in range(0, n_tri, 1 << 16):
+            corners = self.vertices[self.faces[first:first + (1 << 16)]]
+            corners.min(axis=1, out=lower[first:first + len(corners)])
+            corners.max(axis=1, out=upper[first:first + len(corners)])
+        lower[n_tri:] = self.centers - self.radii[:, None]
+        upper[n_tri:] = self.centers + self.radii[:, None]
+        return lower, upper
 
     def bounds(self):
         """(lower, upper) of the whole geometry, or None when it is empty. Computed once (every

@@ -46,6 +46,9 @@ BENCHMARKS = {
     "guiding": Benchmark("path guiding: relative MSE against wall time, training included, of "
                          "unguided and guided ptrace and Mitsuba 3 on scenes lit indirectly",
                          in_all=False),
+    "mitsuba_scenes": Benchmark("ptrace and Mitsuba 3 on the project's Mitsuba XML scenes: mean "
+                                "ratio, per-pixel z-test and times side by side",
+                                requires="mitsuba", in_all=False),
 }
 
 # modules of the package that are not benchmarks

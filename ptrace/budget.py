@@ -39,15 +39,17 @@ ADDRESS_SPACE_FRACTION = 0.75   # of what an RLIMIT_AS or RLIMIT_DATA still leav
 BYTES_PER_TRIANGLE = {"naive": 440, "bvh": 520, "embree": 440}
 # What a loader charges a triangle before it expands instances: the least any render needs.
 LOAD_BYTES_PER_TRIANGLE = min(BYTES_PER_TRIANGLE.values())
-# A texture: its linear float32 RGB texels stay (three float32s); decoding and converting them
 # The light BVH (--light-sampler bvh, or auto above its light count) peaks at this many bytes an
 # entry while it is built (its binary tree, its wide lanes, the build's working arrays).
 LIGHT_TREE_BYTES = 3000
-# (8- or 16-bit pixels, float copies, the sRGB conversion) peaks at TEXTURE_PEAK_BYTES a texel.
-TEXEL_BYTES, TEXTURE_PEAK_BYTES = 12, 80
-# An environment map (-e): float64 radiance and its sampling tables stay; reading it and
-# building the tables peaks at ENVIRONMENT_BYTES a pixel.
-ENVIRONMENT_BYTES = 80
+# A texture: its linear float32 RGB texels stay (three float32s); decoding and converting them
+# a band of rows at a time peaks at TEXTURE_PEAK_BYTES a texel (an image file read by
+# OpenImageIO about 16; a glTF's image decoded by Pillow keeps its 8-bit pixels meanwhile).
+TEXEL_BYTES, TEXTURE_PEAK_BYTES = 12, 24
+# An environment map (-e): float32 radiance (12 bytes a pixel) and its float32 sampling tables
+# (8) stay; reading it and building the tables a band of rows at a time peaks at
+# ENVIRONMENT_BYTES a pixel.
+ENVIRONMENT_BYTES = 28
 UNITS = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
 RAISE = "--max-memory SIZE (max_memory= in Python) raises it"
 

@@ -31,24 +31,45 @@ FLOOR = 1e-3          # of the table's mean: the density's lower bound (see the 
 CONSTANT_SIZE = (32, 64)   # rows, columns of the image a constant environment is made of
 
 
+BAND_TEXELS = 1 << 18     # texels a band of rows holds while an image is read or its tables made
+
+
+def band_rows(columns):
+    """Rows of `columns` texels in a band: images are converted and their sampling tables made
+    a band of rows at a time, so that the float64 working arrays stay a few MiB whatever the
+    image's size."""
+    return max(1, BAND_TEXELS // max(int(columns), 1))
+
+
 @dataclass(eq=False)
 class Environment:
-    """An environment image: (H, W, 3) linear radiance, row 0 toward +Y (theta = 0)."""
+    """An environment image: (H, W, 3) linear radiance, float32, row 0 toward +Y (theta = 0).
+    Any (H, W, 3) array is taken; its values are checked (finite, not negative, of magnitude
+    at most ptrace.io.limits.LIMIT) before they are rounded to float32."""
     image: np.ndarray
     name: str = "environment"
 
     def __post_init__(self):
-        image = np.asarray(self.image, dtype=np.float64)
+        image = np.asarray(self.image)
         if image.ndim != 3 or image.shape[2] != 3 or min(image.shape[:2]) < 1:
             raise PtraceError(f"{self.name}: an environment must be an (H, W, 3) image, got "
                               f"shape {image.shape}")
-        if not np.isfinite(image).all() or (image < 0).any():
-            raise PtraceError(f"{self.name}: the environment has negative, NaN or infinite "
-                              f"pixels")
-        words = problem(image)    # finite, but every sample it lights would overflow
-        if words is not None:
-            raise PtraceError(f"{self.name}: the environment's radiance: {words}")
-        self.image = np.ascontiguousarray(image)
+        if image.dtype != np.float32 or not image.flags.c_contiguous:
+            converted = np.empty(image.shape, np.float32)
+        else:
+            converted = image
+        step = band_rows(image.shape[1])
+        for start in range(0, image.shape[0], step):
+            band = np.asarray(image[start:start + step], dtype=np.float64)
+            if not np.isfinite(band).all() or (band < 0).any():
+                raise PtraceError(f"{self.name}: the environment has negative, NaN or infinite "
+                                  f"pixels")
+            words = problem(band)    # finite, but every sample it lights would overflow
+            if words is not None:
+                raise PtraceError(f"{self.name}: the environment's radiance: {words}")
+            if converted is not image:
+                converted[start:start + step] = band
+        self.image = converted
 
     @classmethod
     def constant(cls, rgb):
@@ -56,13 +77,20 @@ class Environment:
         return cls(np.broadcast_to(np.asarray(rgb, dtype=np.float64), (rows, columns, 3)).copy(),
                    name=f"constant {tuple(float(c) for c in rgb)}")
 
+    def mean_luminance(self):
+        """The image's mean luminance (every pixel alike, not weighted by solid angle)."""
+        mean = np.mean(self.image.reshape(-1, 3), axis=0, dtype=np.float64)
+        return float(mean @ LUMINANCE)
+
 
 def load_environment(spec, max_memory=None):
     """An Environment from a file OpenImageIO reads (.exr, .hdr, .png, ...; its first three
     channels, linear) or from "r,g,b" (or one number): a constant colour. An image whose size
     (read from its header, before any pixel is decoded) would need more than max_memory (as
     ptrace.budget takes it; default half the machine's memory) for its pixels and sampling
-    tables is refused (a BudgetError), not downsampled: see ptrace.budget."""
+    tables is refused (a BudgetError), not downsampled: see ptrace.budget. The pixels are
+    decoded a band of rows at a time into the float32 image, so reading it needs little more
+    than the image itself."""
     text = str(spec)
     parts = text.split(",")
     try:
@@ -76,56 +104,98 @@ def load_environment(spec, max_memory=None):
     require_regular_file(text, "environment map")
     import OpenImageIO as oiio
     with library_output() as printed:      # libpng's and OpenImageIO's own lines: folded in
-        buffer = oiio.ImageBuf(text)
-        error = buffer.geterror() if buffer.has_error else None
-        spec = buffer.spec()
+        reader = oiio.ImageInput.open(text)
+        error = (oiio.geterror() or "not a readable image") if reader is None else None
     if error is not None:
         raise PtraceError(f"{text}: cannot read the environment map "
                           f"({printed.one_line(error) or 'not a readable image'})")
-    pixels = spec.width * spec.height
-    budget.Budget.of(max_memory).charge(
-        text, f"the {spec.width}x{spec.height} environment map", pixels * budget.ENVIRONMENT_BYTES)
-    with library_output() as printed:
-        pixels = buffer.get_pixels(oiio.FLOAT)
-        error = buffer.geterror() if buffer.has_error else None
-    if error is not None:
-        raise PtraceError(f"{text}: cannot read the environment map "
-                          f"({printed.one_line(error) or 'its pixels could not be decoded'})")
-    if pixels is None or pixels.ndim != 3 or pixels.shape[2] < 3:
-        channels = None if pixels is None else pixels.shape[-1]
-        raise PtraceError(f"{text}: an environment map needs 3 colour channels, found {channels}")
-    return Environment(pixels[:, :, :3], name=text)
+    try:
+        spec = reader.spec()
+        if spec.nchannels < 3:
+            raise PtraceError(f"{text}: an environment map needs 3 colour channels, found "
+                              f"{spec.nchannels}")
+        if spec.width < 1 or spec.height < 1:
+            raise PtraceError(f"{text}: cannot read the environment map (it has no pixels)")
+        budget.Budget.of(max_memory).charge(
+            text, f"the {spec.width}x{spec.height} environment map",
+            spec.width * spec.height * budget.ENVIRONMENT_BYTES)
+        image = _read_bands(text, reader, spec, oiio)
+    finally:
+        reader.close()
+    return Environment(image, name=text)
+
+
+def _read_bands(text, reader, spec, oiio):
+    """The (H, W, 3) float32 pixels of an open image, decoded a band of rows at a time (a tile
+    row at a time for a tiled file)."""
+    image = np.empty((spec.height, spec.width, 3), np.float32)
+    step = band_rows(spec.width)
+    if spec.tile_height > 0:
+        step = max(spec.tile_height, step - step % spec.tile_height)
+    for start in range(0, spec.height, step):
+        end = min(start + step, spec.height)
+        with library_output() as printed:
+            if spec.tile_width > 0:
+                pixels = reader.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + start,
+                                           spec.y + end, spec.z, spec.z + max(spec.depth, 1),
+                                           0, 3, oiio.FLOAT)
+            else:
+                pixels = reader.read_scanlines(0, 0, spec.y + start, spec.y + end, spec.z, 0, 3,
+                                               oiio.FLOAT)
+            error = reader.geterror() if reader.has_error or pixels is None else None
+        if error is not None or pixels is None:
+            raise PtraceError(f"{text}: cannot read the environment map "
+                              f"({printed.one_line(error) or 'its pixels could not be decoded'})")
+        image[start:end] = np.asarray(pixels, dtype=np.float32).reshape(end - start,
+                                                                         spec.width, 3)
+    return image
 
 
 def environment_arrays(environment):
-    """(image (H, W, 3), marginal cdf (H + 1), conditional cdfs (H, W + 1), table (H, W) with
-    mean 1, so it is the density p over [0, 1)^2) of an Environment, or empty arrays."""
+    """(image (H, W, 3) float32, marginal cdf (H + 1) float64, conditional cdfs (H, W + 1)
+    float32, table (H, W) float32 with mean 1, so it is the density p over [0, 1)^2) of an
+    Environment, or empty arrays of the same types. The table and the cdfs are computed in
+    float64 a band of rows at a time and stored in float32."""
     if environment is None:
-        return np.zeros((0, 0, 3)), np.zeros(1), np.zeros((0, 1)), np.zeros((0, 0))
+        return (np.zeros((0, 0, 3), np.float32), np.zeros(1), np.zeros((0, 1), np.float32),
+                np.zeros((0, 0), np.float32))
     image = environment.image
     rows, columns = image.shape[:2]
-    sin_theta = np.sin((np.arange(rows) + 0.5) / rows * np.pi)
-    luminance = image @ LUMINANCE
-    # the cell means of the bilinear lookup: wrap around in phi, clamp at the poles
-    luminance = 0.75 * luminance + 0.125 * (np.roll(luminance, 1, axis=1)
-                                            + np.roll(luminance, -1, axis=1))
-    above = np.concatenate([luminance[:1], luminance[:-1]])
-    below = np.concatenate([luminance[1:], luminance[-1:]])
-    luminance = 0.75 * luminance + 0.125 * (above + below)
-    table = luminance * sin_theta[:, None]
-    mean = table.mean()
-    table = table + FLOOR * (mean if mean > 0 else 1.0)
-    table /= table.mean()
-    conditional = np.zeros((rows, columns + 1))
-    conditional[:, 1:] = np.cumsum(table, axis=1)
-    row_sums = conditional[:, -1].copy()
-    conditional /= row_sums[:, None]
-    conditional[:, -1] = 1.0
+    step = band_rows(columns)
+    table = np.empty((rows, columns), np.float32)
+    total = 0.0
+    for start in range(0, rows, step):
+        end = min(start + step, rows)
+        # the band and a row either side (clamped at the poles)
+        index = np.clip(np.arange(start - 1, end + 1), 0, rows - 1)
+        luminance = np.asarray(image[index], dtype=np.float64) @ LUMINANCE
+        # the cell means of the bilinear lookup: wrap around in phi, clamp at the poles
+        luminance = 0.75 * luminance + 0.125 * (np.roll(luminance, 1, axis=1)
+                                                + np.roll(luminance, -1, axis=1))
+        luminance = 0.75 * luminance[1:-1] + 0.125 * (luminance[:-2] + luminance[2:])
+        sin_theta = np.sin((np.arange(start, end) + 0.5) / rows * np.pi)
+        band = luminance * sin_theta[:, None]
+        total += float(band.sum())
+        table[start:end] = band
+    mean = total / (rows * columns)
+    floor = FLOOR * (mean if mean > 0 else 1.0)
+    scale = 1.0 / (mean + floor)     # the table's mean is then 1
+    conditional = np.empty((rows, columns + 1), np.float32)
+    conditional[:, 0] = 0.0
+    row_sums = np.empty(rows)
+    for start in range(0, rows, step):
+        end = min(start + step, rows)
+        band = (np.asarray(table[start:end], dtype=np.float64) + floor) * scale
+        table[start:end] = band
+        sums = np.cumsum(band, axis=1)
+        row_sums[start:end] = sums[:, -1]
+        conditional[start:end, 1:] = sums / sums[:, -1:]
+        conditional[start:end, -1] = 1.0
     marginal = np.zeros(rows + 1)
     marginal[1:] = np.cumsum(row_sums)
     marginal /= marginal[-1]
     marginal[-1] = 1.0
-    return image, marginal, np.ascontiguousarray(conditional), np.ascontiguousarray(table)
+    return image, marginal, conditional, table
 
 
 @njit(cache=True, inline="always")

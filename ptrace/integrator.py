@@ -117,11 +117,15 @@ def _f64(array, shape_tail=None):
 
 
 def primitive_scale(geometry):
-    """Largest absolute coordinate of each primitive: the magnitude its hit points carry."""
-    corners = (np.abs(geometry.vertices[geometry.faces]).max(axis=(1, 2))
-               if geometry.triangle_count else np.zeros(0))
-    spheres = np.abs(geometry.centers).max(axis=1, initial=0.0) + geometry.radii
-    return np.ascontiguousarray(np.concatenate([corners, spheres]))
+    """Largest absolute coordinate of each primitive: the magnitude its hit points carry
+    (a chunk of triangles at a time: no (F, 3, 3) array of corners)."""
+    n_tri = geometry.triangle_count
+    scale = np.empty(n_tri + geometry.sphere_count)
+    for first in range(0, n_tri, 1 << 16):
+        corners = np.abs(geometry.vertices[geometry.faces[first:first + (1 << 16)]])
+        corners.max(axis=(1, 2), out=scale[first:first + len(corners)])
+    scale[n_tri:] = np.abs(geometry.centers).max(axis=1, initial=0.0) + geometry.radii
+    return scale
 
 
 def scene_records(scene, light_tree=False):

@@ -19,20 +19,22 @@ import tempfile
 # the runs; re-measure it when the kernels change much).
 COLD_COMPILE_SECONDS = 60
 
-_NOTES = []   # one line per kind, in the order they happened
+_NOTES = {}   # kind -> (its first note, the files it concerned), in the order they happened
 
 
-def _note(text):
-    if text not in _NOTES:
-        _NOTES.append(text)
+def _note(text, kind=None, path=None):
+    """Note `text`, once per kind (default: the text itself), counting the files it concerns."""
+    _NOTES.setdefault(kind or text, (text, set()))[1].add(path)
 
 
 def cache_notes(clear=False):
-    """The notes about numba's cache so far (a fallback folder, a corrupt file recompiled);
-    clear=True empties the list, so that each is told once."""
-    notes = list(_NOTES)
+    """The notes about numba's cache so far (a fallback folder, corrupt files recompiled), one
+    line per kind, each with how many more files it concerned; clear=True empties the list, so
+    that each is told once."""
+    notes = [text if len(paths) < 2 else f"{text} (and {len(paths) - 1} more files like it)"
+             for text, paths in _NOTES.values()]
     if clear:
-        del _NOTES[:]
+        _NOTES.clear()
     return notes
 
 
@@ -154,7 +156,8 @@ def _guard_cache_files():
             return load_index(self)
         except Exception as error:   # noqa: BLE001 - garbage in the file: any unpickling error
             _note(f"numba's cache: {self._index_path} could not be read "
-                  f"({type(error).__name__}); recompiling and rewriting it")
+                  f"({type(error).__name__}); recompiling and rewriting it", "index",
+                  self._index_path)
             return {}
 
     def guarded_load_overload(self, sig, target_context):
@@ -162,7 +165,8 @@ def _guard_cache_files():
             return load_overload(self, sig, target_context)
         except Exception as error:   # noqa: BLE001 - as above, for a data file
             _note(f"numba's cache: a compiled kernel in {self._cache_path} could not be read "
-                  f"({type(error).__name__}); recompiling it")
+                  f"({type(error).__name__}); recompiling it", "data",
+                  (self._cache_path, self._name, repr(sig)))
             return None
 
     def guarded_save_overload(self, sig, data):
@@ -170,12 +174,39 @@ def _guard_cache_files():
             return save_overload(self, sig, data)
         except Exception as error:   # noqa: BLE001 - a full or read-only cache folder
             _note(f"numba's cache: a compiled kernel could not be saved in {self._cache_path} "
-                  f"({error}); it is compiled again next run")
+                  f"({error}); it is compiled again next run", "save",
+                  (self._cache_path, self._name, repr(sig)))
 
     index_file._load_index = guarded_load_index
     cache.load_overload = guarded_load_overload
     cache.save_overload = guarded_save_overload
+    index_file.save = _locked(index_file.save, exclusive=True)
+    index_file.load = _locked(index_file.load, exclusive=False)
     index_file._ptrace_guarded = True
+
+
+def _locked(method, exclusive):
+    """An IndexDataCacheFile method run holding a lock on its index (a .lock file beside it):
+    numba saves an entry as two replaced files (the index, then the data file it names), so two
+    processes compiling two kernels of one index at once (two closures of a stage, two
+    backends' records) could leave an index naming the other's data, and a third process reading
+    between the two writes could load one kernel for another's arguments. Saves are exclusive,
+    loads shared. Where no lock can be had (no fcntl, a read-only folder) numba's own way
+    stands."""
+    def locked(self, *args):
+        try:
+            import fcntl
+            handle = open(self._index_path + ".lock", "ab")
+        except (ImportError, OSError):
+            return method(self, *args)
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
+            except OSError:   # a filesystem without locks
+                pass
+            return method(self, *args)     # closing the file releases the lock
+    locked.__wrapped__ = method
+    return locked
 
 
 _DEPENDENCY_FOLDERS = []

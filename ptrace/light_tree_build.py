@@ -344,7 +344,11 @@ def _wide(lower, upper, center, radius2, power, axis, cos_o, sin_o, cos_e, two, 
     """The binary tree as the walk reads it, LEVELS levels a step (_wide_members): (lanes, kid,
     span). A lane holds its binary node's fields; unused lanes have power 0, so their importance
     is 0 everywhere, and an empty span."""
-    members, kid, end = _wide_members(np.ascontiguousarray(child, dtype=np.int64))
+    if child.shape[0] == 0:   # no lights (every record built without the tree): no compile
+        members = kid = np.zeros((0, LANES), dtype=np.int64)
+        end = np.zeros(0, dtype=np.int64)
+    else:
+        members, kid, end = _wide_members(np.ascontiguousarray(child, dtype=np.int64))
     fields = np.zeros((child.shape[0] + 1, FIELDS))     # the last row: an unused lane's
     fields[:-1, F_LO:F_LO + 3], fields[:-1, F_HI:F_HI + 3] = lower, upper
     fields[:-1, F_CENTER:F_CENTER + 3], fields[:-1, F_R2] = center, radius2

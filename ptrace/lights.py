@@ -171,8 +171,9 @@ def selection_weights(scene):
         elif kind == AMBIENT:
             weight[i] = np.pi * luminance[i]
         elif kind == ENVIRONMENT:
-            image = scene.environment.image if scene.environment is not None else np.ones(3)
-            weight[i] = np.pi * luminance[i] * float((image @ LUMINANCE).mean())
+            mean = scene.environment.mean_luminance() if scene.environment is not None \
+                else float(np.ones(3) @ LUMINANCE)
+            weight[i] = np.pi * luminance[i] * mean
     if prims.shape[0]:
         weight[-1] = emitted / r2
     return np.where(np.isfinite(weight) & (weight > 0.0), weight, 0.0)

@@ -292,6 +292,14 @@ def front_for(up):
     return turned / np.linalg.norm(turned)
 
 
+def _face_normals(geometry, chunk=1 << 16):
+    """The triangles' (unnormalised) normals, a chunk of triangles at a time."""
+    vertices, faces = np.asarray(geometry.vertices), np.asarray(geometry.faces)
+    for first in range(0, faces.shape[0], chunk):
+        corners = vertices[faces[first:first + chunk]]
+        yield np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
 def _face_on(scene, backward, up):
     """(backward, up) for a framing camera: as given, unless the scene is a flat model (triangles
     only, every one of them parallel to one plane) whose plane holds the view direction, which
@@ -302,14 +310,20 @@ def _face_on(scene, backward, up):
     geometry = scene.geometry
     if geometry.faces.shape[0] == 0 or np.asarray(geometry.radii).shape[0] > 0:
         return backward, up
-    corners = np.asarray(geometry.vertices)[np.asarray(geometry.faces)]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
-    total = float(lengths.sum())
-    if not total > 0.0 or float(np.abs(normals @ backward).sum()) > 1e-9 * total:
+    total, along, longest, normal = 0.0, 0.0, -1.0, None
+    for normals in _face_normals(geometry):
+        lengths = np.linalg.norm(normals, axis=1)
+        total += float(lengths.sum())
+        along += float(np.abs(normals @ backward).sum())
+        k = int(np.argmax(lengths))
+        if lengths[k] > longest:      # the first longest face's normal, as argmax finds it
+            longest, normal = float(lengths[k]), normals[k]
+    if not total > 0.0 or along > 1e-9 * total:
         return backward, up
-    normal = normals[int(np.argmax(lengths))] / float(lengths.max())
-    if float(np.linalg.norm(np.cross(normals, normal), axis=1).sum()) > 1e-9 * total:
+    normal = normal / longest
+    across = sum(float(np.linalg.norm(np.cross(normals, normal), axis=1).sum())
+                 for normals in _face_normals(geometry))
+    if across > 1e-9 * total:
         return backward, up     # not flat: faces in several orientations, all edge-on (a fence)
     side = float(normal @ up)
     if abs(side) > 1e-12:

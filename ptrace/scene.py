@@ -142,15 +142,19 @@ class Textures:
 
     @classmethod
     def from_images(cls, images, wraps=None, names=()):
-        """From a list of (H, W, 3) linear float arrays (top row first)."""
+        """From a list of (H, W, 3) linear float arrays (top row first). A single float32
+        texture is not copied: the texels share its memory."""
         if not images:
             return cls.empty()
         heights = np.array([image.shape[0] for image in images], dtype=np.int64)
         widths = np.array([image.shape[1] for image in images], dtype=np.int64)
         sizes = heights * widths
         offset = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        texels = np.concatenate([np.asarray(image, np.float32).reshape(-1, 3)
-                                 for image in images])
+        if len(images) == 1:      # its texels as they are (a view when float32 already)
+            texels = np.ascontiguousarray(np.asarray(images[0], np.float32).reshape(-1, 3))
+        else:
+            texels = np.concatenate([np.asarray(image, np.float32).reshape(-1, 3)
+                                     for image in images])
         wrap = np.zeros((len(images), 2), np.int64) if wraps is None \
             else np.array(wraps, dtype=np.int64).reshape(-1, 2)
         return cls(texels, offset, widths, heights, wrap, tuple(names))
@@ -277,6 +281,9 @@ class Scene:
     vertex_colours: np.ndarray = None
     textures: Textures = None
     file_cameras: tuple = ()        # FileCamera records of the file's own cameras (glTF)
+    # what the file asks of a render where the caller does not say (a Mitsuba scene's film,
+    # sampler and integrator): any of resolution (W, H), spp, max_depth, rr_depth
+    render_defaults: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.uv is None:
@@ -326,8 +333,11 @@ def area_weighted_normals(vertices, faces):
     """
     normals = np.zeros_like(vertices)
     if len(faces):
-        p0, p1, p2 = (vertices[faces[:, i]] for i in range(3))
-        face_normals = np.cross(p1 - p0, p2 - p0)   # twice the area, same for every corner
+        # twice the area, same for every corner; a chunk of faces at a time
+        face_normals = np.empty((len(faces), 3), dtype=np.result_type(vertices, np.float64))
+        for first in range(0, len(faces), 1 << 16):
+            p0, p1, p2 = (vertices[faces[first:first + (1 << 16), i]] for i in range(3))
+            face_normals[first:first + len(p0)] = np.cross(p1 - p0, p2 - p0)
         for corner in range(3):
             np.add.at(normals, faces[:, corner], face_normals)
     length = np.linalg.norm(normals, axis=1)

@@ -245,3 +245,55 @@ def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypat
     assert (tmp_path / "error_vs_time_CBbunny.png").exists()
     assert json.loads((tmp_path / "evt.json").read_text()) == data
 
+
+
+def test_mitsuba_scenes_z_test_tells_agreeing_images_from_differing_ones():
+    """Batches drawn from one distribution agree; a 5 % brighter one in a quarter of the
+    pixels differs; a pixel with no spread agrees only with an equal mean."""
+    pytest.importorskip("scipy")
+    import numpy as np
+
+    from benchmarks.mitsuba_scenes import z_test
+    rng = np.random.default_rng(7)
+    truth = rng.uniform(0.2, 1.0, (1, 20, 30, 3))
+    ours = truth + rng.normal(0, 0.05, (8, 20, 30, 3))
+    theirs = truth + rng.normal(0, 0.05, (8, 20, 30, 3))
+    share, agrees = z_test(ours, theirs)
+    assert agrees and share < 0.03
+    brighter = theirs.copy()
+    brighter[:, :5] *= 1.05
+    assert not z_test(ours, brighter)[1]
+    flat = np.ones((4, 1, 1, 3))
+    assert z_test(flat, flat.copy()) == (0.0, True)
+    assert z_test(flat, 2 * flat) == (1.0, False)
+
+
+def test_mitsuba_scenes_quick(tmp_path):
+    """The quick run renders its two scenes with both renderers and reports each: every number
+    finite, the means within 10 % at 8 spp, and ptrace's notes of each scene."""
+    pytest.importorskip("mitsuba")
+    from benchmarks import mitsuba_scenes
+    output = tmp_path / "mitsuba_scenes.md"
+    threads = numba.get_num_threads()
+    try:
+        assert mitsuba_scenes.main(["--quick", "--output", str(output)]) == 0
+    finally:
+        numba.set_num_threads(threads)
+    text = output.read_text()
+    scenes, loading = text.split("## Loading a large mesh")
+    rows = [line.split("|")[1:-1] for line in scenes.splitlines()
+            if line.startswith("| ") and not line.startswith("| scene")]
+    assert [r[0].strip() for r in rows] == list(mitsuba_scenes.QUICK_SCENES)
+    loads = [line.split("|")[1:-1] for line in loading.splitlines()
+             if line.startswith("| ") and not line.startswith("| form")]
+    assert [r[0].strip() for r in loads] == ["ply", "serialized"]
+    assert all(float(cell.strip().rstrip("x").replace(",", "")) > 0 for r in loads
+               for cell in r[1:])
+    for row in rows:
+        numbers = [float(cell.strip().rstrip("%")) for cell in row[2:9]]
+        assert all(value >= 0 for value in numbers), row
+        assert abs(numbers[4] - 1) < 0.1, row           # the timing run's mean ratio
+        assert row[9].strip() in ("agrees", "differs")
+    for name in mitsuba_scenes.QUICK_SCENES:
+        assert f"### {name}\n\n- " in text
+    assert "the file's sensor and integrator render with -r 24 18, -s 8" in text

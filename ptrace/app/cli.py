@@ -124,7 +124,7 @@ def run(argv):
         [denoised_path(output)] if args.denoise else []))
     output, aov_names, budget = job.output, job.aov_names, job.budget
     aovs = {} if (aov_names or args.denoise) else None
-    scene, camera = scene_and_camera(args, budget)
+    scene, camera = scene_and_camera(args, budget, job)
     width, height = args.resolution
     if args.info:
         print(json.dumps(scene_info(scene, camera), indent=2))

@@ -150,13 +150,15 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     add("-t", "--threads", type=positive_int("threads"), default=None,
         help="render threads (default: all cores; with --workers or --scheduler, threads per "
              "task on each worker, default its share of its machine's cores)")
-    add("-s", "--spp", type=int_range("samples per pixel (-s)", "spp"), default=1,
-        help=f"camera rays per pixel, {range_text('spp')} (default 1)")
+    add("-s", "--spp", type=int_range("samples per pixel (-s)", "spp"), default=None,
+        help=f"camera rays per pixel, {range_text('spp')} (default 1, or a Mitsuba scene's "
+             f"sample_count)")
     add("-l", "--light-samples", type=int_range("light samples (-l)", "light_samples"),
         default=1, help=f"samples per area light per shading point, "
                         f"{range_text('light_samples')} (default 1)")
-    add("-m", "--max-depth", type=int_range("max depth (-m)", "max_depth"), default=1,
-        help=f"maximum ray depth, {range_text('max_depth')} (default 1)")
+    add("-m", "--max-depth", type=int_range("max depth (-m)", "max_depth"), default=None,
+        help=f"maximum ray depth, {range_text('max_depth')} (default 1, or a Mitsuba scene's "
+             f"max_depth - 1)")
     add("-a", "--adaptive", nargs=2, metavar=("BATCH", "TOL"), default=None,
         help="adaptive sampling: samples per batch and tolerance")
     add("-H", "--hemisphere", action="store_true",
@@ -180,11 +182,12 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
              "unless training shows it does not lower the variance) or off (the default); "
              "in-process renders of the path integrator without -H or -a")
     add("-r", "--resolution", nargs=2, type=int_at_least("resolution (-r)", 1, MAX_SIDE),
-        metavar=("W", "H"), default=(800, 600),
+        metavar=("W", "H"), default=None,
         help=f"image size, 1 to {MAX_SIDE} per side and the image buffers (about "
              f"{PIXEL_BYTES} bytes a pixel) within --max-memory; a course scene's "
              f"camera (and -c's) keeps the focal length, so it crops; a mesh file's default "
-             f"camera and --eye's frame the view at any size (default 800 600)")
+             f"camera and --eye's frame the view at any size (default 800 600, or a Mitsuba "
+             f"scene's film)")
     add("-f", "--output", default=None, metavar="FILE",
         help="output image, .png (the course's 8-bit curve) or .exr (linear float); "
              "default SCENE_NAME.png in the current directory")
@@ -248,12 +251,21 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     return parser
 
 
+# the values of -s, -m and -r when neither the command line nor the scene gives them
+FALLBACKS = {"spp": 1, "max_depth": 1, "resolution": (800, 600)}
+
+
 def parse(parser, argv):
     """The arguments of argv (a vector flag's negative value attached: `--eye -1,2,3`), -a's
     two words read as (batch, tolerance)."""
     from .cli_camera import attach_negative_vectors
     args = parser.parse_args(attach_negative_vectors(argv))
     check_numbers(args)
+    # the flags given, which a scene's own render settings never override (scene_defaults)
+    args.given = {name for name in FALLBACKS if getattr(args, name, None) is not None}
+    for name, value in FALLBACKS.items():
+        if getattr(args, name, None) is None:
+            setattr(args, name, value)
     if args.adaptive is not None:
         batch = int_range("adaptive batch (-a)", "spp")(args.adaptive[0])
         tolerance = positive_float("adaptive tolerance")(args.adaptive[1])
@@ -309,7 +321,8 @@ def settings_of(args):
         light_samples=args.light_samples, max_depth=args.max_depth, adaptive=args.adaptive,
         hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
         light_sampler=args.light_sampler, bvh_split=args.bvh_split,
-        guiding=getattr(args, "guiding", "off"))
+        guiding=getattr(args, "guiding", "off"),
+        **({"rr_depth": args.rr_depth} if getattr(args, "rr_depth", None) else {}))
 
 
 def plan(args, files_of):
@@ -351,14 +364,37 @@ def plan(args, files_of):
     return Plan(settings, budget, output, files, aov_names, buffers)
 
 
-def scene_and_camera(args, budget):
+def scene_defaults(args, scene):
+    """Take the scene's own render settings (Scene.render_defaults: a Mitsuba scene's film,
+    sampler and integrator) for -r, -s, -m and the roulette depth where the command line did
+    not give them (args.given). Returns whether any was taken."""
+    defaults = getattr(scene, "render_defaults", None) or {}
+    given = getattr(args, "given", set(FALLBACKS))
+    taken = False
+    for name in ("resolution", "spp", "max_depth", "rr_depth"):
+        if name in defaults and name not in given:
+            setattr(args, name, tuple(defaults[name]) if name == "resolution" else
+                    defaults[name])
+            taken = True
+    return taken
+
+
+def scene_and_camera(args, budget, job=None):
     """The scene of the flags (its file, -e's environment, a mesh file's default light unless
-    --no-default-light) and the camera they give at -r's size (ptrace.app.cli_camera)."""
+    --no-default-light) and the camera they give at -r's size (ptrace.app.cli_camera). The
+    scene's own render settings fill in -r, -s and -m where they were not given
+    (scene_defaults); job (the Plan) then gets the settings and buffers of the result."""
     from .. import load
     from .cli_camera import camera_from_flags, check_pointing
     check_pointing(args)
     scene = load(args.scene, default_light=not args.no_default_light, max_memory=budget,
                  defines=dict(getattr(args, "defines", None) or ()))
+    if scene_defaults(args, scene) and job is not None and job.settings is not None:
+        from ..rendering.renderer import check_frame
+        job.settings = settings_of(args)
+        job.buffers = check_frame(*args.resolution, args.crop,
+                                  features=bool(job.aov_names or args.denoise),
+                                  max_memory=budget)
     if args.environment is not None:
         from ..environment import load_environment
         scene = scene.with_environment(load_environment(args.environment, max_memory=budget))

@@ -270,7 +270,8 @@ def prepare(args):
                           f"got {args.threads}")
     width, height = args.resolution
     view_render.sessions_that_fit(width, height, MAX_SESSIONS, "-r")
-    scene, camera = options.scene_and_camera(args, job.budget)   # -e, -c, --eye ..., -b, -d
+    scene, camera = options.scene_and_camera(args, job.budget, job)   # -e, -c, --eye ..., -b, -d
+    view_render.sessions_that_fit(*args.resolution, MAX_SESSIONS, "-r")   # a file's film
     check_render(scene, job.settings.accel, job.buffers, job.budget)
     return scene, job.settings, camera, tuple(job.files)
 

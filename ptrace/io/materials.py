@@ -18,6 +18,13 @@ MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has 
 DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (docs/usage.md says so)
 
 
+BAND_TEXELS = 1 << 18    # texels of a band of rows: images are converted a band at a time
+
+
+def _band_rows(width):
+    return max(1, BAND_TEXELS // max(int(width), 1))
+
+
 class TexturePool:
     """The textures a file's materials use, each image converted once to linear RGB."""
 
@@ -37,25 +44,36 @@ class TexturePool:
         if key not in self._index:
             if hasattr(image, "size") and hasattr(image, "mode"):    # a PIL image, not decoded
                 budget.current().image(self.path or name, *image.size, f"{name!r}")
-            pixels = linear_rgb(image, srgb, encoded)
-            self._index[key] = len(self.images)
-            self.images.append(pixels)
-            self.wraps.append(tuple(wrap))
-            self.names.append(name)
+            self._append(key, linear_rgb(image, srgb, encoded), wrap, name)
         return self._index[key]
+
+    def add_file(self, path, srgb, wrap=(REPEAT, REPEAT), name="", what="", model=None):
+        """Index of the texture of an image file (read_texture_file: decoded and converted a
+        band of rows at a time); the same file with the same options is read once. Raises
+        ValueError if it cannot be read, BudgetError as read_image_file does."""
+        key = (path, srgb, tuple(wrap))
+        if key not in self._index:
+            self._append(key, read_texture_file(path, srgb, what, model), wrap, name)
+        return self._index[key]
+
+    def _append(self, key, pixels, wrap, name):
+        self._index[key] = len(self.images)
+        self.images.append(pixels)
+        self.wraps.append(tuple(wrap))
+        self.names.append(name)
 
     def mean(self, index):
         """The mean linear colour of texture `index`."""
-        return self.images[index].reshape(-1, 3).mean(axis=0)
+        return np.mean(self.images[index].reshape(-1, 3), axis=0, dtype=np.float64)
 
 
-def image_values(image):
-    """(H, W, C) float32 values in [0, 1] of a PIL image or an array, and whether they came
-    from integers (8- or 16-bit: encoded values, sRGB for colour) rather than floats.
-
-    Every PNG colour type becomes colour here: a palette image is expanded through its
-    palette (its values are indices, not grey levels), 16-bit grey (Pillow's I;16 modes, or I)
-    is scaled by 65535, 1-bit by 1; CMYK and YCbCr JPEGs are converted to RGB."""
+def _stored_values(image):
+    """(H, W, C) array of an image's stored values (a PIL image's as numpy sees them), the
+    divisor that scales integers to [0, 1] (None: floats, taken as they are), and whether the
+    values came from integers. Every PNG colour type becomes colour here: a palette image is
+    expanded through its palette (its values are indices, not grey levels), 16-bit grey
+    (Pillow's I;16 modes, or I) is scaled by 65535, 1-bit by 1; CMYK and YCbCr JPEGs are
+    converted to RGB."""
     if hasattr(image, "mode"):                       # a PIL image
         mode = image.mode
         if mode in ("P", "PA"):
@@ -66,9 +84,9 @@ def image_values(image):
             image = image.convert("L")
         pixels = np.asarray(image)
         if mode.startswith("I;16") or mode == "I":
-            return (pixels.astype(np.float64) / 65535.0).astype(np.float32)[:, :, None], True
+            return pixels.reshape(pixels.shape[:2] + (1,)), 65535.0, True
         if mode == "F":
-            return pixels.astype(np.float32)[:, :, None], False
+            return pixels.reshape(pixels.shape[:2] + (1,)), None, False
     else:
         pixels = np.asarray(image)
     if pixels.ndim == 2:
@@ -76,29 +94,41 @@ def image_values(image):
     if pixels.ndim != 3 or pixels.shape[0] == 0 or pixels.shape[1] == 0:
         raise ValueError(f"an image of shape {pixels.shape} is not a picture")
     if pixels.dtype == np.uint8:
-        return pixels.astype(np.float32) / 255.0, True
+        return pixels, 255.0, True
     if pixels.dtype == np.uint16:
-        return (pixels.astype(np.float64) / 65535.0).astype(np.float32), True
+        return pixels, 65535.0, True
     if pixels.dtype == bool:
-        return pixels.astype(np.float32), True
-    return pixels.astype(np.float32), False
+        return pixels, 1.0, True
+    return pixels, None, False
 
 
-def linear_rgb(image, srgb, encoded=None):
-    """(H, W, 3) float32 linear RGB of an image (PIL or array; 8- or 16-bit or float), top row
-    first: grey becomes grey in every channel, alpha is dropped. With srgb, integer-encoded
-    values are decoded from sRGB by OpenImageIO's colour conversion
-    (ImageBufAlgo.colorconvert), not a formula of ours; float images are linear already.
-    encoded overrides whether the values came from integers (an image file's values that
-    OpenImageIO has already scaled to floats)."""
+def _scaled(stored, divisor):
+    """float32 values in [0, 1] (integers) or as they are (floats) of stored values."""
+    if divisor == 255.0:
+        return stored.astype(np.float32) / 255.0
+    if divisor == 65535.0:
+        return (stored.astype(np.float64) / 65535.0).astype(np.float32)
+    return stored.astype(np.float32)
+
+
+def image_values(image):
+    """(H, W, C) float32 values in [0, 1] of a PIL image or an array, and whether they came
+    from integers (8- or 16-bit: encoded values, sRGB for colour) rather than floats; the
+    colour types as _stored_values takes them."""
+    stored, divisor, from_integers = _stored_values(image)
+    return _scaled(stored, divisor), from_integers
+
+
+def _linear_band(values, decode):
+    """(h, W, 3) float32 linear RGB of a band of (h, W, C) float32 values: grey becomes grey in
+    every channel, alpha is dropped; with decode, the values are decoded from sRGB by
+    OpenImageIO's colour conversion. ValueError for a value that is not finite or beyond
+    ptrace.io.limits.LIMIT."""
     import OpenImageIO as oiio
-    values, from_integers = image_values(image)
-    encoded = from_integers if encoded is None else encoded
-    channels = values.shape[2]
-    if channels in (1, 2):       # grey (and alpha): the grey in every channel
+    if values.shape[2] in (1, 2):      # grey (and alpha): the grey in every channel
         values = np.repeat(values[:, :, :1], 3, axis=2)
-    values = np.ascontiguousarray(values[:, :, :3])
-    if srgb and encoded:
+    values = np.ascontiguousarray(values[:, :, :3], dtype=np.float32)
+    if decode:
         buffer = oiio.ImageBuf(values)
         converted = oiio.ImageBufAlgo.colorconvert(buffer, "sRGB", "linear")
         if converted.has_error:
@@ -109,7 +139,76 @@ def linear_rgb(image, srgb, encoded=None):
     words = problem(values)      # finite, but an emission it scales would overflow
     if words is not None:
         raise ValueError(f"the image's values: {words}")
-    return values.astype(np.float32)
+    return values
+
+
+def linear_rgb(image, srgb, encoded=None):
+    """(H, W, 3) float32 linear RGB of an image (PIL or array; 8- or 16-bit or float), top row
+    first: grey becomes grey in every channel, alpha is dropped. With srgb, integer-encoded
+    values are decoded from sRGB by OpenImageIO's colour conversion
+    (ImageBufAlgo.colorconvert), not a formula of ours; float images are linear already.
+    encoded overrides whether the values came from integers (an image file's values that
+    OpenImageIO has already scaled to floats). Converted a band of rows at a time into the
+    result: the float working copies stay a few MiB."""
+    stored, divisor, from_integers = _stored_values(image)
+    encoded = from_integers if encoded is None else encoded
+    height, width = stored.shape[:2]
+    result = np.empty((height, width, 3), np.float32)
+    step = _band_rows(width)
+    for start in range(0, height, step):
+        result[start:start + step] = _linear_band(_scaled(stored[start:start + step], divisor),
+                                                  srgb and encoded)
+    return result
+
+
+def _open_image(path, model, what):
+    """(reader, spec) of an image file opened by OpenImageIO, its size charged to the budget
+    (read_image_file says how). The caller closes the reader."""
+    import OpenImageIO as oiio
+    with library_output() as printed:     # libpng's own lines: folded into the message
+        reader = oiio.ImageInput.open(path)
+        error = (oiio.geterror() or "not a readable image") if reader is None else None
+    if error is not None:
+        raise ValueError(printed.one_line(error) or "not a readable image")
+    spec = reader.spec()
+    if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
+        reader.close()
+        raise ValueError("the image has no pixels")
+    try:
+        budget.current().image(model or path, spec.width, spec.height, what or repr(path))
+    except BaseException:
+        reader.close()
+        raise
+    return reader, spec
+
+
+def _bands(reader, spec, channels):
+    """The image's pixels, (h, W, channels) float32 in the file's own scale, a band of rows
+    (whole tile rows for a tiled file) at a time. ValueError if they cannot be decoded."""
+    import OpenImageIO as oiio
+    step = _band_rows(spec.width)
+    if spec.tile_height > 0:
+        step = max(spec.tile_height, step - step % spec.tile_height)
+    for start in range(0, spec.height, step):
+        end = min(start + step, spec.height)
+        with library_output() as printed:
+            if spec.tile_width > 0:
+                pixels = reader.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + start,
+                                           spec.y + end, spec.z, spec.z + max(spec.depth, 1),
+                                           0, channels, oiio.FLOAT)
+            else:
+                pixels = reader.read_scanlines(0, 0, spec.y + start, spec.y + end, spec.z, 0,
+                                               channels, oiio.FLOAT)
+            error = reader.geterror() if reader.has_error or pixels is None else None
+        if error is not None or pixels is None:
+            raise ValueError(printed.one_line(error) or "its pixels could not be decoded")
+        yield start, np.asarray(pixels, dtype=np.float32).reshape(end - start, spec.width,
+                                                                  channels)
+
+
+def _encoded(spec):
+    import OpenImageIO as oiio
+    return spec.format.basetype in (oiio.UINT8, oiio.UINT16, oiio.INT8, oiio.INT16)
 
 
 def read_image_file(path, what="", model=None):
@@ -120,25 +219,30 @@ def read_image_file(path, what="", model=None):
     (default path) and `what` (how the model uses it) if its size, read from its header before
     any pixel is decoded, passes the memory budget. The caller has checked that path is a
     regular file inside the model's folder."""
-    import OpenImageIO as oiio
-    with library_output() as printed:     # libpng's own lines: folded into the message
-        buffer = oiio.ImageBuf(path)
-        error = buffer.geterror() if buffer.has_error else None
-        spec = buffer.spec()
-    if error is not None:
-        raise ValueError(printed.one_line(error) or "not a readable image")
-    if spec.width <= 0 or spec.height <= 0 or spec.nchannels <= 0:
-        raise ValueError("the image has no pixels")
-    budget.current().image(model or path, spec.width, spec.height, what or repr(path))
-    with library_output() as printed:
-        pixels = buffer.get_pixels(oiio.FLOAT)
-        error = buffer.geterror() if buffer.has_error else None
-    if error is not None:
-        raise ValueError(printed.one_line(error) or "its pixels could not be decoded")
-    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width,
-                                                          spec.nchannels)
-    encoded = spec.format.basetype in (oiio.UINT8, oiio.UINT16, oiio.INT8, oiio.INT16)
-    return pixels, encoded
+    reader, spec = _open_image(path, model, what)
+    try:
+        pixels = np.empty((spec.height, spec.width, spec.nchannels), np.float32)
+        for start, band in _bands(reader, spec, spec.nchannels):
+            pixels[start:start + len(band)] = band
+    finally:
+        reader.close()
+    return pixels, _encoded(spec)
+
+
+def read_texture_file(path, srgb, what="", model=None):
+    """(H, W, 3) float32 linear RGB of an image file, as linear_rgb(read_image_file(...))
+    gives it (with srgb, integer-encoded values decoded from sRGB), decoded and converted a
+    band of rows at a time: reading it needs little more than its result. Raises as
+    read_image_file does."""
+    reader, spec = _open_image(path, model, what)
+    try:
+        result = np.empty((spec.height, spec.width, 3), np.float32)
+        decode = srgb and _encoded(spec)
+        for start, band in _bands(reader, spec, min(spec.nchannels, 3)):
+            result[start:start + len(band)] = _linear_band(band, decode)
+    finally:
+        reader.close()
+    return result
 
 
 def conductor_from_colour(colour):

@@ -106,10 +106,8 @@ def _load_mesh(path, default_light):
         geometry = accel.Geometry(vertices=vertices, faces=faces)
     except ValueError as error:
         raise SceneError(path, f"invalid mesh: {error}") from error
-    corners = vertices[faces]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     framed = not any(c.kind == gltf_cameras.PERSPECTIVE for c in cameras)
-    if framed and not np.abs(normals[:, 2]).sum() > 1e-9 * np.linalg.norm(normals, axis=1).sum():
+    if framed and not _facing_view(geometry.vertices, geometry.faces):
         notes.append("mesh file: every face is edge-on to the default view along the Z axis "
                      "(a flat model in a plane that holds it): the default camera looks at it "
                      "from the plane's normal instead")
@@ -176,6 +174,10 @@ def _read_with_trimesh(path, extension):
             notes += elements.pop("notes", [])
             faces = elements.get("face", (0,))[0]
             budget.current().triangles(path, faces, f"its {faces:,} faces")
+            plain = ply.read_plain_binary(path, data)
+            if plain is not None:      # positions and triangles alone: read without trimesh
+                del data
+                return _plain_parts(path, *plain, notes)
         if extension == ".stl":
             _check_stl(path, data)
     quiet = logging.getLogger("trimesh")
@@ -222,6 +224,29 @@ def _read_with_trimesh(path, extension):
     if document is not None and len(parts["faces"]) == 0:
         parts["why_empty"] = gltf.why_empty(document)
     return parts
+
+
+def _plain_parts(path, vertices, faces, notes):
+    """The parts of a mesh of positions and triangles alone (ptrace.io.ply.read_plain_binary):
+    its vertices merged as trimesh's processing merges them, one default diffuse material."""
+    vertices, faces, dropped = ply.merge_vertices(vertices, faces)
+    record = {"kind": DIFFUSE, "albedo": (DEFAULT_ALBEDO,) * 3, "name": "default"}
+    return {"vertices": vertices, "faces": faces,
+            "material_index": np.zeros(len(faces), np.int32), "materials": [record],
+            "uv": None, "vertex_colours": None, "textures": TexturePool(path), "notes": notes,
+            "lights": [], "cameras": (), "defaulted": len(faces), "non_finite": dropped}
+
+
+def _facing_view(vertices, faces, chunk=1 << 16):
+    """Whether any face turns toward the default view along Z: the faces' normals' |z| summed
+    is more than 1e-9 of their lengths summed (a chunk of faces at a time)."""
+    along, length = 0.0, 0.0
+    for first in range(0, len(faces), chunk):
+        corners = vertices[faces[first:first + chunk]]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        along += float(np.abs(normals[:, 2]).sum())
+        length += float(np.linalg.norm(normals, axis=1).sum())
+    return along > 1e-9 * length
 
 
 def _assemble(path, scene, document, missing, notes, untextured):

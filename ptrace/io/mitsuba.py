@@ -13,9 +13,11 @@ import numpy as np
 
 import accel
 
+from .. import budget
 from ..budget import BudgetError
 from ..environment import Environment
 from ..errors import SceneError
+from ..rendering.settings import RANGES
 from ..scene import (
     DIRECTIONAL,
     EMISSION,
@@ -38,6 +40,7 @@ from .mitsuba_xml import Colour, Plugin, Reader
 
 SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 # integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
+UPSAMPLE, FINE_ENVMAP = 16, 2048     # latlong_from_mitsuba's resampling of small maps
 INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
                "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
 
@@ -73,9 +76,11 @@ class Builder:
 
     def build(self):
         scene = self.reader.read()
+        self.notes.extend(self.reader.notes)
         if self.reader.upgrade:
             self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
                               f"upgrades it")
+        self._count_meshes(scene)
         for plugin in scene.children:
             handler = getattr(self, "_" + plugin.tag, None)
             if handler is not None:
@@ -85,6 +90,23 @@ class Builder:
         return self._finish()
 
     # --- shapes ---------------------------------------------------------------------------
+
+    def _count_meshes(self, scene):
+        """Check the memory budget (ptrace.budget) for the triangles of every mesh file the
+        scene places (mitsuba_shapes.file_triangles), before any of them is read; each is
+        charged again as it is read."""
+        total, count = 0, 0
+        for shape in scene.children:
+            if shape.tag == "shape" and shape.type in ("obj", "ply", "serialized") and \
+                    shape.params.get("filename") is not None:
+                path = self.reader.resolve(shape, shape.string("filename"))
+                total += shapes.file_triangles(shape, path)
+                count += 1
+        if count:
+            budget.current().charge(
+                self.path, f"the {total:,} triangles of its {count} mesh "
+                           f"file{'s' if count > 1 else ''}", 0,
+                total * budget.LOAD_BYTES_PER_TRIANGLE)
 
     def _shape(self, shape):
         if shape.type not in SHAPES:
@@ -231,7 +253,7 @@ class Builder:
             pixels = np.repeat(pixels[:, :, :1], 3, axis=2)
         scale = emitter.float("scale", 1.0)
         image = latlong_from_mitsuba(np.asarray(pixels[:, :, :3], np.float64),
-                                     transform.matrix[:3, :3]) * scale
+                                     transform.inverse[:3, :3]) * scale
         return Environment(np.maximum(image, 0.0), name=path)
 
     # --- sensor and settings --------------------------------------------------------------
@@ -240,24 +262,44 @@ class Builder:
         if sensor.type not in ("perspective", "thinlens"):
             sensor.fail(f"sensor type {sensor.type!r} is not supported (ptrace renders "
                         f"perspective and thinlens)")
+        from ..rendering.renderer import MAX_SIDE
         film = self._one(sensor, "film")
-        width, height = 768, 576
+        width, height = 768, 576        # Mitsuba's film without a <film>
         if film is not None:
             width, height = film.integer("width", 768), film.integer("height", 576)
-            if not (width >= 1 and height >= 1):
-                film.fail("width and height must be at least 1")
+            if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+                film.fail(f"width and height must be from 1 to {MAX_SIDE}, not "
+                          f"{width}x{height}")
+        if not self.cameras:    # the first sensor's, as Mitsuba renders the first
             self.settings["resolution"] = (width, height)
+        if film is not None:
             if any(film.has(k) for k in ("crop_offset_x", "crop_offset_y", "crop_width",
                                          "crop_height")):
                 self.notes.append("<film>: its crop window ignored: ptrace renders the whole "
                                   "image (-p crops)")
+            filters = [c for c in film.children if c.tag == "rfilter"] + \
+                [v for v in film.params.values() if isinstance(v, Plugin) and v.tag == "rfilter"]
+            kind = filters[0].type if filters else "gaussian"
+            if kind != "box":
+                self.notes.append(f"<film>: its {kind} reconstruction filter (Mitsuba's default: "
+                                  f"gaussian) not applied: ptrace's pixels weigh their samples "
+                                  f"equally (a box), the same mean, a sharper image")
             for child in film.children:
                 child._read.update(child.params)
             film._read.update(film.params)
         sampler = self._one(sensor, "sampler")
+        spp = 4     # Mitsuba's independent sampler without a <sampler>
         if sampler is not None:
-            self.settings["spp"] = sampler.integer("sample_count", 4)
+            spp = sampler.integer("sample_count", 4)
+            low, high = RANGES["spp"]
+            if not low <= spp <= high:
+                sampler.fail(f"sample_count must be from {low} to {high}, not {spp}")
             sampler._read.update(sampler.params)
+            self.notes.append(f"<sampler type=\"{sampler.type}\">: ptrace draws its own "
+                              f"points (--sampler, Owen-scrambled Sobol' by default) for its "
+                              f"sample_count: the same expected image")
+        if not self.cameras:
+            self.settings["spp"] = spp
         yfov = self._yfov(sensor, width / height)
         matrix = sensor.transform("to_world").matrix
         axes = matrix[:3, :3] @ np.diag([-1.0, 1.0, -1.0])    # Mitsuba: left, up, forward
@@ -326,6 +368,12 @@ class Builder:
         depth = integrator.integer("max_depth", -1)
         if integrator.type == "direct":
             depth = 2
+        elif integrator.has("rr_depth"):
+            rr_depth = integrator.integer("rr_depth")
+            low, high = RANGES["rr_depth"]
+            if not low <= rr_depth:
+                integrator.fail(f"rr_depth {rr_depth} is less than {low}")
+            self.settings["rr_depth"] = min(rr_depth, high)
         elif integrator.type != "path":
             self.notes.append(f"<integrator type=\"{integrator.type}\">: rendered by ptrace's "
                               f"path tracer")
@@ -348,7 +396,9 @@ class Builder:
         material_index = np.concatenate(self.tri_materials + [np.array(self.sphere_materials,
                                                                        np.int32)])
         uv = np.concatenate(self.uvs) if self.materials.textured and self.uvs else None
-        self._settings_note()
+        if "max_depth" not in self.settings:    # Mitsuba's path tracer without an <integrator>
+            self.settings["max_depth"] = -1
+        defaults = self._render_defaults()
         if not self.lights and self.environment is None and \
                 not any(r["kind"] == EMISSION for r in self.materials.records):
             self.notes.append("no emitters in the scene: the image is black, as Mitsuba's")
@@ -363,41 +413,57 @@ class Builder:
                       lights=Lights.from_records(self.lights), notes=self.notes, uv=uv,
                       textures=Textures.from_images(self.pool.images, self.pool.wraps,
                                                     self.pool.names),
-                      file_cameras=tuple(self.cameras))
+                      file_cameras=tuple(self.cameras), render_defaults=defaults)
         if self.environment is not None:
             scene = scene.with_environment(self.environment)
         return scene
 
-    def _settings_note(self):
-        settings = self.settings
+    def _render_defaults(self):
+        """Scene.render_defaults of the file's first sensor's film and sampler and of its
+        integrator (Mitsuba's own defaults where the file leaves one out), with a note that
+        says them as ptrace's flags: max_depth counts the camera's segment, -m does not; an
+        unbounded max_depth (-1) is ptrace's largest -m."""
+        settings = dict(self.settings)
+        depth = settings.pop("max_depth")
+        high = RANGES["max_depth"][1]
+        settings["max_depth"] = high if depth < 0 else min(max(depth - 1, 0), high)
+        if depth == 0:
+            self.notes.append("<integrator>: max_depth 0 (Mitsuba renders nothing) rendered as "
+                              "-m 0: the emitters seen, nothing lit")
         flags = []
         if "resolution" in settings:
             flags.append("-r {} {}".format(*settings["resolution"]))
         if "spp" in settings:
             flags.append(f"-s {settings['spp']}")
-        depth = settings.get("max_depth")
-        if depth is not None:
-            flags.append("-m 10000" if depth < 0 else f"-m {max(depth - 1, 0)}")
-        if flags:
-            self.notes.append(f"the file's film, sampler and integrator ask for "
-                              f"{' '.join(flags)}; ptrace renders what its flags say")
+        flags.append(f"-m {settings['max_depth']}")
+        if "rr_depth" in settings:
+            flags.append(f"roulette from depth {settings['rr_depth']}")
+        self.notes.append(f"the file's sensor and integrator render with {', '.join(flags)} "
+                          f"where the command line does not say")
+        return settings
 
 
-def latlong_from_mitsuba(image, rotation):
-    """ptrace's lat-long image (ptrace.environment's mapping) of a Mitsuba envmap image under
-    the rotation of its to_world: each pixel's direction looked up, bilinearly, where Mitsuba
-    finds it (u = atan2(x, -z) / 2 pi, v = acos(y) / pi in the envmap's own frame)."""
+def latlong_from_mitsuba(image, inverse):
+    """ptrace's lat-long image (ptrace.environment's mapping) of a Mitsuba envmap image whose
+    to_world's inverse (as Mitsuba keeps it: Transform.inverse) is the 3 x 3 `inverse`: each
+    pixel's direction d looked up, bilinearly, where Mitsuba finds it (v = inverse d, not
+    normalised, as Mitsuba's; u = atan2(v.x, -v.z) / 2 pi, v = acos(v.y) / pi; column
+    u * W - 1/2, row v * (H - 1), as Mitsuba's envmap looks them up). A map narrower than
+    FINE_ENVMAP columns comes out up to UPSAMPLE times finer on each side, so that ptrace's
+    bilinear lookup of it stays close to Mitsuba's of the original at sharp edges."""
     rows, columns = image.shape[:2]
-    y, x = np.meshgrid((np.arange(rows) + 0.5) / rows, (np.arange(columns) + 0.5) / columns,
-                       indexing="ij")
+    scale = max(1, min(UPSAMPLE, FINE_ENVMAP // columns))
+    y, x = np.meshgrid((np.arange(rows * scale) + 0.5) / (rows * scale),
+                       (np.arange(columns * scale) + 0.5) / (columns * scale), indexing="ij")
     theta, phi = y * np.pi, x * 2 * np.pi - np.pi    # ptrace: phi = atan2(-dz, dx)
     d = np.stack([np.sin(theta) * np.cos(phi), np.cos(theta), -np.sin(theta) * np.sin(phi)],
                  axis=-1)
-    local = d @ np.linalg.inv(rotation).T
-    local /= np.linalg.norm(local, axis=-1, keepdims=True)
+    local = d @ np.asarray(inverse).T
     u = (np.arctan2(local[..., 0], -local[..., 2]) / (2 * np.pi)) % 1.0
     v = np.arccos(np.clip(local[..., 1], -1.0, 1.0)) / np.pi
-    fx, fy = u * columns - 0.5, np.clip(v * rows - 0.5, 0, rows - 1)
+    # Mitsuba's rows run from pole to pole (row 0 at v = 0, the last at v = 1), its columns
+    # are cells (column i centred at u = (i + 0.5) / columns)
+    fx, fy = u * columns - 0.5, np.clip(v * (rows - 1), 0, rows - 1)
     x0, y0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
     tx, ty = (fx - x0)[..., None], (fy - y0)[..., None]
     x1, y1 = (x0 + 1) % columns, np.minimum(y0 + 1, rows - 1)

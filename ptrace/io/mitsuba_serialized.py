@@ -32,6 +32,19 @@ MAX_NAME = 1 << 16
 def read_serialized(path, index=0):
     """(vertices (V, 3), faces (F, 3), uv (F, 3, 2) as Mitsuba reads them or None, face
     normals flag) of mesh `index` of a serialized file."""
+    compressed, version, fail = _locate(path, index)
+    return _mesh(path, compressed, version, fail)
+
+
+def serialized_triangles(path, index=0):
+    """The number of triangles mesh `index` of a serialized file claims, from its header
+    alone (its sizes checked against what its compressed bytes can hold)."""
+    compressed, version, fail = _locate(path, index)
+    return _header(compressed, version, fail)[4]
+
+
+def _locate(path, index):
+    """(the compressed bytes of mesh `index`, its format version, the SceneError maker)."""
     data = read_bytes(path)
     fail = lambda message: SceneError(path, f"serialized mesh: {message}")   # noqa: E731
     if len(data) < 8:
@@ -49,11 +62,12 @@ def read_serialized(path, index=0):
     start = struct.unpack_from("<Q" if width == 8 else "<I", data, table + width * index)[0]
     if start + 4 > table:
         raise fail(f"mesh {index} starts at byte {start}, past the end of the meshes")
-    return _mesh(path, data[start + 4:table], struct.unpack_from("<H", data, start + 2)[0],
-                 fail)
+    return data[start + 4:table], struct.unpack_from("<H", data, start + 2)[0], fail
 
 
-def _mesh(path, compressed, version, fail):
+def _header(compressed, version, fail):
+    """(the zlib stream, its first bytes, where the data starts in them, flags, triangles,
+    vertices, bytes of the data) of a mesh's compressed bytes, its sizes checked."""
     stream = zlib.decompressobj()
     try:
         head = stream.decompress(compressed, 4 + MAX_NAME + 16)
@@ -81,6 +95,12 @@ def _mesh(path, compressed, version, fail):
     if need > 1100 * len(compressed) + 1024:
         raise fail(f"it claims {vertices:,} vertices and {triangles:,} triangles, more than "
                    f"its {len(compressed):,} compressed bytes can hold")
+    return stream, head, at, flags, triangles, vertices, need
+
+
+def _mesh(path, compressed, version, fail):
+    stream, head, at, flags, triangles, vertices, need = _header(compressed, version, fail)
+    index = 8 if vertices > 0xFFFFFFFF else 4
     budget.current().triangles(path, triangles, f"its {triangles:,} triangles")
     body, more = head[at:], need + 1 - (len(head) - at)
     try:

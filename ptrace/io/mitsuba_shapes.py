@@ -7,14 +7,16 @@ convention (v up: v = 1 - Mitsuba's v, whose v runs down the image). face_normal
 triangle its own corners, so ptrace's smooth normals come out flat.
 """
 import math
+import os
 
 import numpy as np
 
 from .. import budget
 from ..errors import SceneError
-from . import obj
+from . import obj, ply
 from .limits import problem
 from .meshes import _drop_non_finite, _read_with_trimesh
+from .mitsuba_serialized import serialized_triangles
 
 DISK_SIDES = 128
 BACKING = 1e-4     # how far behind an emitter its back lies, as a fraction of its size
@@ -63,6 +65,24 @@ def disk():
     return vertices, faces, uv
 
 
+def file_triangles(shape, path):
+    """The triangles an obj, ply or serialized shape's file holds, counted before it is read:
+    a PLY's header's faces, a serialized mesh's header, an OBJ's faces fan-triangulated (a
+    face of n corners is n - 2 triangles)."""
+    if shape.type == "serialized":
+        return serialized_triangles(path, shape.integer("shape_index", 0))
+    if shape.type == "ply":
+        with open(path, "rb") as stream:
+            return max(ply.read_header(path, stream.read(ply.MAX_HEADER)).get(
+                "face", (0,))[0], 0)
+    count = 0
+    with open(path, "rb") as stream:
+        for line in stream:
+            if line[:1] == b"f" and line[1:2] in (b" ", b"\t"):
+                count += max(len(line.split(b"#", 1)[0].split()) - 3, 0)
+    return count
+
+
 def mesh_file(shape, path, notes, want_uv=False):
     """(vertices, faces, uv or None) of an obj or ply file, uv as Mitsuba reads it (its v
     runs down the image)."""
@@ -72,7 +92,9 @@ def mesh_file(shape, path, notes, want_uv=False):
         count = len(parts["faces"])     # (a PLY's reader charges them before reading)
         budget.current().triangles(path, count, f"its {count:,} triangles")
     else:
-        parts = _read_with_trimesh(path, ".ply")
+        parts = _binary_ply(path)
+        if parts is None:
+            parts = _read_with_trimesh(path, ".ply")
         if want_uv and parts["uv"] is None:
             parts["uv"] = _ply_uv(path, parts)
     parts = _drop_non_finite(path, parts)
@@ -88,6 +110,72 @@ def mesh_file(shape, path, notes, want_uv=False):
         if flip:
             uv[..., 1] = 1.0 - uv[..., 1]
     return np.asarray(parts["vertices"], np.float64), np.asarray(parts["faces"], np.int64), uv
+
+
+PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "<i2",
+             "int16": "<i2", "ushort": "<u2", "uint16": "<u2", "int": "<i4", "int32": "<i4",
+             "uint": "<u4", "uint32": "<u4", "float": "<f4", "float32": "<f4",
+             "double": "<f8", "float64": "<f8"}
+PLY_UV = (("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+
+
+def _binary_ply(path):
+    """The parts (as ptrace.io.meshes' readers give them) of a binary little-endian PLY of
+    vertices with scalar properties and triangles (a list of 3 indices a face), read straight
+    into numpy, its vertices as the file has them (unmerged, as Mitsuba reads them); None for
+    any other PLY, which trimesh reads. The budget is charged from the header first."""
+    with open(path, "rb") as stream:
+        head = stream.read(ply.MAX_HEADER)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return None
+    start = head.find(b"\n", end) + 1
+    lines = [line.split() for line in head[:end].decode("latin-1").splitlines()[1:]]
+    lines = [w for w in lines if w and w[0] not in ("comment", "obj_info")]
+    if not lines or lines[0][:2] != ["format", "binary_little_endian"]:
+        return None
+    elements = []
+    for words in lines[1:]:
+        if words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), []))
+        elif words[0] == "property" and elements:
+            elements[-1][2].append(words[1:])
+        else:
+            return None
+    if [e[0] for e in elements] != ["vertex", "face"]:
+        return None
+    (_, vertex_count, vertex_properties), (_, face_count, face_properties) = elements
+    if any(len(p) != 2 or p[0] not in PLY_TYPES for p in vertex_properties):
+        return None
+    names = [p[1] for p in vertex_properties]
+    if not {"x", "y", "z"} <= set(names) or len(set(names)) != len(names):
+        return None
+    if len(face_properties) != 1 or len(face_properties[0]) != 4 or \
+            face_properties[0][0] != "list" or face_properties[0][3] not in (
+                "vertex_indices", "vertex_index") or \
+            face_properties[0][1] not in ("uchar", "uint8") or \
+            face_properties[0][2] not in ("int", "int32", "uint", "uint32"):
+        return None
+    vertex_type = np.dtype([(name, PLY_TYPES[kind]) for kind, name in vertex_properties])
+    face_type = np.dtype([("n", "u1"), ("i", PLY_TYPES[face_properties[0][2]], 3)])
+    size = start + vertex_count * vertex_type.itemsize + face_count * face_type.itemsize
+    if os.path.getsize(path) < size or face_count < 1:
+        return None
+    budget.current().triangles(path, face_count, f"its {face_count:,} faces")
+    with open(path, "rb") as stream:
+        stream.seek(start)
+        rows = np.fromfile(stream, dtype=vertex_type, count=vertex_count)
+        faces = np.fromfile(stream, dtype=face_type, count=face_count)
+    if len(rows) != vertex_count or len(faces) != face_count or (faces["n"] != 3).any():
+        return None
+    vertices = np.stack([rows[k].astype(np.float64) for k in "xyz"], axis=1)
+    faces = faces["i"].astype(np.int64)
+    if faces.size and (faces.min() < 0 or faces.max() >= vertex_count):
+        raise SceneError(path, "face indices out of range")
+    uv = next((np.stack([rows[a], rows[b]], axis=1).astype(np.float64)[faces]
+               for a, b in PLY_UV if a in names and b in names), None)
+    return {"vertices": vertices, "faces": faces, "uv": uv, "notes": [],
+            "material_index": np.zeros(len(faces), np.int32), "vertex_colours": None}
 
 
 def _ply_uv(path, parts):

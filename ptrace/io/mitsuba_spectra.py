@@ -171,3 +171,16 @@ def spectrum_to_rgb(wavelengths, values, emitter):
     spectrum = np.where(inside, np.interp(x, wavelengths, values), 0.0)
     xyz = (cmf * (spectrum * weight)[:, None]).sum(axis=0) / (cmf[:, 1] * weight).sum()
     return tuple(float(v) for v in XYZ_TO_SRGB @ xyz)
+
+
+def blackbody_rgb(temperature):
+    """Linear sRGB of the emission of a black body at `temperature` kelvin as Mitsuba 3's
+    spectral variants see it: Planck's law in W m^-2 sr^-1 nm^-1 over 360-830 nm, to RGB as an
+    emitter's spectrum (spectrum_to_rgb). Its RGB variants have no blackbody."""
+    c, h, k = 2.99792458e8, 6.62607004e-34, 1.38064852e-23
+    nm = np.linspace(360.0, 830.0, 4701)
+    metres = nm * 1e-9
+    with np.errstate(over="ignore"):
+        radiance = 1e-9 * 2 * h * c * c / (metres ** 5 * np.expm1(h * c / (k * metres *
+                                                                             temperature)))
+    return spectrum_to_rgb(nm, radiance, True)

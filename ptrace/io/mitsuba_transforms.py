@@ -10,6 +10,30 @@ from ..errors import SceneError
 TRANSFORM_TAGS = ("translate", "rotate", "scale", "matrix", "lookat")
 
 
+class ElementError(SceneError):
+    """A SceneError at a line of an XML file: its text is 'file:line: message'."""
+
+    def __init__(self, path, message, line=None):
+        super().__init__(path, message)
+        self.line = line
+        if line is not None:
+            self.args = (f"{self.path}:{line}: {message}",)
+
+    def __reduce__(self):
+        return type(self), (self.path, self.message, self.line)
+
+
+def element_error(path, element, message):
+    """The ElementError of `message` about `element` of the file `path`, at the element's
+    line when the parser gave one (its sourceline)."""
+    return ElementError(path, message, getattr(element, "sourceline", None))
+
+
+def at(path, element, rest):
+    """element_error of describe(element) followed by `rest` (': what is wrong')."""
+    return element_error(path, element, f"{describe(element)}{rest}")
+
+
 def describe(element):
     """'<shape type="obj" id="wall">': an element and its naming attributes."""
     words = [element.tag] + [f'{key}="{element.get(key)[:60]}"' for key in
@@ -18,10 +42,13 @@ def describe(element):
 
 
 class Transform:
-    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates."""
+    """A 4 x 4 matrix (float64), invertible, that maps local to world coordinates, and its
+    inverse as Mitsuba keeps it (inverse: a rotation's is its transpose, whatever its axis)."""
 
-    def __init__(self, matrix):
+    def __init__(self, matrix, inverse=None):
         self.matrix = np.asarray(matrix, dtype=np.float64)
+        self.inverse = np.linalg.inv(self.matrix) if inverse is None else \
+            np.asarray(inverse, dtype=np.float64)
 
     def apply(self, points):
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -39,27 +66,31 @@ class Transform:
 def parse_transform(reader, element, path):
     """The Transform of a <transform> element: each step left-multiplies what came before (the
     first step is applied first); reader gives the steps' attributes ($name substituted)."""
-    matrix = np.eye(4)
+    matrix, steps = np.eye(4), []
     for step in element:
         if not isinstance(step.tag, str):
             continue
         tag = "lookat" if reader.upgrade and step.tag == "lookAt" else step.tag
         if tag not in TRANSFORM_TAGS:
-            raise SceneError(path, f"{describe(step)}: unknown transform <{tag}> in "
-                                   f"{describe(element)} (known: "
-                                   f"{', '.join(TRANSFORM_TAGS)})")
-        matrix = _step(reader, step, tag, path) @ matrix
+            raise at(path, step, f": unknown transform <{tag}> in "
+                                 f"{describe(element)} (known: "
+                                 f"{', '.join(TRANSFORM_TAGS)})")
+        steps.append((tag, _step(reader, step, tag, path)))
+        matrix = steps[-1][1] @ matrix
     if not np.isfinite(matrix).all():
-        raise SceneError(path, f"{describe(element)}: the matrix overflows to infinity")
+        raise at(path, element, ": the matrix overflows to infinity")
     linear = matrix[:3, :3]
     size = float(np.abs(linear).max())
     if np.any(matrix[3] != (0, 0, 0, 1)):
-        raise SceneError(path, f"{describe(element)}: a projective matrix (its last row is not "
-                               f"0 0 0 1) is not supported")
+        raise at(path, element, ": a projective matrix (its last row is not "
+                                "0 0 0 1) is not supported")
     if not size > 0 or abs(np.linalg.det(linear / size)) < 1e-12:
-        raise SceneError(path, f"{describe(element)}: the transform is not invertible "
-                               f"(it flattens space: determinant 0)")
-    return Transform(matrix)
+        raise at(path, element, ": the transform is not invertible "
+                                "(it flattens space: determinant 0)")
+    inverse = np.eye(4)
+    for tag, step in steps:     # Mitsuba's: a rotation's inverse is its transpose
+        inverse = inverse @ (step.T if tag == "rotate" else np.linalg.inv(step))
+    return Transform(matrix, inverse)
 
 
 def _vector3(reader, step, path, default):
@@ -69,8 +100,8 @@ def _vector3(reader, step, path, default):
         if values.size == 1 and step.tag == "scale":
             return np.repeat(values, 3)
         if values.size != 3:
-            raise SceneError(path, f"{describe(step)}: value needs 3 numbers, has "
-                                   f"{values.size}")
+            raise at(path, step, ": value needs 3 numbers, has "
+                                 f"{values.size}")
         return values
     return np.array([reader.number(step, path, reader.attribute(step, k, path, str(default)), k)
                      for k in "xyz"])
@@ -87,8 +118,12 @@ def _step(reader, step, tag, path):
         angle = reader.number(step, path, reader.required(step, "angle", path), "angle")
         length = float(np.linalg.norm(axis))
         if not length > 0:
-            raise SceneError(path, f"{describe(step)}: the axis of rotation is zero")
-        out[:3, :3] = rotation(axis / length, math.radians(angle))
+            raise at(path, step, ": the axis of rotation is zero")
+        if abs(length - 1.0) > 1e-6:
+            getattr(reader, "notes", []).append(
+                f"{describe(step)}: its axis is not of unit length: Mitsuba 3 does not "
+                f"normalise it (so it scales and shears as well as turns), nor does ptrace")
+        out[:3, :3] = rotation(axis, math.radians(angle))
     elif tag == "matrix":
         values = reader.numbers(step, path, reader.required(step, "value", path))
         if values.size == 16:
@@ -96,8 +131,8 @@ def _step(reader, step, tag, path):
         elif values.size == 9:
             out[:3, :3] = values.reshape(3, 3)
         else:
-            raise SceneError(path, f"{describe(step)}: needs 16 (or 9) numbers, has "
-                                   f"{values.size}")
+            raise at(path, step, ": needs 16 (or 9) numbers, has "
+                                 f"{values.size}")
     else:
         out = _lookat(reader, step, path)
     return out
@@ -108,17 +143,18 @@ def _lookat(reader, step, path):
     for key in ("origin", "target", "up"):
         text = reader.attribute(step, key, path)
         if text is None and key != "up":
-            raise SceneError(path, f"{describe(step)} has no {key} attribute")
+            raise at(path, step, f" has no {key} attribute")
         if text is not None:
             points[key] = reader.numbers(step, path, text, key)
             if points[key].size != 3:
-                raise SceneError(path, f"{describe(step)}: {key} needs 3 numbers")
+                raise at(path, step, f": {key} needs 3 numbers")
     return lookat(points["origin"], points["target"], points.get("up"),
-                  lambda message: SceneError(path, f"{describe(step)}: {message}"))
+                  lambda message: at(path, step, f": {message}"))
 
 
 def rotation(axis, angle):
-    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis."""
+    """The 3 x 3 matrix of a right-handed rotation by angle (radians) about a unit axis (of
+    another axis, Mitsuba's matrix of the same formula: cos I + (1 - cos) a a^T + sin [a]x)."""
     x, y, z = axis
     c, s = math.cos(angle), math.sin(angle)
     t = 1.0 - c

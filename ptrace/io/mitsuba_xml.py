@@ -5,7 +5,8 @@ parser (defusedxml: no entity declarations, no DTDs, no external references); `$
 attribute is replaced by its value from `-D name=value` (the `defines`) or the file's own
 `<default name=.. value=..>`; `<include>` and `<path>` read only inside the scene's folder;
 `<ref>` finds an `id` anywhere in the scene; every value element (`<float>`, `<integer>`,
-`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` (a constant, or wavelength:value pairs),
+`<boolean>`, `<string>`, `<rgb>`, `<spectrum>` (a constant, wavelength:value pairs, or a file of
+them),
 `<point>`, `<vector>`, `<transform>`) becomes a checked Python value. Files of version 0.4 to
 0.6 are upgraded as Mitsuba 3 upgrades them: camelCase parameter names become snake_case,
 `<lookAt>` becomes `<lookat>`, `<srgb>` an RGB colour decoded from sRGB. Every problem is one
@@ -22,8 +23,15 @@ import numpy as np
 from ..errors import SceneError
 from .files import require_regular_file
 from .limits import is_float, problem
-from .mitsuba_spectra import spectrum_to_rgb
-from .mitsuba_transforms import Transform, describe, parse_transform
+from .mitsuba_spectra import blackbody_rgb, spectrum_to_rgb
+from .mitsuba_transforms import (
+    ElementError,
+    Transform,
+    at,
+    describe,
+    element_error,
+    parse_transform,
+)
 
 OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler", "integrator",
                "texture", "medium", "phase", "rfilter", "volume")
@@ -31,6 +39,7 @@ VALUE_TAGS = ("float", "integer", "boolean", "string", "rgb", "spectrum", "point
               "transform", "srgb")
 MAX_INCLUDE_DEPTH = 32
 MAX_NESTING = 64
+MAX_SPECTRUM_FILE = 1 << 20     # bytes of a <spectrum filename=..> file
 NAME = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
 
 
@@ -44,12 +53,13 @@ class Plugin:
     (children), the file it was read from, and how to name it in a message (where). A builder
     takes each parameter it reads with the typed getters; unread() lists those it never took."""
 
-    def __init__(self, tag, kind, ident, path, where):
+    def __init__(self, tag, kind, ident, path, where, line=None):
         self.tag, self.type, self.id, self.path, self.where = tag, kind, ident, path, where
+        self.line = line        # of its element in its file, where the parser gave one
         self.params, self.children, self._read = {}, [], set()
 
     def fail(self, message):
-        raise SceneError(self.path, f"{self.where}: {message}")
+        raise ElementError(self.path, f"{self.where}: {message}", self.line)
 
     def has(self, name):
         return name in self.params
@@ -110,6 +120,16 @@ def _kind_of(value):
     return f"a <{value.tag}>" if isinstance(value, Plugin) else type(value).__name__
 
 
+class LineParser(safe_xml.DefusedXMLParser):
+    """defusedxml's parser (no entity declarations, no external references), each element
+    given the line it starts on as its sourceline."""
+
+    def _start(self, tag, attr_list):
+        element = super()._start(tag, attr_list)
+        element.sourceline = self.parser.CurrentLineNumber
+        return element
+
+
 def camel_to_snake(name):
     """Mitsuba 3's rule: '_' before an upper-case letter that follows a lower-case one, then
     lower case (intIOR -> int_ior, toWorld -> to_world)."""
@@ -127,6 +147,7 @@ class Reader:
         self.ids, self.refs, self.including = {}, [], []
         self.upgrade = False
         self.version = None
+        self.notes = []     # what the parse converted, for the loader's notes
 
     # --- files ----------------------------------------------------------------------------
 
@@ -138,7 +159,7 @@ class Reader:
         self._children(root, scene, self.path, 0)
         for holder, name, element, ident, path in self.refs:
             if ident not in self.ids:
-                raise SceneError(path, f"{describe(element)}: no object has id {ident!r}")
+                raise at(path, element, f": no object has id {ident!r}")
             if name is None:
                 holder.children.append(self.ids[ident])
             else:
@@ -153,25 +174,29 @@ class Reader:
         except OSError as error:
             raise SceneError(path, f"cannot read the file: {error.strerror or error}") from None
         try:
-            root = safe_xml.fromstring(data)
+            parser = LineParser()
+            parser.feed(data)
+            root = parser.close()
         except defusedxml.DefusedXmlException as error:
             raise SceneError(path, f"refused unsafe XML ({type(error).__name__}: entity "
                                    f"declarations, DTDs and external references are not "
                                    f"allowed)") from None
         except safe_xml.ParseError as error:
-            raise SceneError(path, f"not well-formed XML: {error}") from None
+            line = getattr(error, "position", (None,))[0]
+            raise ElementError(path, f"not well-formed XML: {error}", line) from None
         except (LookupError, ValueError, UnicodeError) as error:
             raise SceneError(path, f"not readable as XML: {error}") from None
         if root.tag != "scene":
-            raise SceneError(path, f"not a Mitsuba scene: the root element is <{root.tag}>, "
-                                   f"not <scene>")
+            raise element_error(path, root, f"not a Mitsuba scene: the root element is "
+                                            f"<{root.tag}>, "
+                                            f"not <scene>")
         return root
 
     def _version(self, root):
         text = root.get("version")
         if text is None:
-            raise SceneError(self.path, "<scene> has no version attribute (Mitsuba requires "
-                                        "one, e.g. version=\"3.0.0\")")
+            raise element_error(self.path, root, "<scene> has no version attribute (Mitsuba "
+                                                 "requires one, e.g. version=\"3.0.0\")")
         numbers = re.fullmatch(r"\s*(\d+)\.(\d+)(?:\.(\d+))?\s*", text)
         major, minor = (int(numbers[1]), int(numbers[2])) if numbers else (None, None)
         if major in (2, 3):
@@ -179,22 +204,23 @@ class Reader:
         if major == 0 and 4 <= minor <= 6:
             self.upgrade = True
             return text
-        raise SceneError(self.path, f'<scene version="{text[:20]}">: ptrace reads Mitsuba '
-                                    f"scenes of versions 0.4 to 0.6 (upgraded) and 2.x to 3.x")
+        raise element_error(self.path, root, f'<scene version="{text[:20]}">: ptrace reads '
+                                             f"Mitsuba scenes of versions 0.4 to 0.6 (upgraded) "
+                                             f"and 2.x to 3.x")
 
     def resolve(self, plugin, name):
         """The real path of the file `name` that a Plugin names, inside the scene's folder and
         a regular file (a FIFO or device is never opened: it could block or stream forever)."""
-        path = self._resolve(plugin.where, plugin.path, name)
+        path = self._resolve(plugin.where, plugin.path, name, plugin.line)
         if not stat.S_ISREG(os.stat(path).st_mode):
             plugin.fail(f"{name!r} is not a regular file")
         return path
 
-    def _resolve(self, where, path, name):
+    def _resolve(self, where, path, name, line=None):
         """The real path of a file named in `path` at `where`, inside the scene's folder (as
         named, from the naming file's folder or a <path> folder)."""
         if not name or "\x00" in name:
-            raise SceneError(path, f"{where}: an empty or invalid file name")
+            raise ElementError(path, f"{where}: an empty or invalid file name", line)
         name = name.replace("\\", "/")
         for folder in ([os.path.dirname(os.path.realpath(path))] + self.search):
             candidate = os.path.realpath(os.path.join(folder, name))
@@ -204,9 +230,9 @@ class Reader:
                 return candidate
         candidate = os.path.realpath(os.path.join(self.folder, name))
         if os.path.commonpath([self.folder, candidate]) != self.folder:
-            raise SceneError(path, f"{where}: {name!r} is outside the scene's folder; ptrace "
-                                   f"reads only files inside it")
-        raise SceneError(path, f"{where}: file {name!r} not found")
+            raise ElementError(path, f"{where}: {name!r} is outside the scene's folder; ptrace "
+                                     f"reads only files inside it", line)
+        raise ElementError(path, f"{where}: file {name!r} not found", line)
 
     # --- elements -------------------------------------------------------------------------
 
@@ -219,21 +245,21 @@ class Reader:
         def value(match):
             name = match.group(1)
             if name not in self.params:
-                raise SceneError(path, f"{describe(element)}: ${name} has no value (no "
-                                       f'<default name="{name}"> before it and no -D '
-                                       f"{name}=...)")
+                raise at(path, element, f": ${name} has no value (no "
+                                        f'<default name="{name}"> before it and no -D '
+                                        f"{name}=...)")
             return self.params[name]
         return NAME.sub(value, text)
 
     def required(self, element, key, path):
         value = self.attribute(element, key, path)
         if value is None:
-            raise SceneError(path, f"{describe(element)} has no {key} attribute")
+            raise at(path, element, f" has no {key} attribute")
         return value
 
     def _children(self, element, holder, path, depth):
         if depth > MAX_NESTING:
-            raise SceneError(path, f"{describe(element)}: nested more than {MAX_NESTING} deep")
+            raise at(path, element, f": nested more than {MAX_NESTING} deep")
         for child in element:
             if not isinstance(child.tag, str):      # comments, processing instructions
                 continue
@@ -247,11 +273,12 @@ class Reader:
                 self._include(child, holder, path, depth)
             elif tag == "path":
                 self.search.append(self._resolve(describe(child), path,
-                                                 self.required(child, "value", path)))
+                                                 self.required(child, "value", path),
+                                                 getattr(child, "sourceline", None)))
             elif tag == "alias":
                 ident = self.required(child, "id", path)
                 if ident not in self.ids:
-                    raise SceneError(path, f"{describe(child)}: no object has id {ident!r}")
+                    raise at(path, child, f": no object has id {ident!r}")
                 self.ids[self.required(child, "as", path)] = self.ids[ident]
             elif tag == "ref":
                 ident = self.required(child, "id", path)
@@ -259,13 +286,13 @@ class Reader:
             elif tag in VALUE_TAGS:
                 name = self._name(child, path)
                 if name is None:
-                    raise SceneError(path, f"{describe(child)} has no name attribute")
+                    raise at(path, child, " has no name attribute")
                 holder.params[name] = self._value(child, tag, path, holder.tag == "emitter")
             elif tag in OBJECT_TAGS and tag != "scene":
                 self._object(child, holder, path, depth)
             else:
-                raise SceneError(path, f"{describe(child)}: unknown element <{tag}> in "
-                                       f"{holder.where}")
+                raise at(path, child, f": unknown element <{tag}> in "
+                                      f"{holder.where}")
 
     def _name(self, element, path):
         name = self.attribute(element, "name", path)
@@ -276,14 +303,15 @@ class Reader:
         file that is including it (itself, however indirectly) is refused in the file that
         closes the cycle."""
         target = self._resolve(describe(element), path,
-                               self.required(element, "filename", path))
+                               self.required(element, "filename", path),
+                               getattr(element, "sourceline", None))
         chain = self.including + [os.path.realpath(path)]
         if target in chain:
             names = " -> ".join(os.path.basename(p) for p in chain + [target])
-            raise SceneError(path, f"{describe(element)}: includes itself ({names})")
+            raise at(path, element, f": includes itself ({names})")
         if len(chain) > MAX_INCLUDE_DEPTH:
-            raise SceneError(path, f"{describe(element)}: includes nested more than "
-                                   f"{MAX_INCLUDE_DEPTH} deep")
+            raise at(path, element, ": includes nested more than "
+                                    f"{MAX_INCLUDE_DEPTH} deep")
         self.including.append(os.path.realpath(path))
         try:
             self._children(self._parse_file(target), holder, target, depth + 1)
@@ -293,11 +321,12 @@ class Reader:
     def _object(self, element, holder, path, depth):
         kind = self.required(element, "type", path)
         ident = self.attribute(element, "id", path)
-        plugin = Plugin(element.tag, kind, ident, path, describe(element))
+        plugin = Plugin(element.tag, kind, ident, path, describe(element),
+                        getattr(element, "sourceline", None))
         self._children(element, plugin, path, depth + 1)
         if ident is not None:
             if ident in self.ids:
-                raise SceneError(path, f"{describe(element)}: the id {ident!r} is given twice")
+                raise at(path, element, f": the id {ident!r} is given twice")
             self.ids[ident] = plugin
         name = self._name(element, path)
         if name is None:
@@ -311,8 +340,8 @@ class Reader:
         """The one number of an attribute's text (what names the attribute)."""
         values = self.numbers(element, path, text, what)
         if values.size != 1:
-            raise SceneError(path, f"{describe(element)}: {what} needs one number, has "
-                                   f"{values.size}")
+            raise at(path, element, f": {what} needs one number, has "
+                                    f"{values.size}")
         return float(values[0])
 
     def numbers(self, element, path, text, what="value"):
@@ -322,11 +351,11 @@ class Reader:
             values = np.array([float(w) for w in words], dtype=np.float64)
         except ValueError:
             bad = next(w for w in words if not is_float(w))
-            raise SceneError(path, f"{describe(element)}: {bad[:40]!r} in its {what} is not a "
-                                   f"number") from None
+            raise at(path, element, f": {bad[:40]!r} in its {what} is not a "
+                                    f"number") from None
         wrong = problem(values)
         if wrong is not None:
-            raise SceneError(path, f"{describe(element)}: in its {what}, {wrong}")
+            raise at(path, element, f": in its {what}, {wrong}")
         return values
 
     def _value(self, element, tag, path, emitter=False):
@@ -335,20 +364,24 @@ class Reader:
             return parse_transform(self, element, path)
         if tag == "string":
             return self.required(element, "value", path)
+        if tag == "spectrum" and element.get("filename") is not None:
+            return self._spectrum_file(element, path, emitter)
+        if tag == "spectrum" and element.get("type") is not None:
+            return self._spectrum_plugin(element, path, emitter)
         text = self.required(element, "value", path) if tag not in ("point", "vector") \
             else attr("value")
         if tag == "boolean":
             word = text.strip().lower()
             if word not in ("true", "false"):
-                raise SceneError(path, f"{describe(element)}: {text[:40]!r} is neither true "
-                                       f"nor false")
+                raise at(path, element, f": {text[:40]!r} is neither true "
+                                        f"nor false")
             return word == "true"
         if tag == "integer":
             try:
                 return int(text.strip())
             except ValueError:
-                raise SceneError(path, f"{describe(element)}: {text[:40]!r} is not a whole "
-                                       f"number") from None
+                raise at(path, element, f": {text[:40]!r} is not a whole "
+                                        f"number") from None
         if tag in ("point", "vector"):
             if text is not None:
                 values = self.numbers(element, path, text)
@@ -356,23 +389,23 @@ class Reader:
                 values = np.array([self.number(element, path, attr(k, "0"), k)
                                    for k in "xyz"])
             if values.size != 3:
-                raise SceneError(path, f"{describe(element)}: needs 3 numbers, has "
-                                       f"{values.size}")
+                raise at(path, element, ": needs 3 numbers, has "
+                                        f"{values.size}")
             return values
         if tag == "spectrum" and ":" in text:
             return self._spectrum(element, path, text, emitter)
         if tag == "rgb" and text.strip().startswith("#"):
-            raise SceneError(path, f"{describe(element)}: hexadecimal colours are not "
-                                   f"supported (give three numbers)")
+            raise at(path, element, ": hexadecimal colours are not "
+                                    "supported (give three numbers)")
         values = self.numbers(element, path, text)
         if tag == "float":
             if values.size != 1:
-                raise SceneError(path, f"{describe(element)}: needs one number, has "
-                                       f"{values.size}")
+                raise at(path, element, ": needs one number, has "
+                                        f"{values.size}")
             return float(values[0])
         if values.size not in (1, 3) or tag == "spectrum" and values.size != 1:
-            raise SceneError(path, f"{describe(element)}: needs one number or three, has "
-                                   f"{values.size}")
+            raise at(path, element, ": needs one number or three, has "
+                                    f"{values.size}")
         values = np.resize(values, 3)
         if tag == "srgb":   # 0.x files: an sRGB-encoded colour
             values = np.where(values <= 0.04045, values / 12.92,
@@ -387,11 +420,60 @@ class Reader:
                 wavelength, _, value = item.partition(":")
                 pair = self.numbers(element, path, f"{wavelength} {value}", "spectrum")
                 if pair.size != 2:
-                    raise SceneError(path, f"{describe(element)}: {item[:40]!r} is not a "
-                                           f"wavelength:value pair")
+                    raise at(path, element, f": {item[:40]!r} is not a "
+                                            f"wavelength:value pair")
                 pairs.append(pair)
+        return self._spectrum_rgb(element, path, pairs, emitter)
+
+    def _spectrum_file(self, element, path, emitter):
+        """The RGB colour of <spectrum filename=..>: a text file of one wavelength and one
+        value a line (lines starting with # are comments), read as Mitsuba reads it."""
+        name = self.attribute(element, "filename", path)
+        target = self._resolve(describe(element), path, name,
+                               getattr(element, "sourceline", None))
+        require_regular_file(target)
+        if os.path.getsize(target) > MAX_SPECTRUM_FILE:
+            raise at(path, element, f": {name!r} is larger than a spectrum's "
+                                    f"{MAX_SPECTRUM_FILE:,} bytes")
+        try:
+            with open(target, encoding="utf-8", errors="replace") as stream:
+                lines = stream.read().splitlines()
+        except OSError as error:
+            raise at(path, element, f": cannot read {name!r}: "
+                                    f"{error.strerror or error}") from None
+        pairs = []
+        for number, line in enumerate(lines, 1):
+            if line.strip() and not line.lstrip().startswith("#"):
+                pair = self.numbers(element, path, line, f"line {number} of {name!r}")
+                if pair.size != 2:
+                    raise at(path, element, f": line {number} of {name!r} is not a "
+                                            f"wavelength and a value")
+                pairs.append(pair)
+        return self._spectrum_rgb(element, path, pairs, emitter)
+
+    def _spectrum_plugin(self, element, path, emitter):
+        """The RGB colour of <spectrum type="blackbody"> (its temperature in kelvin) on an
+        emitter, as Mitsuba's spectral variants render it (its RGB variants cannot)."""
+        kind = self.attribute(element, "type", path)
+        if kind != "blackbody":
+            raise at(path, element, f": spectrum type {kind[:40]!r} is not supported (ptrace "
+                                    f"reads blackbody, values and files)")
+        if not emitter:
+            raise at(path, element, ": a blackbody spectrum outside an emitter")
+        temperature = None
+        for child in element:
+            if child.tag == "float" and self.attribute(child, "name", path) == "temperature":
+                temperature = self.number(child, path, self.required(child, "value", path),
+                                          "value")
+        if temperature is None or not temperature > 0:
+            raise at(path, element, ": a blackbody needs a temperature above 0 kelvin")
+        self.notes.append(f"{describe(element)}: converted to RGB as Mitsuba's spectral "
+                          f"variants see it (its RGB variants cannot render a blackbody)")
+        return Colour(blackbody_rgb(temperature))
+
+    def _spectrum_rgb(self, element, path, pairs, emitter):
         pairs = np.array(pairs).reshape(-1, 2)
         if len(pairs) < 2 or np.any(np.diff(pairs[:, 0]) <= 0):
-            raise SceneError(path, f"{describe(element)}: a spectrum needs two or more "
-                                   f"wavelength:value pairs, wavelengths increasing")
+            raise at(path, element, ": a spectrum needs two or more "
+                                    "wavelength:value pairs, wavelengths increasing")
         return Colour(spectrum_to_rgb(pairs[:, 0], pairs[:, 1], emitter))

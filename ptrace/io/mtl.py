@@ -22,7 +22,6 @@ from .materials import (
     check_numbers,
     conductor_from_colour,
     linear_rgb,
-    read_image_file,
 )
 
 IGNORED = ("ka", "map_ka", "map_ks", "map_ns", "map_d", "map_bump", "bump", "norm", "disp",
@@ -92,7 +91,7 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
     material_index = np.zeros(len(faces), np.int32)
     defaulted = 0
     file_uv = uv if has_uv.any() else None    # as the file gives them (Mitsuba's obj reads)
-    uv = uv.copy()
+    copied = False
     for key in sorted(set(zip(material_of_face.tolist(), has_uv.tolist()))):
         material, with_uv = key
         chosen = (material_of_face == material) & (has_uv == with_uv)
@@ -118,6 +117,8 @@ def assemble(path, directory, library, names, material_of_face, has_uv, uv, vert
                              f"its texture is not applied to them")
             if transform is not None and with_uv:
                 scale, offset = transform
+                if not copied:      # file_uv stays as the file gives them
+                    uv, copied = uv.copy(), True
                 uv[chosen] = uv[chosen] * scale + offset
         record_key = (name if name in library else None, record.get("albedo_texture", -1),
                       record.get("emission_texture", -1))
@@ -266,8 +267,8 @@ def read_map(statement, field, where, directory, mtl_path, pool, notes):
     if remark:
         notes.append(f"<{label}>: {remark}")
     try:
-        pixels, encoded = read_image_file(path, f"{name!r} ({field} of <{where}>)", mtl_path)
-        texture = pool.add(pixels, srgb=True, wrap=wrap, name=name, key=path, encoded=encoded)
+        texture = pool.add_file(path, srgb=True, wrap=wrap, name=name,
+                                what=f"{name!r} ({field} of <{where}>)", model=mtl_path)
     except ValueError as error:
         notes.append(f"<{label}>: the texture could not be read as an image ({error}): "
                      f"ignored (the material's colour alone)")

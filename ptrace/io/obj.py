@@ -34,24 +34,12 @@ CORNER_FORMS = {0: r"-?\d+", 1: r"-?\d+/-?\d+", 2: r"-?\d+//-?\d+", 3: r"-?\d+/-
 
 def read_obj(path):
     """The parts of a scene (as ptrace.io.meshes assembles them) that an OBJ file gives."""
-    data = files.read_bytes(path)
-    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):     # UTF-16 text, with its byte order mark
-        try:
-            data = data.decode("utf-16").encode("utf-8")
-        except UnicodeError:
-            raise SceneError(path, "is not an OBJ file: it starts as UTF-16 text but is not "
-                                   "UTF-16") from None
-    if b"\x00" in data:
-        raise SceneError(path, "is not an OBJ file: it holds binary data (NUL bytes), and OBJ "
-                               "is text")
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        text = data.decode("latin-1")     # names in a legacy encoding; the numbers are ASCII
+    text = _text(path)
     state = _read_statements(path, text)
+    del text      # read again for the line number of an error (_line_number)
     notes = state["notes"]
-    if not state["faces"]:
-        if state["v"]:
+    if not state["face_count"]:
+        if state["vertex_count"]:
             lines = " and lines" if state["skipped"].get("l") else ""
             raise SceneError(path, f"contains no faces, only points (vertices{lines}): "
                                    f"ptrace renders surfaces")
@@ -62,9 +50,10 @@ def read_obj(path):
             raise SceneError(path, f"is not an OBJ file: line {number} starts with {what}, "
                                    f"which is no OBJ statement, and there are no vertices")
         raise SceneError(path, "the file contains no triangles (no face statements)")
-    vertices, colours = _vertex_rows(path, state["v"])
+    vertices, colours = _joined_vertices(state)
     _check_magnitudes(path, state, vertices)
-    uv_rows = _uv_rows(path, state["vt"])
+    uv_rows = np.concatenate(state["vt"]) if state["vt"] else np.zeros((0, 2))
+    del state["vt"]
     corner_v, corner_vt, corner_vn, counts = _corners(path, state, len(vertices),
                                                       len(uv_rows))
     triangles, face_of_triangle = _fan(counts, notes)
@@ -72,11 +61,16 @@ def read_obj(path):
         raise SceneError(path, "the file contains no triangles (every face has fewer than "
                                "three corners)")
     tri_v = corner_v[triangles]                   # (T, 3) vertex index of each corner
+    del corner_v
     tri_vt = corner_vt[triangles]                 # (T, 3), -1 where a corner has none
+    del corner_vt
     has_uv = (tri_vt >= 0).all(axis=1)
-    uv = np.zeros((len(triangles), 3, 2))
     if len(uv_rows):
+        uv = np.zeros((len(triangles), 3, 2))
         uv[has_uv] = uv_rows[tri_vt[has_uv]]
+    else:       # no face has texture coordinates: zeros that take no memory
+        uv = np.broadcast_to(np.zeros((1, 1, 1)), (len(triangles), 3, 2))
+    del tri_vt, uv_rows
     # Which faces share a vertex, so that the area-weighted normals ptrace computes are smooth
     # only where the file's are (the normals' values are not read): a corner with a normal (vn)
     # is the pair (v, vn), so a position given several normals (a cube's corner) splits; one
@@ -84,14 +78,25 @@ def read_obj(path):
     # OBJ specification says. A file with neither vn nor `s` is smooth, the course's rule.
     # Unreferenced vertices are dropped.
     count, groups = len(counts), len(state["groups"])
-    group = _per_face(state["smoothing"], count, -1)[face_of_triangle][:, None]
-    normal = corner_vn[triangles]
-    base = state["vn"] + 1
-    share = np.where(normal >= 0, normal, np.where(
-        group == 0, base + face_of_triangle[:, None], base + count + 1 + group))
-    span = base + count + groups + 2
-    keys, faces = np.unique(tri_v * span + share, return_inverse=True)
-    used = keys // span
+    if state["vn"] == 0 and not state["smoothing"]:     # every corner shares by position
+        del corner_vn, triangles
+        used, faces = np.unique(tri_v, return_inverse=True)
+    else:
+        group = _per_face(state["smoothing"], count, -1)[face_of_triangle][:, None]
+        normal = corner_vn[triangles]
+        del corner_vn, triangles
+        base = state["vn"] + 1
+        share = np.where(normal >= 0, normal, np.where(
+            group == 0, base + face_of_triangle[:, None], base + count + 1 + group))
+        del normal, group
+        span = base + count + groups + 2
+        tri_v *= span
+        tri_v += share
+        del share
+        keys, faces = np.unique(tri_v, return_inverse=True)
+        used = keys // span
+        del keys
+    del tri_v
     faces = faces.reshape(-1, 3)
     material_of_face = _per_face(state["materials"], len(counts), -1)[face_of_triangle]
     for word, count in sorted(state["skipped"].items()):
@@ -111,88 +116,166 @@ def read_obj(path):
 SKIPPED_NAMES = {"p": "point", "l": "line", "free-form": "free-form (curve or surface)"}
 
 
+def _text(path):
+    """The file's text (UTF-8, UTF-16 with its byte order mark, or Latin-1); SceneError for a
+    file that is not text."""
+    data = files.read_bytes(path)
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):     # UTF-16 text, with its byte order mark
+        try:
+            data = data.decode("utf-16").encode("utf-8")
+        except UnicodeError:
+            raise SceneError(path, "is not an OBJ file: it starts as UTF-16 text but is not "
+                                   "UTF-16") from None
+    if b"\x00" in data:
+        raise SceneError(path, "is not an OBJ file: it holds binary data (NUL bytes), and OBJ "
+                               "is text")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = data.decode("latin-1")     # names in a legacy encoding; the numbers are ASCII
+    return text
+
+
+CHUNK_ROWS = 1 << 16        # statements of a kind turned into arrays at a time
+BLOCK_CHARACTERS = 1 << 20  # text split into lines a block at a time
+
+
+def _blocks(text):
+    """The text in blocks that each end just after a newline (or at the text's end), so that
+    their lines are the text's lines, without a list of every line at once."""
+    start = 0
+    while start < len(text):
+        end = text.find("\n", start + BLOCK_CHARACTERS)
+        end = len(text) if end < 0 else end + 1
+        yield text[start:end]
+        start = end
+
+
+def _uncommented(rows):
+    return [row.split("#", 1)[0] for row in rows] if "#" in "".join(rows) else rows
+
+
 def _read_statements(path, text):
-    """One pass over the lines, in order: the payload of every v, vt and f statement, where
-    each run of faces starts (with the counts of v and vt read before it, for relative
-    indices), and each usemtl's face. The common lines (`v `, `vt `, `f ` at the line's start)
-    take a short path; the rest (tabs, indentation, other statements) are split into words."""
-    lines = text.replace("\\\r\n", " ").replace("\\\n", " ").splitlines()
-    state = {"v": [], "vt": [], "faces": [], "runs": [], "materials": [], "mtllib": [], "vn": 0,
-             "smoothing": [], "groups": {},
+    """One pass over the lines, in order, turning the payloads of v, vt and f statements into
+    arrays a chunk of statements at a time (state["v"], ["v_colours"], ["vt"], ["faces"]:
+    lists of chunks): where each run of faces starts (with the counts of v and vt read before
+    it, for relative indices), and each usemtl's face. The common lines (`v `, `vt `, `f ` at
+    the line's start) take a short path; the rest (tabs, indentation, other statements) are
+    split into words."""
+    text = text.replace("\\\r\n", " ").replace("\\\n", " ")
+    state = {"v": [], "v_colours": [], "vt": [], "faces": [], "runs": [], "materials": [],
+             "mtllib": [], "vn": 0, "smoothing": [], "groups": {},
              "material_names": {}, "skipped": {}, "unknown": 0, "first_unknown": None,
-             "notes": [], "lines": lines}
-    v_rows, vt_rows, faces, runs = state["v"], state["vt"], state["faces"], state["runs"]
-    names, skipped = state["material_names"], state["skipped"]
+             "notes": [], "path": path, "vertex_count": 0, "uv_count": 0, "face_count": 0}
+    runs, names, skipped = state["runs"], state["material_names"], state["skipped"]
+    v_rows, vt_rows, faces = [], [], []
+    counted = {"v": 0, "vt": 0, "f": 0}      # rows flushed into arrays already
+
+    def flush(force=False):
+        if v_rows and (force or len(v_rows) >= CHUNK_ROWS):
+            positions, colours = _vertex_rows(path, _uncommented(v_rows), counted["v"])
+            state["v"].append(positions)
+            state["v_colours"].append(colours)
+            counted["v"] += len(v_rows)
+            v_rows.clear()
+        if vt_rows and (force or len(vt_rows) >= CHUNK_ROWS):
+            state["vt"].append(_uv_rows(path, _uncommented(vt_rows)))
+            counted["vt"] += len(vt_rows)
+            vt_rows.clear()
+        if faces and (force or len(faces) >= CHUNK_ROWS):
+            state["faces"].append(_raw_corners(path, _uncommented(faces)))
+            counted["f"] += len(faces)
+            faces.clear()
+
     in_faces, normals = False, 0
-    for line in lines:
-        head = line[:2]
-        if head == "v ":
-            v_rows.append(line[2:])
-            in_faces = False
-            continue
-        if head == "f ":
-            if not in_faces:
-                runs.append((len(faces), len(v_rows), len(vt_rows), normals))
-                in_faces = True
-            faces.append(line[2:])
-            continue
-        if head == "vt" and line[2:3] == " ":
-            vt_rows.append(line[3:])
-            in_faces = False
-            continue
-        if head == "vn" and line[2:3] == " ":
-            normals += 1
-            in_faces = False
-            continue
-        words = line.split(None, 1)
-        if not words or words[0][0] == "#":
-            continue
-        key, rest = words[0], (words[1] if len(words) > 1 else "")
-        if key == "v":
-            v_rows.append(rest)
-            in_faces = False
-        elif key == "vt":
-            vt_rows.append(rest)
-            in_faces = False
-        elif key == "vn":
-            normals += 1
-            in_faces = False
-        elif key == "f":
-            if not in_faces:
-                runs.append((len(faces), len(v_rows), len(vt_rows), normals))
-                in_faces = True
-            faces.append(rest)
-        elif key == "s":      # smoothing group: off (or 0), or a name
-            group = rest.strip().lower()
-            group = 0 if group in ("off", "0", "") else \
-                state["groups"].setdefault(group, len(state["groups"]) + 1)
-            state["smoothing"].append((len(faces), group))
-        elif key == "usemtl":
-            state["materials"].append((len(faces), names.setdefault(rest.strip(), len(names))))
-        elif key == "mtllib":
-            state["mtllib"].append(rest.strip())
-        elif key in IGNORED:
-            continue
-        elif key in ("p", "l"):
-            skipped[key] = skipped.get(key, 0) + 1
-        elif key in FREE_FORM:
-            skipped["free-form"] = skipped.get("free-form", 0) + 1
-        else:
-            state["unknown"] += 1
-            if state["first_unknown"] is None:
-                state["first_unknown"] = key[:40]
+    for block in _blocks(text):
+        for line in block.splitlines():
+            head = line[:2]
+            if head == "v ":
+                v_rows.append(line[2:])
+                in_faces = False
+                continue
+            if head == "f ":
+                if not in_faces:
+                    runs.append((counted["f"] + len(faces), counted["v"] + len(v_rows),
+                                 counted["vt"] + len(vt_rows), normals))
+                    in_faces = True
+                faces.append(line[2:])
+                continue
+            if head == "vt" and line[2:3] == " ":
+                vt_rows.append(line[3:])
+                in_faces = False
+                continue
+            if head == "vn" and line[2:3] == " ":
+                normals += 1
+                in_faces = False
+                continue
+            words = line.split(None, 1)
+            if not words or words[0][0] == "#":
+                continue
+            key, rest = words[0], (words[1] if len(words) > 1 else "")
+            if key == "v":
+                v_rows.append(rest)
+                in_faces = False
+            elif key == "vt":
+                vt_rows.append(rest)
+                in_faces = False
+            elif key == "vn":
+                normals += 1
+                in_faces = False
+            elif key == "f":
+                if not in_faces:
+                    runs.append((counted["f"] + len(faces), counted["v"] + len(v_rows),
+                                 counted["vt"] + len(vt_rows), normals))
+                    in_faces = True
+                faces.append(rest)
+            elif key == "s":      # smoothing group: off (or 0), or a name
+                group = rest.strip().lower()
+                group = 0 if group in ("off", "0", "") else \
+                    state["groups"].setdefault(group, len(state["groups"]) + 1)
+                state["smoothing"].append((counted["f"] + len(faces), group))
+            elif key == "usemtl":
+                state["materials"].append((counted["f"] + len(faces),
+                                           names.setdefault(rest.strip(), len(names))))
+            elif key == "mtllib":
+                state["mtllib"].append(rest.strip())
+            elif key in IGNORED:
+                continue
+            elif key in ("p", "l"):
+                skipped[key] = skipped.get(key, 0) + 1
+            elif key in FREE_FORM:
+                skipped["free-form"] = skipped.get("free-form", 0) + 1
+            else:
+                state["unknown"] += 1
+                if state["first_unknown"] is None:
+                    state["first_unknown"] = key[:40]
+        flush()
+    flush(force=True)
     state["vn"] = normals
-    for key in ("v", "vt", "faces"):        # comments after the numbers
-        rows = state[key]
-        if "#" in "".join(rows):
-            state[key] = [row.split("#", 1)[0] for row in rows]
+    state["vertex_count"], state["uv_count"], state["face_count"] = \
+        counted["v"], counted["vt"], counted["f"]
     return state
+
+
+def _joined_vertices(state):
+    """(V, 3) positions and (V, 3) colours or None of the chunks read (a vertex without a
+    colour, where others have one, is white)."""
+    if not state["v"]:
+        return np.zeros((0, 3)), None
+    positions = np.concatenate(state["v"]) if len(state["v"]) > 1 else state["v"][0]
+    colours = None
+    if any(c is not None for c in state["v_colours"]):
+        colours = np.concatenate([np.ones((len(p), 3)) if c is None else c
+                                  for p, c in zip(state["v"], state["v_colours"])])
+    del state["v"], state["v_colours"]
+    return positions, colours
 
 
 def _line_number(state, key, index):
     """The line number of the index-th statement of kind key ("f", or the first unknown)."""
     seen = 0
-    for number, line in enumerate(state["lines"], 1):
+    text = _text(state["path"]).replace("\\\r\n", " ").replace("\\\n", " ")
+    for number, line in enumerate(text.splitlines(), 1):
         words = line.split(None, 1)
         if words and (words[0] == key or key is None and words[0] == state["first_unknown"]):
             if seen == index:
@@ -232,9 +315,10 @@ def _is_number(token):
         return False
 
 
-def _vertex_rows(path, rows):
+def _vertex_rows(path, rows, first=0):
     """(V, 3) positions, and (V, 3) colours or None: `v x y z`, `v x y z w` (w ignored) and
-    `v x y z r g b` (vertex colours, as MeshLab writes them)."""
+    `v x y z r g b` (vertex colours, as MeshLab writes them). first: the number of vertices
+    read before these rows (an error names the vertex by its number in the file)."""
     flat = _numbers(path, rows, "vertex (v)")
     if len(flat) == 3 * len(rows):
         positions, colours = flat.reshape(-1, 3), None
@@ -242,7 +326,8 @@ def _vertex_rows(path, rows):
         counts = np.array([len(row.split()) for row in rows])
         if counts.min() < 3:
             line = int(np.argmin(counts))
-            raise SceneError(path, f"vertex {line + 1} has {counts[line]} coordinate(s); a "
+            raise SceneError(path, f"vertex {first + line + 1} has {counts[line]} "
+                                   f"coordinate(s); a "
                                    f"vertex needs three")
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         positions = flat[starts[:, None] + np.arange(3)]
@@ -283,11 +368,9 @@ def _uv_rows(path, rows):
     return uv
 
 
-def _corners(path, state, vertex_count, uv_count):
-    """Per corner of every face: its vertex index and its texture coordinate index (-1 for
-    none), 0-based, relative indices resolved against the statements read before the face;
-    and the number of corners of each face."""
-    rows = state["faces"]
+def _raw_corners(path, rows):
+    """(v, vt, vn, counts) of some face statements' payloads: per corner its three indices as
+    the file writes them (0 where one is absent), and the number of corners of each face."""
     text = "\n".join(rows)
     if any(c in text for c in ("\t", "\r", "\f", "\v", "  ", " \n", "\n ")) or \
             text[:1] == " " or text[-1:] == " ":      # whitespace other than single spaces
@@ -296,6 +379,10 @@ def _corners(path, state, vertex_count, uv_count):
     counts = np.fromiter((row.count(" ") + 1 if row else 0 for row in text.split("\n")),
                          dtype=np.int64, count=len(rows))
     corners = text.replace("\n", " ") if counts.all() else " ".join(text.split())
+    del text
+    if not corners:
+        none = np.zeros(0, np.int64)
+        return none, none, none, counts
     first = corners.split(" ", 1)[0]
     form = first.count("/") + (first.count("//") > 0)
     pattern = CORNER_FORMS.get(form)
@@ -308,15 +395,37 @@ def _corners(path, state, vertex_count, uv_count):
         raw_vn = numbers[:, width - 1] if form in (2, 3) else np.zeros(len(numbers), np.int64)
     else:     # corners of mixed forms: one at a time
         raw_v, raw_vt, raw_vn = _mixed_corners(path, corners.split(" "))
+    return (np.ascontiguousarray(raw_v), np.ascontiguousarray(raw_vt),
+            np.ascontiguousarray(raw_vn), counts)
+
+
+def _take_joined(chunks, k):
+    """The k-th arrays of the chunks joined into one, each chunk's freed as it is taken."""
+    joined = np.concatenate([chunk[k] for chunk in chunks]) if len(chunks) != 1 \
+        else chunks[0][k]
+    for chunk in chunks:
+        chunk[k] = None
+    return joined
+
+
+def _corners(path, state, vertex_count, uv_count):
+    """Per corner of every face: its vertex index and its texture coordinate index (-1 for
+    none), 0-based, relative indices resolved against the statements read before the face;
+    and the number of corners of each face."""
+    chunks = [list(chunk) for chunk in state.pop("faces")]
+    raw_v, raw_vt, raw_vn, counts = [_take_joined(chunks, k) for k in range(4)]
+    n_faces = len(counts)
     runs = state["runs"]
-    read_v = np.repeat(_per_face([(r[0], r[1]) for r in runs], len(rows), 0), counts)
-    read_vt = np.repeat(_per_face([(r[0], r[2]) for r in runs], len(rows), 0), counts)
-    face = np.repeat(np.arange(len(rows)), counts)
-    v = _resolve(path, state, raw_v, read_v, vertex_count, "vertex", face)
-    vt = _resolve(path, state, raw_vt, read_vt, uv_count, "texture coordinate", face,
+    face = np.repeat(np.arange(n_faces), counts)
+    read = np.repeat(_per_face([(r[0], r[1]) for r in runs], n_faces, 0), counts)
+    v = _resolve(path, state, raw_v, read, vertex_count, "vertex", face)
+    del raw_v
+    read = np.repeat(_per_face([(r[0], r[2]) for r in runs], n_faces, 0), counts)
+    vt = _resolve(path, state, raw_vt, read, uv_count, "texture coordinate", face,
                   optional=True)
-    read_vn = np.repeat(_per_face([(r[0], r[3]) for r in runs], len(rows), 0), counts)
-    vn = _resolve(path, state, raw_vn, read_vn, state["vn"], "normal", face, optional=True)
+    del raw_vt
+    read = np.repeat(_per_face([(r[0], r[3]) for r in runs], n_faces, 0), counts)
+    vn = _resolve(path, state, raw_vn, read, state["vn"], "normal", face, optional=True)
     return v, vt, vn, counts
 
 

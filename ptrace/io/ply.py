@@ -87,3 +87,115 @@ def vertex_colours(path, elements, raw, notes):
     rgba = np.full((len(values), 4), 255, np.uint8)
     rgba[:, :3] = np.round(np.clip(values, 0.0, 1.0) * 255).astype(np.uint8)
     return rgba
+
+
+SCALAR_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+                "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+                "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+                "float64": "f8"}
+# vertex properties that the trimesh reader would make more of than positions (colours,
+# texture coordinates, normals): a file with any of them is read through trimesh
+ATTRIBUTE_NAMES = {name for names in COLOUR_NAMES for name in names} | {
+    "s", "t", "u", "v", "texture_u", "texture_v", "texture_s", "texture_t", "nx", "ny", "nz"}
+MERGE_DIGITS = 8     # trimesh's merge of vertices: positions equal to 1e-8 are one vertex
+CHUNK = 1 << 20      # faces converted a chunk at a time
+
+
+def read_plain_binary(path, data):
+    """The parts of a binary PLY file of triangles and positions alone (a vertex element of
+    scalar properties with x, y, z and none of ATTRIBUTE_NAMES, then a face element of one
+    list of three indices per face, no other element and no texture comment), read straight
+    from the file's bytes into the flat arrays: positions as float64, faces as int64. The
+    faces with a NaN or infinite corner are kept and counted (ptrace.io.meshes drops them),
+    and vertices at the same position (to 1e-8) are merged into one, first one first, as
+    the trimesh reader merges them. None for any other PLY: trimesh reads it."""
+    end = data.find(b"end_header", 0, MAX_HEADER)
+    if end < 0:
+        return None
+    start = data.find(b"\n", end) + 1
+    if start <= 0:
+        return None
+    order, elements, current, endian = [], {}, None, None
+    for line in data[:end].decode("latin-1").splitlines()[1:]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            if "texturefile" in line.lower():
+                return None
+            continue
+        if words[0] == "format":
+            endian = {"binary_little_endian": "<", "binary_big_endian": ">"}.get(
+                words[1] if len(words) > 1 else "")
+        elif words[0] == "element" and len(words) == 3:
+            current = []
+            order.append(words[1])
+            elements[words[1]] = (int(words[2]), current)
+        elif words[0] == "property" and current is not None:
+            current.append(words[1:])
+        else:
+            return None
+    if endian is None or order != ["vertex", "face"]:
+        return None
+    (n_vertices, vertex_properties), (n_faces, face_properties) = \
+        elements["vertex"], elements["face"]
+    if n_vertices < 0 or n_faces < 0:
+        return None
+    names = [p[-1] for p in vertex_properties]
+    if any(len(p) != 2 or p[0] not in SCALAR_TYPES for p in vertex_properties) or \
+            not {"x", "y", "z"} <= set(names) or ATTRIBUTE_NAMES & set(names) or \
+            len(set(names)) != len(names):
+        return None
+    if len(face_properties) != 1 or len(face_properties[0]) != 4 or \
+            face_properties[0][0] != "list" or \
+            face_properties[0][3] not in ("vertex_indices", "vertex_index") or \
+            face_properties[0][1] not in SCALAR_TYPES or face_properties[0][2] not in \
+            SCALAR_TYPES or SCALAR_TYPES[face_properties[0][2]][0] == "f":
+        return None
+    vertex_type = np.dtype([(p[1], endian + SCALAR_TYPES[p[0]]) for p in vertex_properties])
+    face_type = np.dtype([("n", endian + SCALAR_TYPES[face_properties[0][1]]),
+                          ("i", endian + SCALAR_TYPES[face_properties[0][2]], 3)])
+    size = n_vertices * vertex_type.itemsize
+    if start + size + n_faces * face_type.itemsize != len(data):
+        return None     # polygons other than triangles, or a short file: trimesh's to read
+    rows = np.frombuffer(data, vertex_type, n_vertices, start)
+    records = np.frombuffer(data, face_type, n_faces, start + size)
+    if n_faces and not (records["n"] == 3).all():
+        return None
+    vertices = np.empty((n_vertices, 3))
+    for axis, name in enumerate("xyz"):
+        vertices[:, axis] = rows[name]
+    faces = np.empty((n_faces, 3), np.int64)
+    for first in range(0, n_faces, CHUNK):
+        faces[first:first + CHUNK] = records["i"][first:first + CHUNK]
+    del rows, records
+    if n_faces and (faces.min() < 0 or faces.max() >= n_vertices):
+        raise SceneError(path, "face indices out of range")
+    return vertices, faces
+
+
+def merge_vertices(vertices, faces):
+    """(vertices, faces) with the referenced vertices at the same position (to MERGE_DIGITS
+    decimals) made one, in the order of their first occurrence, and the non-finite ones
+    dropped with the faces that use them (counted: the third value): what trimesh's
+    processing does to a mesh of positions alone."""
+    from trimesh.grouping import unique_rows
+    finite = np.isfinite(vertices).all(axis=1)
+    dropped = 0
+    if not finite.all():
+        keep = finite[faces].all(axis=1)
+        dropped = int((~keep).sum())
+        faces = faces[keep]
+    referenced = np.zeros(len(vertices), bool)
+    referenced[faces] = True
+    referenced &= finite
+    chosen = np.flatnonzero(referenced)
+    with np.errstate(all="ignore"):
+        stacked = np.round(vertices[chosen] * 10.0 ** MERGE_DIGITS).astype(np.int64)
+    unique, inverse = unique_rows(stacked, keep_order=True)
+    del stacked
+    remap = np.zeros(len(vertices), np.int64)
+    remap[chosen] = inverse
+    del inverse
+    vertices = vertices[chosen[unique]]
+    for first in range(0, len(faces), CHUNK):
+        faces[first:first + CHUNK] = remap[faces[first:first + CHUNK]]
+    return vertices, faces, dropped

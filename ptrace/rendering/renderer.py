@@ -71,11 +71,14 @@ def scene_warnings(scene, settings):
     return out
 
 
-def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, seed=0,
+def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, seed=0,
            threads=None, crop=None, camera=None, progress=False, stats=None, client=None,
            notice=None, aovs=None, max_memory=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
+    spp (default 1), max_depth and rr_depth not given, and resolution without a camera, are
+    the scene's own (scene.render_defaults: a Mitsuba scene's film, sampler and integrator)
+    where it has them.
     resolution is (W, H), default the camera's own size, or without a camera the course's
     800x600; camera (a ptrace.Camera: ptrace.course_camera, ptrace.look_at, ...) replaces
     the scene's default camera (ptrace.pointing.default_camera: the course's for a course scene,
@@ -104,12 +107,19 @@ def render(scene, *, spp=1, accel="bvh", integrator="path", resolution=None, see
     phases = Phases(IN_PROCESS_PHASES if client is None else DASK_PHASES)
     phases.enter("setup")
     try:
+        defaults = getattr(scene, "render_defaults", None) or {}
+        spp = defaults.get("spp", 1) if spp is None else spp
+        for name in ("max_depth", "rr_depth"):
+            if name in defaults:
+                options.setdefault(name, defaults[name])
         settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,
                                          **options)
         if resolution is not None:
             width, height = resolution
         elif camera is not None:
             width, height = camera.width, camera.height
+        elif "resolution" in defaults:
+            width, height = defaults["resolution"]
         else:
             width, height = BASE_WIDTH, BASE_HEIGHT
         buffers = check_frame(width, height, crop, features=aovs is not None,

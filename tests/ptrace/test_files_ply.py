@@ -89,3 +89,35 @@ def test_a_flat_model_edge_on_to_the_default_camera_is_noted(tmp_path):
                                atol=1e-12)
     assert (ptrace.render(scene, integrator="normals", resolution=(16, 12)).sum(-1) > 0).any()
     assert not any("edge-on" in n for n in ptrace.load(write(tmp_path)).notes)
+
+
+@pytest.mark.parametrize("endian", ["<", ">"])
+def test_a_binary_ply_of_positions_reads_as_trimesh_reads_it(tmp_path, monkeypatch, endian):
+    """A binary PLY of positions and triangles (with an extra per-vertex property) is read
+    straight into the flat arrays, and gives what the trimesh reader gives: the same vertices
+    after merging equal positions (first occurrence first), the same faces, the face with a
+    NaN corner dropped and counted, the same notes."""
+    from ptrace.io import ply
+    positions = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 0), (np.nan, 0, 0),
+                 (2, 2, 2), (1, 0, 0)]
+    vertices = np.zeros(len(positions), [("x", endian + "f4"), ("y", endian + "f4"),
+                                         ("z", endian + "f4"), ("quality", endian + "f8")])
+    vertices["x"], vertices["y"], vertices["z"] = np.array(positions, np.float32).T
+    faces = np.zeros(4, [("n", "u1"), ("i", endian + "i4", 3)])
+    faces["n"], faces["i"] = 3, [[0, 1, 2], [4, 3, 2], [5, 1, 3], [7, 3, 4]]
+    name = {"<": "binary_little_endian", ">": "binary_big_endian"}[endian]
+    header = (f"ply\nformat {name} 1.0\nelement vertex {len(positions)}\nproperty float x\n"
+              "property float y\nproperty float z\nproperty double quality\n"
+              "element face 4\nproperty list uchar int vertex_indices\nend_header\n")
+    path = tmp_path / "mesh.ply"
+    path.write_bytes(header.encode() + vertices.tobytes() + faces.tobytes())
+    data = path.read_bytes()
+    assert ply.read_plain_binary(str(path), data) is not None     # the direct reader's file
+    direct = ptrace.load(path)
+    monkeypatch.setattr(ply, "read_plain_binary", lambda *args: None)
+    through_trimesh = ptrace.load(path)
+    assert direct.geometry.vertices.tolist() == through_trimesh.geometry.vertices.tolist()
+    assert direct.geometry.faces.tolist() == through_trimesh.geometry.faces.tolist()
+    assert direct.geometry.faces.tolist() == [[0, 1, 2], [0, 3, 2], [1, 3, 0]]
+    assert direct.notes == through_trimesh.notes
+    assert any("dropped 1 face(s)" in note for note in direct.notes), direct.notes

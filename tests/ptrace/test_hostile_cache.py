@@ -17,7 +17,8 @@ from ptrace.app import cli
 from console import SHIPPED
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
-TINY = "from numba import njit\n\n\n@njit(cache=True)\ndef add_one(x):\n    return x + 1\n"
+TINY = ("from numba import njit\n\n\n@njit(cache=True)\ndef add_one(x):\n    return x + 1\n\n\n"
+        "@njit(cache=True)\ndef add_two(x):\n    return add_one(x) + 1\n")
 
 
 def python(code, env, cwd):
@@ -32,12 +33,12 @@ def tiny(tmp_path):
     (tmp_path / "mod" / "tiny.py").write_text(TINY)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
                PYTHONPATH=os.pathsep.join([str(tmp_path / "mod"), str(REPO)]))
-    first = python("import tiny; print(tiny.add_one(1))", env, tmp_path)
+    first = python("import tiny; print(tiny.add_two(0))", env, tmp_path)
     assert first.stdout.strip() == "2", first.stderr
     return env, tmp_path
 
 
-WITH_PTRACE = ("import ptrace, tiny; print(tiny.add_one(1)); "
+WITH_PTRACE = ("import ptrace, tiny; print(tiny.add_two(0)); "
                "print('\\n'.join(ptrace.jit.cache_notes()))")
 
 
@@ -46,10 +47,10 @@ WITH_PTRACE = ("import ptrace, tiny; print(tiny.add_one(1)); "
 def test_a_corrupt_cache_file_is_recompiled_with_a_note(tiny, pattern, garbage):
     env, folder = tiny
     files = list((folder / "cache").rglob(pattern))
-    assert files
+    assert len(files) == 2     # add_one's and add_two's
     for path in files:
         path.write_bytes(garbage)
-    plain = python("import tiny; print(tiny.add_one(1))", env, folder)
+    plain = python("import tiny; print(tiny.add_two(0))", env, folder)
     assert plain.returncode != 0 and "Traceback" in plain.stderr   # numba alone: a traceback
     for path in files:
         path.write_bytes(garbage)   # (in case numba alone rewrote one)
@@ -57,8 +58,10 @@ def test_a_corrupt_cache_file_is_recompiled_with_a_note(tiny, pattern, garbage):
     assert guarded.returncode == 0 and "Traceback" not in guarded.stderr, guarded.stderr
     out = guarded.stdout.strip().splitlines()
     assert out[0] == "2"
+    # one line for the kind, however many files
     assert len(out) == 2 and out[1].startswith("numba's cache: ") and "recompiling" in out[1]
-    again = python("import tiny; print(tiny.add_one(1))", env, folder)   # rewritten whole
+    assert out[1].endswith("(and 1 more files like it)"), out[1]
+    again = python("import tiny; print(tiny.add_two(0))", env, folder)   # rewritten whole
     assert again.returncode == 0 and again.stdout.strip() == "2", again.stderr
 
 
@@ -111,7 +114,8 @@ def test_a_private_folder_that_is_not_ours_is_not_used(tmp_path):
 
 
 def test_the_cli_says_a_cache_note_in_one_line(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(jit, "_NOTES", ["numba's cache: a test note"])
+    monkeypatch.setattr(jit, "_NOTES", {})
+    jit._note("numba's cache: a test note")
     code = cli.main(["--integrator", "normals", "-r", "4", "3", "-f", str(tmp_path / "x.png"),
                      str(SHIPPED)])
     err = capsys.readouterr().err
@@ -151,3 +155,29 @@ def test_an_edit_to_a_called_module_recompiles_its_callers(tmp_path):
     again = python(RUN_CALLER, env, tmp_path)
     assert again.stdout.strip() == "14", again.stderr
     assert python(RUN_CALLER, env, tmp_path).stdout.strip() == "14"   # and cached so
+
+
+def test_a_cache_entry_is_saved_whole_while_another_process_reads_the_index(tmp_path):
+    """numba saves an entry as an index and a data file, each replaced on its own; ptrace holds
+    a lock on the index across both (and across a load's two reads), so a save waits while a
+    load holds it and a load never sees an index naming data not yet written."""
+    import fcntl
+    import threading
+
+    from numba.core.caching import IndexDataCacheFile
+    cache_file = IndexDataCacheFile(str(tmp_path), "kernel-1.py311", ("stamp", 1))
+    saved = threading.Event()
+
+    def save():
+        cache_file.save(("signature",), ("compiled", 1))
+        saved.set()
+
+    with open(cache_file._index_path + ".lock", "ab") as reader:
+        fcntl.flock(reader, fcntl.LOCK_SH)      # another process loading
+        thread = threading.Thread(target=save)
+        thread.start()
+        assert not saved.wait(0.5), "the save did not wait for the load's lock"
+        assert not os.path.exists(cache_file._index_path)
+    thread.join(10)
+    assert saved.is_set()
+    assert cache_file.load(("signature",)) == ("compiled", 1)

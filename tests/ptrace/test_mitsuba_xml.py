@@ -59,6 +59,8 @@ def test_transform_steps_compose_left_to_right(tmp_path):
     ('<scale value="1, 2 3"/>', np.diag([1.0, 2.0, 3.0]), (0, 0, 0)),
     ('<translate value="4 5 6"/>', np.eye(3), (4, 5, 6)),
     ('<rotate value="0 1 0" angle="180"/>', np.diag([-1.0, 1.0, -1.0]), (0, 0, 0)),
+    # Mitsuba 3 does not normalise a rotation's axis: the same formula, scaling too
+    ('<rotate y="2" angle="90"/>', [[0, 0, 2], [0, 4, 0], [-2, 0, 0]], (0, 0, 0)),
     ('<rotate x="1" angle="90"/>', np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float),
      (0, 0, 0)),
     ('<matrix value="0 0 1 5  0 1 0 6  -1 0 0 7  0 0 0 1"/>',
@@ -108,6 +110,53 @@ def test_spectra_convert_to_rgb_as_mitsubas_rgb_variants_do(tmp_path, pairs):
               mi.traverse(shapes[1].emitter())["radiance.value"]]
     for mine, reference in zip(ours, theirs):
         np.testing.assert_allclose(mine, np.array(reference), rtol=2e-3)
+
+
+def test_a_spectrum_from_a_file_converts_as_mitsubas_does(tmp_path):
+    """A file of wavelength value lines (comments with #) is the spectrum of its pairs, the
+    RGB Mitsuba's RGB variant gives it; a line that is not two numbers is refused naming it."""
+    (tmp_path / "s.spd").write_text("# wavelength value\n400 0.1\n500 0.8\n\n600 0.2\n700 0.9\n")
+    path = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum name='
+                           '"reflectance" filename="s.spd"/></bsdf></shape>')
+    ours = ptrace.load(path).materials.albedo[0]
+    pairs = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum name='
+                            '"reflectance" value="400:0.1, 500:0.8, 600:0.2, 700:0.9"/></bsdf>'
+                            '</shape>', name="pairs.xml")
+    np.testing.assert_array_equal(ours, ptrace.load(pairs).materials.albedo[0])
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    theirs = mi.traverse(mi.load_file(str(path)).shapes()[0].bsdf())["reflectance.value"]
+    np.testing.assert_allclose(ours, np.array(theirs), rtol=2e-3)
+    (tmp_path / "s.spd").write_text("400 0.1\n500\n")
+    with pytest.raises(ptrace.SceneError, match=r"scene.xml:2: .*line 2 of 's.spd' is not"):
+        ptrace.load(path)
+
+
+def test_a_blackbody_emitter_is_what_mitsubas_spectral_variant_renders(tmp_path):
+    """A 3000 K blackbody's RGB (Mitsuba's RGB variants refuse it) against the radiance
+    Mitsuba's scalar_spectral renders of it seen straight on, within its noise (3 %)."""
+    path = write(tmp_path, '<integrator type="path"/><sensor type="perspective"><float name='
+                           '"fov" value="10"/><transform name="to_world"><lookat origin="0,0,5"'
+                           ' target="0,0,0"/></transform><film type="hdrfilm"><integer name='
+                           '"width" value="4"/><integer name="height" value="4"/></film>'
+                           '</sensor><shape type="rectangle"><emitter type="area"><spectrum '
+                           'type="blackbody" name="radiance"><float name="temperature" value='
+                           '"3000"/></spectrum></emitter></shape>')
+    scene = ptrace.load(path)
+    ours = scene.materials.emission[scene.material_index[0]]
+    assert any("blackbody" in note for note in scene.notes)
+    bad = write(tmp_path, '<shape type="sphere"><bsdf type="diffuse"><spectrum type="blackbody"'
+                          ' name="reflectance"><float name="temperature" value="3000"/>'
+                          '</spectrum></bsdf></shape>', name="bad.xml")
+    with pytest.raises(ptrace.SceneError, match="blackbody spectrum outside an emitter"):
+        ptrace.load(bad)
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_spectral")
+    try:
+        image = np.array(mi.render(mi.load_file(str(path)), spp=256))[1:3, 1:3, :3]
+    finally:
+        mi.set_variant("scalar_rgb")
+    np.testing.assert_allclose(ours, image.reshape(-1, 3).mean(axis=0), rtol=0.03)
 
 
 def test_include_reads_the_included_scene(tmp_path):
@@ -162,7 +211,9 @@ def test_a_0_6_scene_with_its_old_names(tmp_path):
     # sRGB 0.5 is linear 0.214
     np.testing.assert_allclose(scene.materials.albedo[0], [0.21404] * 3, rtol=1e-4)
     notes = "\n".join(scene.notes)
-    assert "-r 40 30 -s 32 -m 5" in notes and "rendered by ptrace's path tracer" in notes
+    assert scene.render_defaults == {"resolution": (40, 30), "spp": 32, "max_depth": 5}
+    assert "-r 40 30, -s 32, -m 5" in notes and "rendered by ptrace's path tracer" in notes
+    assert "<sampler type=\"ldsampler\">: ptrace draws its own" in notes
 
 
 def test_moment_renders_its_nested_integrator(tmp_path):
@@ -394,6 +445,64 @@ def test_the_memory_budget_counts_every_mesh_placed(tmp_path):
         ptrace.load(path, max_memory=3 * per_quad - 1)
 
 
+def test_the_memory_budget_counts_the_meshes_before_reading_any(tmp_path):
+    """The budget is checked for every mesh file's triangles (a PLY's and a serialized
+    mesh's header, an OBJ's faces) before any file is read: an OBJ whose face points past its
+    vertices is not reached when the PLY after it claims too many faces."""
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 9\n")
+    (tmp_path / "big.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex "
+                                       b"3\nproperty float x\nproperty float y\nproperty "
+                                       b"float z\nelement face 1000000\nproperty list uchar "
+                                       b"int vertex_indices\nend_header\n")
+    square = ([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], None)
+    (tmp_path / "m.serialized").write_bytes(serialized([square]))
+    path = write(tmp_path, "".join(
+        f'<shape type="{kind}"><string name="filename" value="{name}"/></shape>'
+        for kind, name in (("obj", "bad.obj"), ("serialized", "m.serialized"),
+                           ("ply", "big.ply"))))
+    per = ptrace.budget.LOAD_BYTES_PER_TRIANGLE
+    with pytest.raises(ptrace.budget.BudgetError) as caught:
+        ptrace.load(path, max_memory=10 ** 6 * per)
+    assert caught.value.path == str(path)
+    assert "the 1,000,003 triangles of its 3 mesh files" in caught.value.message
+    with pytest.raises(ptrace.SceneError, match="bad.obj"):     # within the budget: read
+        ptrace.load(path, max_memory=2 * 10 ** 6 * per)
+
+
+def binary_ply(path, vertices, faces, extra=()):
+    """A binary little-endian PLY of float x y z (and the named extra float columns of each
+    vertex row after them) and faces of any size."""
+    names = ["x", "y", "z", *extra]
+    head = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {len(vertices)}\n" + \
+        "".join(f"property float {n}\n" for n in names) + f"element face {len(faces)}\n" + \
+        "property list uchar int vertex_indices\nend_header\n"
+    body = np.asarray(vertices, "<f4").tobytes()
+    body += b"".join(struct.pack("<B", len(f)) + np.asarray(f, "<i4").tobytes() for f in faces)
+    path.write_bytes(head.encode() + body)
+
+
+def test_a_binary_ply_is_read_as_mitsuba_reads_it(tmp_path):
+    """A binary PLY of triangles is read straight (its vertices unmerged, its u v kept), the
+    same triangles as trimesh reads; one with a quad goes through trimesh, fan-triangulated."""
+    from ptrace.io import mitsuba_shapes
+    rows = [[0, 0, 0, 0, 0, 0.5], [1, 0, 0, 1, 0, 0.5], [1, 1, 0, 1, 1, 0.5],
+            [0, 1, 0, 0, 1, 0.5], [0, 1, 0, 0, 1, 0.5]]          # a duplicate vertex
+    binary_ply(tmp_path / "t.ply", rows, [[0, 1, 2], [0, 2, 4]], extra=("u", "v", "w"))
+    parts = mitsuba_shapes._binary_ply(str(tmp_path / "t.ply"))
+    assert len(parts["vertices"]) == 5
+    np.testing.assert_array_equal(parts["faces"], [[0, 1, 2], [0, 2, 4]])
+    np.testing.assert_allclose(parts["uv"][1], [[0, 0], [1, 1], [0, 1]])
+    scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
+                                        'value="t.ply"/></shape>'))
+    np.testing.assert_allclose(scene.geometry.vertices[scene.geometry.faces],
+                               np.array(rows)[:, :3][[[0, 1, 2], [0, 2, 4]]])
+    binary_ply(tmp_path / "q.ply", np.array(rows)[:4, :3], [[0, 1, 2, 3]])
+    assert mitsuba_shapes._binary_ply(str(tmp_path / "q.ply")) is None
+    scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
+                                        'value="q.ply"/></shape>', name="q.xml"))
+    assert scene.triangle_count == 2
+
+
 # --- materials ------------------------------------------------------------------------------
 
 def material_of(tmp_path, bsdf):
@@ -494,6 +603,44 @@ def test_emitters(tmp_path):
     emitting = scene.materials.kind[scene.material_index] == EMISSION
     assert emitting.sum() == 2 and (scene.materials.emission[scene.material_index[emitting]]
                                     == 7).all()
+
+
+def test_an_envmap_looks_up_what_mitsubas_looks_up(tmp_path):
+    """ptrace's lookup of a resampled envmap (turned by a to_world) against Mitsuba's own
+    lookup of the file, in 300 directions: a smooth 16 x 32 image, whose rows Mitsuba spreads
+    from pole to pole and whose columns it centres on cells."""
+    from ptrace.environment import environment_radiance
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    rows, columns = np.mgrid[0:16, 0:32]
+    ring = np.sin(np.pi * rows / 15)    # 0 on the first and last rows, which are the poles
+    image = np.stack([1 + np.sin(rows / 3.0), 1 + 0.5 * ring * np.cos(columns / 5.0),
+                      0.2 + ring * columns / 20.0], axis=-1).astype(np.float32)
+    write_texture_exr(tmp_path / "env.exr", image)
+    path = write(tmp_path, '<emitter type="envmap"><string name="filename" value="env.exr"/>'
+                           '<transform name="to_world"><rotate x="0.8" y="0.6" angle="35"/>'
+                           '</transform></emitter>')
+    ours = ptrace.load(path).environment.image
+    emitter = mi.load_file(str(path)).emitters()[0]
+    errors = []
+    for d in np.random.default_rng(3).normal(size=(300, 3)):
+        d /= np.linalg.norm(d)
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*(-d))
+        theirs = np.array(emitter.eval(si))
+        errors.append(np.abs(np.array(environment_radiance(ours, *d)) - theirs).max())
+    # ptrace's lookup of the map resampled finer: close, not the same bits; the image
+    # spans 0 to 2
+    assert np.median(errors) < 0.002 and np.max(errors) < 0.05, (np.median(errors),
+                                                                  np.max(errors))
+
+
+def write_texture_exr(path, pixels):
+    import OpenImageIO as oiio
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, oiio.FLOAT))
+    out.write_image(np.ascontiguousarray(pixels))
+    out.close()
 
 
 @pytest.mark.parametrize("beam, cutoff", [(15.0, 20.0), (1.0, 60.0), (30.0, 30.0)])
@@ -695,3 +842,119 @@ def test_cornell_box_mean_agrees_with_mitsuba(tmp_path, box, spp):
                  str(path)]) == 0
     ratio = float(read_image(out)[:, :, :3].mean() / reference.mean())
     assert ratio == pytest.approx(1.0, abs=0.03), ratio
+
+
+# --- the file's film, sampler and integrator as the render's defaults -----------------------
+
+LIT_FLOOR = """
+<integrator type="path">{integrator}</integrator>
+<sensor type="perspective">
+  <float name="fov" value="40"/>
+  <transform name="to_world"><lookat origin="0, 3, 0.01" target="0, 0, 0" up="0, 1, 0"/>
+  </transform>
+  <sampler type="independent"><integer name="sample_count" value="3"/></sampler>
+  <film type="hdrfilm"><integer name="width" value="6"/><integer name="height" value="4"/>
+  </film>
+</sensor>
+<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="-90"/><scale value="5"/>
+  </transform><bsdf type="diffuse"/></shape>
+<emitter type="point"><point name="position" x="0" y="2" z="0"/>
+  <rgb name="intensity" value="10"/></emitter>
+"""
+
+
+def test_the_files_settings_are_the_render_defaults(tmp_path):
+    """film 6x4, sample_count 3, max_depth 1 (the emitters seen: the lit floor black) and
+    rr_depth 7 are what ptrace.render uses unless its caller says otherwise."""
+    path = write(tmp_path, LIT_FLOOR.format(
+        integrator='<integer name="max_depth" value="1"/><integer name="rr_depth" value="7"/>'))
+    scene = ptrace.load(path)
+    assert scene.render_defaults == {"resolution": (6, 4), "spp": 3, "max_depth": 0,
+                                     "rr_depth": 7}
+    stats = {}
+    image = ptrace.render(scene, stats=stats)
+    assert image.shape == (4, 6, 3) and stats["spp"] == 3
+    assert image.max() == 0     # -m 0: a point light is never seen, the floor not lit
+    stats = {}
+    image = ptrace.render(scene, resolution=(5, 3), spp=2, max_depth=1, stats=stats)
+    assert image.shape == (3, 5, 3) and stats["spp"] == 2 and image.min() > 0
+
+
+def test_mitsubas_own_defaults_where_the_file_leaves_them_out(tmp_path):
+    """No <integrator>: Mitsuba's path tracer of unbounded depth (ptrace's largest -m); a
+    sensor without film or sampler: 768x576 and 4 samples; no sensor: ptrace's own."""
+    bare = ptrace.load(write(tmp_path, '<sensor type="perspective"/><shape type="sphere"/>'))
+    assert bare.render_defaults == {"resolution": (768, 576), "spp": 4, "max_depth": 10_000}
+    sensorless = ptrace.load(write(tmp_path, '<shape type="sphere"/>', name="s.xml"))
+    assert sensorless.render_defaults == {"max_depth": 10_000}
+    deep = ptrace.load(write(tmp_path, '<integrator type="path"><integer name="max_depth" '
+                                       'value="99999"/></integrator>', name="d.xml"))
+    assert deep.render_defaults["max_depth"] == 10_000
+
+
+def test_the_command_line_takes_the_files_settings_unless_given(tmp_path, capsys):
+    path = write(tmp_path, LIT_FLOOR.format(integrator='<integer name="max_depth" value="1"/>'))
+    out = tmp_path / "o.exr"
+    assert main(["-q", "-f", str(out), str(path)]) == 0
+    assert capsys.readouterr().out.startswith("6x4 spp 3 ")
+    assert read_image(out).shape[:2] == (4, 6) and read_image(out)[:, :, :3].max() == 0
+    assert main(["-q", "-r", "5", "3", "-s", "2", "-m", "1", "-f", str(out), str(path)]) == 0
+    assert capsys.readouterr().out.startswith("5x3 spp 2 ")
+    assert read_image(out).shape[:2] == (3, 5) and read_image(out)[:, :, :3].min() > 0
+
+
+def test_a_reconstruction_filter_other_than_a_box_is_noted(tmp_path):
+    film = '<sensor type="perspective"><film type="hdrfilm">{}</film></sensor>'
+    for rfilter, noted in (("", True), ('<rfilter type="tent"/>', True),
+                           ('<rfilter type="box"/>', False)):
+        notes = "\n".join(ptrace.load(write(tmp_path, film.format(rfilter))).notes)
+        assert ("reconstruction filter" in notes) == noted, rfilter
+
+
+def test_the_files_settings_are_said_in_a_note(tmp_path, capsys):
+    path = write(tmp_path, LIT_FLOOR.format(integrator='<integer name="max_depth" value="4"/>'))
+    assert main(["-r", "2", "2", "-f", str(tmp_path / "o.png"), str(path)]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if "-r 6 4, -s 3, -m 3" in
+             line]
+    assert len(notes) == 1 and notes[0].startswith("ptrace: note: ")
+
+
+# --- line numbers ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("case", ["unknown_plugin", "undefined_name", "singular_transform",
+                                  "missing_file", "unknown_ref", "wrong_type"])
+def test_a_refusal_names_the_line_of_its_element(tmp_path, capsys, case):
+    """The element at fault sits on line 4 (after the <scene> line and two comment lines)."""
+    body, fragment = REFUSALS[case]
+    path = write(tmp_path, f"<!-- one -->\n<!-- two -->\n{body}")
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert str(caught.value).startswith(f"{path}:4: ") and fragment in str(caught.value)
+    assert caught.value.path == str(path)
+    assert main(["-q", "-f", str(tmp_path / "out.png"), str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"ptrace: error: {caught.value}\n"
+
+
+def test_the_line_is_the_one_of_the_element_in_its_own_file(tmp_path):
+    """A fault in an included file names that file and the line there; a nested value names
+    its own line, not its plugin's."""
+    write(tmp_path, '\n\n<shape type="cube">\n<transform name="to_world">\n<scale z="0"/>\n'
+                    '</transform></shape>', name="part.xml")
+    path = write(tmp_path, '<include filename="part.xml"/>')
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert caught.value.path.endswith("part.xml") and caught.value.line == 5
+    assert str(caught.value).startswith(f"{caught.value.path}:5: ")
+    path = write(tmp_path, '<shape type="sphere">\n\n<float name="radius"\n value="x"/>'
+                           '</shape>', name="value.xml")
+    with pytest.raises(ptrace.SceneError, match=r"value\.xml:4: <float name=\"radius\">"):
+        ptrace.load(path)
+
+
+def test_xml_that_is_not_well_formed_names_the_parsers_line(tmp_path):
+    path = tmp_path / "broken.xml"
+    path.write_text('<scene version="3.0.0">\n<shape type="sphere">\n</scene>\n')
+    with pytest.raises(ptrace.SceneError) as caught:
+        ptrace.load(path)
+    assert str(caught.value).startswith(f"{path}:3: not well-formed XML")
