@@ -10,7 +10,7 @@ import pytest
 from files_by_hand import QUAD, QUAD_FACES, QUAD_UV_GLTF, gltf
 
 import ptrace
-from ptrace.budget import Budget, BudgetError
+from ptrace.budget import TEXEL_BYTES, TEXTURE_PEAK_BYTES, Budget, BudgetError
 
 # -- the memory budget: items that fit alone but not together ---------------------------------
 
@@ -55,19 +55,21 @@ def _textured_quads(path, count, side):
 
 
 def test_a_files_textures_that_fit_the_budget_alone_are_refused_together(tmp_path):
-    """Two 512 x 512 textures of N texels each: a texture keeps 12 bytes a texel and peaks at
-    80 while it is decoded, so one texture needs 80 N, the second after the first 12 N + 80 N.
-    A budget of 86 N (plus room for the quads' few triangles) loads either file of one
-    texture, and refuses the file that holds both."""
+    """Two 512 x 512 textures of N texels each: a texture keeps K = TEXEL_BYTES a texel and
+    peaks at P = TEXTURE_PEAK_BYTES while it is decoded, so one texture needs P N, the second
+    after the first K N + P N. A budget of (P + K / 2) N (plus room for the quads' few
+    triangles) loads either file of one texture, and refuses the file that holds both."""
     side = 512
     texels = side * side
-    limit = 86 * texels + 20_000
+    kept, peak = TEXEL_BYTES, TEXTURE_PEAK_BYTES
+    limit = (peak + kept // 2) * texels + 20_000
     ptrace.load(_textured_quads(tmp_path / "one.gltf", 1, side), max_memory=limit)
     (tmp_path / "other").mkdir()
     ptrace.load(_textured_quads(tmp_path / "other" / "one.gltf", 1, side), max_memory=limit)
     with pytest.raises(BudgetError, match="512x512 texture"):
         ptrace.load(_textured_quads(tmp_path / "two.gltf", 2, side), max_memory=limit)
-    ptrace.load(tmp_path / "two.gltf", max_memory=94 * texels + 20_000)   # and room for both
+    # and room for both
+    ptrace.load(tmp_path / "two.gltf", max_memory=(peak + kept + 2) * texels + 20_000)
 
 
 # -- the default light's emitter share ---------------------------------------------------------
