@@ -73,7 +73,7 @@ from ptrace.environment import LUMINANCE
 
 ALPHA = 1e-3          # family-wise false-alarm rate, per case
 SPP = 1024            # ptrace's samples per pixel for the family test
-POWER_SPP = 256       # ptrace's samples per pixel of the -m 4 render of (c) and of (a)'s
+POWER_SPP = 128       # ptrace's samples per pixel of the -m 4 render of (c) and of (a)'s
                       # render with ptrace's default settings
 DARKER = 0.975        # (c): this fraction of ptrace's image must be rejected
 SEED = 1
