@@ -23,22 +23,13 @@ from numba import njit
 
 from . import budget
 from .errors import PtraceError, require_regular_file
+from .io.bands import band_rows, read_bands
 from .io.limits import problem
 from .io.quiet import library_output
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 FLOOR = 1e-3          # of the table's mean: the density's lower bound (see the docstring)
 CONSTANT_SIZE = (32, 64)   # rows, columns of the image a constant environment is made of
-
-
-BAND_TEXELS = 1 << 18     # texels a band of rows holds while an image is read or its tables made
-
-
-def band_rows(columns):
-    """Rows of `columns` texels in a band: images are converted and their sampling tables made
-    a band of rows at a time, so that the float64 working arrays stay a few MiB whatever the
-    image's size."""
-    return max(1, BAND_TEXELS // max(int(columns), 1))
 
 
 @dataclass(eq=False)
@@ -119,35 +110,21 @@ def load_environment(spec, max_memory=None):
         budget.Budget.of(max_memory).charge(
             text, f"the {spec.width}x{spec.height} environment map",
             spec.width * spec.height * budget.ENVIRONMENT_BYTES)
-        image = _read_bands(text, reader, spec, oiio)
+        image = _read_bands(text, reader, spec)
     finally:
         reader.close()
     return Environment(image, name=text)
 
 
-def _read_bands(text, reader, spec, oiio):
+def _read_bands(text, reader, spec):
     """The (H, W, 3) float32 pixels of an open image, decoded a band of rows at a time (a tile
     row at a time for a tiled file)."""
     image = np.empty((spec.height, spec.width, 3), np.float32)
-    step = band_rows(spec.width)
-    if spec.tile_height > 0:
-        step = max(spec.tile_height, step - step % spec.tile_height)
-    for start in range(0, spec.height, step):
-        end = min(start + step, spec.height)
-        with library_output() as printed:
-            if spec.tile_width > 0:
-                pixels = reader.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + start,
-                                           spec.y + end, spec.z, spec.z + max(spec.depth, 1),
-                                           0, 3, oiio.FLOAT)
-            else:
-                pixels = reader.read_scanlines(0, 0, spec.y + start, spec.y + end, spec.z, 0, 3,
-                                               oiio.FLOAT)
-            error = reader.geterror() if reader.has_error or pixels is None else None
-        if error is not None or pixels is None:
-            raise PtraceError(f"{text}: cannot read the environment map "
-                              f"({printed.one_line(error) or 'its pixels could not be decoded'})")
-        image[start:end] = np.asarray(pixels, dtype=np.float32).reshape(end - start,
-                                                                         spec.width, 3)
+    try:
+        for start, pixels in read_bands(reader, spec, 3):
+            image[start:start + pixels.shape[0]] = pixels
+    except ValueError as error:
+        raise PtraceError(f"{text}: cannot read the environment map ({error})") from None
     return image
 
 

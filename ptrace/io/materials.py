@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import budget
 from ..scene import REPEAT
+from .bands import band_rows, read_bands
 from .limits import LIMIT, LIMIT_WORDS, problem
 from .quiet import library_output
 
@@ -18,11 +19,6 @@ MIN_ALPHA = 0.01          # a roughness of 0 becomes this Beckmann alpha (0 has 
 DEFAULT_ALBEDO = 0.5      # the diffuse material of a geometry without one (docs/usage.md says so)
 
 
-BAND_TEXELS = 1 << 18    # texels of a band of rows: images are converted a band at a time
-
-
-def _band_rows(width):
-    return max(1, BAND_TEXELS // max(int(width), 1))
 
 
 class TexturePool:
@@ -154,7 +150,7 @@ def linear_rgb(image, srgb, encoded=None):
     encoded = from_integers if encoded is None else encoded
     height, width = stored.shape[:2]
     result = np.empty((height, width, 3), np.float32)
-    step = _band_rows(width)
+    step = band_rows(width)
     for start in range(0, height, step):
         result[start:start + step] = _linear_band(_scaled(stored[start:start + step], divisor),
                                                   srgb and encoded)
@@ -182,30 +178,6 @@ def _open_image(path, model, what):
     return reader, spec
 
 
-def _bands(reader, spec, channels):
-    """The image's pixels, (h, W, channels) float32 in the file's own scale, a band of rows
-    (whole tile rows for a tiled file) at a time. ValueError if they cannot be decoded."""
-    import OpenImageIO as oiio
-    step = _band_rows(spec.width)
-    if spec.tile_height > 0:
-        step = max(spec.tile_height, step - step % spec.tile_height)
-    for start in range(0, spec.height, step):
-        end = min(start + step, spec.height)
-        with library_output() as printed:
-            if spec.tile_width > 0:
-                pixels = reader.read_tiles(0, 0, spec.x, spec.x + spec.width, spec.y + start,
-                                           spec.y + end, spec.z, spec.z + max(spec.depth, 1),
-                                           0, channels, oiio.FLOAT)
-            else:
-                pixels = reader.read_scanlines(0, 0, spec.y + start, spec.y + end, spec.z, 0,
-                                               channels, oiio.FLOAT)
-            error = reader.geterror() if reader.has_error or pixels is None else None
-        if error is not None or pixels is None:
-            raise ValueError(printed.one_line(error) or "its pixels could not be decoded")
-        yield start, np.asarray(pixels, dtype=np.float32).reshape(end - start, spec.width,
-                                                                  channels)
-
-
 def _encoded(spec):
     import OpenImageIO as oiio
     return spec.format.basetype in (oiio.UINT8, oiio.UINT16, oiio.INT8, oiio.INT16)
@@ -222,7 +194,7 @@ def read_image_file(path, what="", model=None):
     reader, spec = _open_image(path, model, what)
     try:
         pixels = np.empty((spec.height, spec.width, spec.nchannels), np.float32)
-        for start, band in _bands(reader, spec, spec.nchannels):
+        for start, band in read_bands(reader, spec, spec.nchannels):
             pixels[start:start + len(band)] = band
     finally:
         reader.close()
@@ -238,7 +210,7 @@ def read_texture_file(path, srgb, what="", model=None):
     try:
         result = np.empty((spec.height, spec.width, 3), np.float32)
         decode = srgb and _encoded(spec)
-        for start, band in _bands(reader, spec, min(spec.nchannels, 3)):
+        for start, band in read_bands(reader, spec, min(spec.nchannels, 3)):
             result[start:start + len(band)] = _linear_band(band, decode)
     finally:
         reader.close()
