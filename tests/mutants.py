@@ -30,6 +30,7 @@ SHADING = "ptrace/kernel/shading.py"
 RR_TEST = "tests/ptrace/test_roulette_rule.py"
 PROMISES = "tests/ptrace/test_hostile_promises.py"
 ALPHA_TEST = "tests/ptrace/test_gltf_alpha_normals.py"
+GUIDE, GUIDE_TEST = "ptrace/kernel/guide.py", "tests/ptrace/test_guiding.py"
 
 # name -> (what the bug is, [(file, text, replacement)], [pytest arguments])
 MUTANTS = {
@@ -182,6 +183,19 @@ MUTANTS = {
         [("ptrace/light_hits.py", "        k = k + 1 if box_crossed(lower, upper, k, ox, oy, oz, "
           "dx, dy, dz, t_max) else skip[k]\n", "        k = skip[k]\n")],
         ["tests/ptrace/test_light_bvh.py", "-k", "through_the_tree"]),
+    "guide-u-not-rescaled": (
+        "the guide's quadtree warp passes u1 down unrescaled after choosing the left half",
+        [(GUIDE, "u1 = _rescale(u1, 0.0, left)", "u1 = u1")],
+        [GUIDE_TEST, "-k", "chi_square or sphere"]),
+    "guide-left-out-of-bsdf-bounce-pdf": (
+        "a bounce the BSDF draws is weighted by the BSDF's pdf alone, not the mixture's",
+        [(SHADING, "pdf = (1.0 - mix) * pdf + mix * folded_pdf(guide, leaf, wx / length,",
+          "pdf = pdf + 0.0 * folded_pdf(guide, leaf, wx / length,")],
+        [GUIDE_TEST, "-k", "means_agree"]),
+    "guide-chosen-at-half-alpha": (
+        "the guide is chosen with probability alpha / 2 while the pdf mixes at alpha",
+        [(SHADING, "base + DIM_GUIDE) < mix:", "base + DIM_GUIDE) < 0.5 * mix:")],
+        [GUIDE_TEST, "-k", "means_agree"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "
         "chosen lane's interval",
@@ -235,8 +249,10 @@ def run_tests(directory, args):
         raise SystemExit(f"the scratch copy is not what gets imported: {probe.stdout}"
                          f"{probe.stderr}")
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider",
-                             *args], cwd=directory, env=env, capture_output=True, text=True)
+    # one process (-n 0): xdist reports -x's stop as an interruption (exit 2), not a failure
+    result = subprocess.run([sys.executable, "-m", "pytest", "-x", "-q", "-n", "0", "-p",
+                             "no:cacheprovider", *args], cwd=directory, env=env,
+                            capture_output=True, text=True)
     lines = [line for line in result.stdout.splitlines() if line.strip()] or [""]
     return result.returncode, time.perf_counter() - start, lines[-1], lines
 
