@@ -179,10 +179,11 @@ class Wavefront:
                 self._closest(wave, scratch, size)
                 features_stage(shapes, self.materials, floats, ints, size, wave.features)
             if self.normals:   # the camera rays' hits, coloured by their normals
-                self._closest(wave, scratch, size)
+                if not aovs:
+                    self._closest(wave, scratch, size)
                 normals_stage(shapes, floats, ints, size)
             else:
-                self.paths(wave, scratch, size)
+                self.paths(wave, scratch, size, traced=aovs)
                 if trainer is not None:
                     kept = record_stage(floats, size, wave.history, self.depth, wave.records)
                     records.append(wave.records[:, :kept].copy())
@@ -204,10 +205,11 @@ class Wavefront:
         else:
             closest_stage(self.accel, scratch, wave.floats, wave.ints, wave.queue, n)
 
-    def paths(self, wave, scratch, n):
+    def paths(self, wave, scratch, n, traced=False):
         """Carry the wave's n queued paths, whose rays are set (slots as camera_stage leaves
         them: throughput 1, no radiance, vertex 0, one ray), to their ends: each path's
-        radiance in its R, G, B rows and the rays it traced in its RAYS row."""
+        radiance in its R, G, B rows and the rays it traced in its RAYS row. traced: their
+        first closest hits are found already (the AOVs' features needed them)."""
         floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
         shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
         shadow_key, cutouts = wave.shadow_key, self.cutouts
@@ -216,7 +218,9 @@ class Wavefront:
         guide, history, depth = self.guide, wave.history, self.depth
         snapshot = self.trainer is not None
         while n:
-            self._closest(wave, scratch, n)
+            if not traced:
+                self._closest(wave, scratch, n)
+            traced = False
             hits = n
             n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
                                after, starts)
