@@ -295,55 +295,56 @@ def power_heuristic(pdf, other):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def light_mode(options, lights):
-    """The light sampler this scene's vertices use: LIGHTS_ALL, LIGHTS_POWER or LIGHTS_BVH
-    (AUTO resolved by the number of lights; bvh falls back to power in records built without
-    the tree)."""
-    mode = options.light_sampler
-    if mode == LIGHTS_AUTO:
-        mode = LIGHTS_ALL if lights.kind.shape[0] <= AUTO_EVERY_LIGHT else AUTO_MANY
-    if mode == LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
-        mode = LIGHTS_POWER
-    return mode
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def expected_samples(options, lights, mode, light, qx, qy, qz, nx, ny, nz):
-    """A light's expected light samples at vertex q (shading normal n) under light sampler
-    mode: -l, or -l times its probability of being chosen there."""
-    if mode == LIGHTS_POWER:
-        return options.light_samples * lights.select_pmf[light]
-    if mode == LIGHTS_BVH:
-        return options.light_samples * bvh_light_pmf(lights, light, qx, qy, qz, nx, ny, nz)
+def every_light_samples(options, lights, light, qx, qy, qz, nx, ny, nz):
+    """A light's expected light samples at vertex q (shading normal n) when every light is
+    sampled: -l."""
     return float(options.light_samples)
 
 
+@njit(cache=True, _nrt=False, forceinline=True)
+def power_samples(options, lights, light, qx, qy, qz, nx, ny, nz):
+    """... when one light is chosen by power for each light sample: -l times its probability."""
+    return options.light_samples * lights.select_pmf[light]
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def tree_samples(options, lights, light, qx, qy, qz, nx, ny, nz):
+    """... when the light BVH chooses: -l times the tree's probability of it at q."""
+    return options.light_samples * bvh_light_pmf(lights, light, qx, qy, qz, nx, ny, nz)
+
+
+# each light sampler's expected samples of a light at a vertex (ptrace.codes' LIGHTS_*)
+EXPECTED_SAMPLES = {LIGHTS_ALL: every_light_samples, LIGHTS_POWER: power_samples,
+                    LIGHTS_BVH: tree_samples}
+
+
 @njit(cache=True, _nrt=False, inline="always")
-def area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx, qy, qz, qnx, qny, qnz,
-                     ox, oy, oz, dx, dy, dz, t):
-    """Area light `light`'s emission that a bounce ray from q (spawned at o, unit direction d,
-    closest hit at t) finds, as emission_found counts it: (0, 0, 0) if the ray does not cross
-    it before t, or it is a face a delta bounce sees as geometry."""
+def area_light_crossed(lights, delta, light, ox, oy, oz, dx, dy, dz, t):
+    """Whether a bounce ray (spawned at o, unit direction d, closest hit at t) finds area light
+    `light`, as emission_found counts it: it crosses the light before t, and the light is not a
+    face that a delta bounce sees as geometry."""
     if delta and lights.faced[light]:
-        return 0.0, 0.0, 0.0
+        return False
     t_light = area_light_hit(lights.position, lights.direction, lights.edge_x, lights.edge_y,
                              light, ox, oy, oz, dx, dy, dz)
-    if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
-        return 0.0, 0.0, 0.0
-    weight = 1.0
-    if not delta:   # the light's density for this direction from q, as the shading samples it
-        n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
-        weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz, dx,
-                                                               dy, dz))
-    return (weight * lights.radiance[light, 0], weight * lights.radiance[light, 1],
-            weight * lights.radiance[light, 2])
+    return t_light * (1.0 - SHADOW_SHORTEN) < t     # (false when t_light is inf)
 
 
-@njit(cache=True, _nrt=False, inline="always")
-def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny,
-                   qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
-    """Emission a bounce ray from q (shading normal qn; spawned at o, unit direction d, closest hit
-    at t on prim at barycentrics (u, v), material m) finds, as (r, g, b), before the throughput.
+_EMISSION_FOUND = {}
+
+
+def emission_found(mode):
+    """The function that counts the emission a bounce ray finds, for light sampler `mode`
+    (LIGHTS_ALL, LIGHTS_POWER or LIGHTS_BVH: the one the shading kernels used; made once per
+    process, cached on disk per mode): a constant of its code, so only the light BVH's
+    function compiles the tree's pmfs.
+
+        r, g, b = found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx,
+                        qny, qnz, ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz)
+
+    is the emission a bounce ray from q (shading normal qn; spawned at o, unit direction d,
+    closest hit at t on prim at barycentrics (u, v), material m) finds, as (r, g, b), before
+    the throughput.
 
     After a delta bounce (mirror, glass), which light sampling cannot follow, everything it sees
     counts whole: emissive geometry (a light's face included), area lights without a face, and the
@@ -355,66 +356,80 @@ def emission_found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy,
     them. When the shading kernel chose lights by power or by the light BVH, a light's samples
     per vertex are -l times its probability of being chosen (at q, by the tree), and its weight
     says so."""
-    r = g = b = 0.0
-    kinds = lights.kind
-    mode = light_mode(options, lights)
-    # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
-    k = np.int64(0)     # not a literal 0: next_light would compile once more for it
-    t_max = t / (1.0 - SHADOW_SHORTEN)
-    while True:
-        light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
-                              lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
-        if light < 0:
-            break
-        lr, lg, lb = area_light_found(lights, options, mode, delta, bsdf_pdf_, light, qx, qy, qz,
-                                      qnx, qny, qnz, ox, oy, oz, dx, dy, dz, t)
-        r += lr
-        g += lg
-        b += lb
-    for j in range(lights.sky.shape[0]):     # the lights at infinity
-        light = lights.sky[j]
-        kind = kinds[light]
-        if kind == ENVIRONMENT and prim < 0:
+    if mode in _EMISSION_FOUND:
+        return _EMISSION_FOUND[mode]
+    SAMPLES = EXPECTED_SAMPLES[mode]
+    TREE = mode == LIGHTS_BVH
+
+    @njit(cache=True, _nrt=False, forceinline=True)
+    def found(shapes, materials, lights, options, delta, bsdf_pdf_, qx, qy, qz, qnx, qny, qnz,
+              ox, oy, oz, dx, dy, dz, t, prim, u, v, m, gx, gy, gz):
+        r = g = b = 0.0
+        kinds = lights.kind
+        # the area lights the ray crosses before its hit, found by ptrace.light_hits' tree
+        k = np.int64(0)     # not a literal 0: next_light would compile once more for it
+        t_max = t / (1.0 - SHADOW_SHORTEN)
+        while True:
+            light, k = next_light(lights.hit_lower, lights.hit_upper, lights.hit_skip,
+                                  lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
+            if light < 0:
+                break
+            if not area_light_crossed(lights, delta, light, ox, oy, oz, dx, dy, dz, t):
+                continue
             weight = 1.0
-            if not delta:
-                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
-                weight = power_heuristic(bsdf_pdf_, n * environment_pdf(lights.env_table, dx, dy,
-                                                                        dz))
-            er, eg, eb = environment_radiance(lights.env_image, dx, dy, dz)
-            r += weight * er
-            g += weight * eg
-            b += weight * eb
-        elif kind == AMBIENT and prim < 0 and dy > 0.0:
-            weight = 1.0
-            if not delta:
-                n = expected_samples(options, lights, mode, light, qx, qy, qz, qnx, qny, qnz)
-                weight = power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
+            if not delta:   # the light's density for this direction from q, as shading samples it
+                n = SAMPLES(options, lights, light, qx, qy, qz, qnx, qny, qnz)
+                weight = power_heuristic(bsdf_pdf_, n * area_light_pdf(lights, light, qx, qy, qz,
+                                                                       dx, dy, dz))
             r += weight * lights.radiance[light, 0]
             g += weight * lights.radiance[light, 1]
             b += weight * lights.radiance[light, 2]
-    if m >= 0 and emits(materials.kind[m]):
-        weight = 1.0
-        if not delta:
-            if lights.prim_pdf[prim] == 0.0:
-                return r, g, b       # a light's face: its light was counted above
-            if abs(dx * gx + dy * gy + dz * gz) == 0.0:
-                return r, g, b
-            # the emitter sampler's density for this direction from q, as the shading samples it
-            if mode == LIGHTS_BVH:   # this primitive, chosen by the tree
-                density = options.light_samples * bvh_prim_pmf(
-                    lights, prim, qx, qy, qz, qnx, qny, qnz) * primitive_pdf(
-                    shapes, prim, qx, qy, qz, dx, dy, dz)
-            else:   # the emissive primitives' light (the last), then this primitive by power
-                n = expected_samples(options, lights, mode, kinds.shape[0] - 1, qx, qy, qz,
-                                     qnx, qny, qnz)
-                density = n * emitter_pdf(shapes, lights.prim_pdf, prim, qx, qy, qz, dx, dy,
-                                          dz)
-            weight = power_heuristic(bsdf_pdf_, density)
-        er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
-        r += weight * er
-        g += weight * eg
-        b += weight * eb
-    return r, g, b
+        for j in range(lights.sky.shape[0]):     # the lights at infinity
+            light = lights.sky[j]
+            kind = kinds[light]
+            if kind == ENVIRONMENT and prim < 0:
+                weight = 1.0
+                if not delta:
+                    n = SAMPLES(options, lights, light, qx, qy, qz, qnx, qny, qnz)
+                    weight = power_heuristic(bsdf_pdf_, n * environment_pdf(lights.env_table, dx,
+                                                                            dy, dz))
+                er, eg, eb = environment_radiance(lights.env_image, dx, dy, dz)
+                r += weight * er
+                g += weight * eg
+                b += weight * eb
+            elif kind == AMBIENT and prim < 0 and dy > 0.0:
+                weight = 1.0
+                if not delta:
+                    n = SAMPLES(options, lights, light, qx, qy, qz, qnx, qny, qnz)
+                    weight = power_heuristic(bsdf_pdf_, n / (2.0 * math.pi))
+                r += weight * lights.radiance[light, 0]
+                g += weight * lights.radiance[light, 1]
+                b += weight * lights.radiance[light, 2]
+        if m >= 0 and emits(materials.kind[m]):
+            weight = 1.0
+            if not delta:
+                if lights.prim_pdf[prim] == 0.0:
+                    return r, g, b       # a light's face: its light was counted above
+                if abs(dx * gx + dy * gy + dz * gz) == 0.0:
+                    return r, g, b
+                # the emitter sampler's density for this direction from q, as shading samples it
+                if TREE:   # this primitive, chosen by the tree
+                    density = options.light_samples * bvh_prim_pmf(
+                        lights, prim, qx, qy, qz, qnx, qny, qnz) * primitive_pdf(
+                        shapes, prim, qx, qy, qz, dx, dy, dz)
+                else:   # the emissive primitives' light (the last), then this primitive by power
+                    n = SAMPLES(options, lights, kinds.shape[0] - 1, qx, qy, qz, qnx, qny, qnz)
+                    density = n * emitter_pdf(shapes, lights.prim_pdf, prim, qx, qy, qz, dx, dy,
+                                              dz)
+                weight = power_heuristic(bsdf_pdf_, density)
+            er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
+            r += weight * er
+            g += weight * eg
+            b += weight * eb
+        return r, g, b
+
+    _EMISSION_FOUND[mode] = found
+    return found
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

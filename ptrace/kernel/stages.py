@@ -10,6 +10,7 @@ threads or the order the paths are processed in."""
 import numpy as np
 from numba import njit
 
+from ..codes import LIGHTS_ALL
 from ..environment import LUMINANCE, environment_radiance
 from ..integrator import (
     SHADOW_SHORTEN,
@@ -137,7 +138,7 @@ def area_lights_found(lights, light_samples, delta, bsdf_pdf_, qx, qy, qz, ox, o
 _HIT_STAGES = {}
 
 
-def hit_stage(general=False):
+def hit_stage(general=False, mode=LIGHTS_ALL):
     """The hit stage (made once per process, cached on disk per variant):
 
         kept = stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out,
@@ -152,10 +153,13 @@ def hit_stage(general=False):
     Without `general` the lights are area lights (wavefront.AreaLights), the emitters their
     faces and the surfaces untextured; with it, the emission is ptrace.integrator's
     emission_found over ptrace.integrator's full records (any light, the environment as the
-    background, emissive geometry, emission textures, glTF's emissive material)."""
-    if general in _HIT_STAGES:
-        return _HIT_STAGES[general]
+    background, emissive geometry, emission textures, glTF's emissive material), for light
+    sampler `mode` (ptrace.codes' LIGHTS_*: the shading kernels')."""
+    key = (general, mode if general else LIGHTS_ALL)
+    if key in _HIT_STAGES:
+        return _HIT_STAGES[key]
     GENERAL = general
+    FOUND = emission_found(key[1])
 
     @njit(cache=True, nogil=True, _nrt=False)
     def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, out, starts):
@@ -190,7 +194,7 @@ def hit_stage(general=False):
                 delta = ints[DELTA, i] != 0
                 if delta or mis:
                     if GENERAL:
-                        er, eg, eb = emission_found(
+                        er, eg, eb = FOUND(
                             shapes, materials, lights, options, delta, floats[PDF, i],
                             floats[QX, i], floats[QY, i], floats[QZ, i], floats[QNX, i],
                             floats[QNY, i], floats[QNZ, i], ox, oy, oz, dx, dy, dz, t, prim, u, v,
@@ -232,7 +236,7 @@ def hit_stage(general=False):
         starts[0] = 0
         return kept
 
-    _HIT_STAGES[general] = stage
+    _HIT_STAGES[key] = stage
     return stage
 
 

@@ -131,7 +131,7 @@ class Wavefront:
         self.guide = uniform_guide()
         self.trainer = None
         self.depth = max(1, min(GUIDE_DEPTH, options.max_depth)) if self.guided else 1
-        self.hit_stage = None if self.normals else hit_stage(general)
+        self.hit_stage = None if self.normals else hit_stage(general, mode)
         # cut-out surfaces: the backend's stages that trace past them (the records hold an
         # empty cutoff array when no material is cut)
         self.cutouts = general and materials.cutoff.shape[0] > 0
