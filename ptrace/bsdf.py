@@ -155,7 +155,189 @@ def beckmann_half_vector(alpha, u1, u2):
     return sin_h * math.cos(phi), sin_h * math.sin(phi), cos_h
 
 
-# -- the interface ---------------------------------------------------------------------------------
+# -- one kind's sample, eval and pdf ---------------------------------------------------------------
+# Every kind has the same three signatures, so a shading kernel takes one kind's functions as the
+# constants of its code (BSDFS) and compiles nothing of the other kinds. `sample` returns (wix,
+# wiy, wiz, fr, fg, fb, pdf), pdf 0 meaning no sample; for a delta kind f carries the whole
+# weight divided by |cos theta_i| and pdf is the discrete probability of the branch taken (1 for
+# mirror and refraction, R or 1-R for glass), so f * |cos| / pdf is the path weight in every case.
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def diffuse_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                   woy, woz, u1, u2, u3):
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    x, y, z = cosine_hemisphere(u1, u2)
+    if z <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    return x, y, z, ar * INV_PI, ag * INV_PI, ab * INV_PI, z * INV_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def diffuse_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    if woz > 0.0 and wiz > 0.0:
+        return ar * INV_PI, ag * INV_PI, ab * INV_PI
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def delta_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    """A delta kind's f, and an emitter's: 0 (its direction is never sampled by another)."""
+    return 0.0, 0.0, 0.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def delta_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    return 0.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def mirror_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                  woy, woz, u1, u2, u3):
+    if woz == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    c = abs(woz)
+    return -wox, -woy, woz, ar / c, ag / c, ab / c, 1.0
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def microfacet_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                      woy, woz, u1, u2, u3):
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    a = alpha
+    hx, hy, hz = beckmann_half_vector(a, u1, u2)
+    d = wox * hx + woy * hy + woz * hz
+    wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+    if wiz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    pdf = _microfacet_pdf(a, wox, woy, woz, wix, wiy, wiz)
+    fr, fg, fb = _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+    return wix, wiy, wiz, fr, fg, fb, pdf
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                    wiz):
+    return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def glossy_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                  woy, woz, u1, u2, u3):
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    if u3 < 0.5:     # the base's cosine lobe
+        wix, wiy, wiz = cosine_hemisphere(u1, u2)
+    else:            # the coat's: reflect wo about a Beckmann half vector
+        hx, hy, hz = beckmann_half_vector(alpha, u1, u2)
+        d = wox * hx + woy * hy + woz * hz
+        wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+    if wiz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fr, fg, fb = _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
+    return wix, wiy, wiz, fr, fg, fb, _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def glossy_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    return _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def pbr_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy,
+               woz, u1, u2, u3):
+    return gltf_sample(ar, ag, ab, metallic, alpha, wox, woy, woz, u1, u2, u3)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    return gltf_eval(ar, ag, ab, metallic, alpha, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+    return gltf_pdf(metallic, alpha, ar, ag, ab, wox, woy, woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _refracted(ior_m, wox, woy, woz):
+    """wo refracted through a dielectric of index ior_m (below the surface, above it air):
+    (cos_o, its sin^2 theta_t (>= 1: total internal reflection), cos_t, t's x y z, the
+    radiance scale eta^2)."""
+    entering = woz > 0.0
+    eta_ratio = 1.0 / ior_m if entering else ior_m    # n_incident / n_transmitted
+    cos_o = abs(woz)
+    sin2_t = eta_ratio * eta_ratio * max(0.0, 1.0 - cos_o * cos_o)
+    if sin2_t >= 1.0:
+        return cos_o, sin2_t, 0.0, 0.0, 0.0, 0.0, 0.0
+    cos_t = math.sqrt(1.0 - sin2_t)
+    tz = -cos_t if entering else cos_t
+    return cos_o, sin2_t, cos_t, -eta_ratio * wox, -eta_ratio * woy, tz, eta_ratio * eta_ratio
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def glass_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy,
+                 woz, u1, u2, u3):
+    """Reflection with Schlick's Fresnel R, else refraction (the course's glass)."""
+    if woz == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    cos_o, sin2_t, cos_t, tx, ty, tz, radiance_scale = _refracted(ior[m], wox, woy, woz)
+    if sin2_t >= 1.0:   # total internal reflection
+        return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
+    r0 = (1.0 - ior[m]) / (1.0 + ior[m])
+    r0 = r0 * r0
+    reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
+    if u3 < reflect:
+        s = reflect / cos_o
+        return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
+    s = (1.0 - reflect) * radiance_scale / cos_t
+    return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+        transmittance[m, 2] * s, 1.0 - reflect
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def refraction_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                      woy, woz, u1, u2, u3):
+    """Refraction alone (none past total internal reflection)."""
+    if woz == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    cos_o, sin2_t, cos_t, tx, ty, tz, radiance_scale = _refracted(ior[m], wox, woy, woz)
+    if sin2_t >= 1.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    s = radiance_scale / cos_t
+    return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+        transmittance[m, 2] * s, 1.0
+
+
+# each kind's (sample, eval, pdf)
+BSDFS = {
+    DIFFUSE: (diffuse_sample, diffuse_eval, diffuse_pdf),
+    MIRROR: (mirror_sample, delta_eval, delta_pdf),
+    GLASS: (glass_sample, delta_eval, delta_pdf),
+    REFRACTION: (refraction_sample, delta_eval, delta_pdf),
+    MICROFACET: (microfacet_sample, microfacet_eval, microfacet_pdf),
+    GLOSSY: (glossy_sample, glossy_eval, glossy_pdf),
+    GLTF_PBR: (pbr_sample, pbr_eval, pbr_pdf),
+}
+
+
+# -- any kind, by its code -------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
@@ -164,15 +346,17 @@ def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
     metallic are material m's albedo, roughness and metallic at the shading point
     (ptrace.textures)."""
     if kind == DIFFUSE:
-        if woz > 0.0 and wiz > 0.0:
-            return ar * INV_PI, ag * INV_PI, ab * INV_PI
-        return 0.0, 0.0, 0.0
+        return diffuse_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                            wix, wiy, wiz)
     if kind == MICROFACET:
-        return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+        return microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                               wix, wiy, wiz)
     if kind == GLOSSY:
-        return _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
+        return glossy_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                           wiy, wiz)
     if kind == GLTF_PBR:
-        return gltf_eval(ar, ag, ab, metallic, alpha, wox, woy, woz, wix, wiy, wiz)
+        return pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                        wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
@@ -181,90 +365,35 @@ def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise. The albedo
     and metallic matter only to GLTF_PBR, whose choice of lobe depends on them."""
     if kind == DIFFUSE:
-        return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
+        return diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
     if kind == MICROFACET:
-        return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+        return microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
     if kind == GLOSSY:
-        return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+        return glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
     if kind == GLTF_PBR:
-        return gltf_pdf(metallic, alpha, ar, ag, ab, wox, woy, woz, wix, wiy, wiz)
+        return pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
     return 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
                 woy, woz, u1, u2, u3):
-    """Sample wi given wo. Returns (wix, wiy, wiz, fr, fg, fb, pdf); pdf 0 means no sample.
-
-    For delta BSDFs f carries the whole weight divided by |cos theta_i| and pdf is the discrete
-    probability of the branch taken (1 for mirror and refraction, R or 1-R for glass), so that
-    f * |cos| / pdf is the path weight in every case.
-    """
+    """Sample wi given wo: (wix, wiy, wiz, fr, fg, fb, pdf), as each kind's sample function
+    (above); pdf 0 means no sample, and emitters do not scatter."""
+    args = (ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+            u1, u2, u3)
     if kind == DIFFUSE:
-        if woz <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        x, y, z = cosine_hemisphere(u1, u2)
-        if z <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        return x, y, z, ar * INV_PI, ag * INV_PI, ab * INV_PI, z * INV_PI
+        return diffuse_sample(*args)
     if kind == MIRROR:
-        if woz == 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        c = abs(woz)
-        return -wox, -woy, woz, ar / c, ag / c, ab / c, 1.0
+        return mirror_sample(*args)
     if kind == MICROFACET:
-        if woz <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        a = alpha
-        hx, hy, hz = beckmann_half_vector(a, u1, u2)
-        d = wox * hx + woy * hy + woz * hz
-        wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
-        if wiz <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        pdf = _microfacet_pdf(a, wox, woy, woz, wix, wiy, wiz)
-        fr, fg, fb = _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
-        return wix, wiy, wiz, fr, fg, fb, pdf
+        return microfacet_sample(*args)
     if kind == GLOSSY:
-        if woz <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        if u3 < 0.5:     # the base's cosine lobe
-            wix, wiy, wiz = cosine_hemisphere(u1, u2)
-        else:            # the coat's: reflect wo about a Beckmann half vector
-            hx, hy, hz = beckmann_half_vector(alpha, u1, u2)
-            d = wox * hx + woy * hy + woz * hz
-            wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
-        if wiz <= 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        fr, fg, fb = _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz)
-        return wix, wiy, wiz, fr, fg, fb, _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
+        return glossy_sample(*args)
     if kind == GLTF_PBR:
-        return gltf_sample(ar, ag, ab, metallic, alpha, wox, woy, woz, u1, u2, u3)
-    if kind == GLASS or kind == REFRACTION:
-        if woz == 0.0:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-        entering = woz > 0.0
-        eta_ratio = 1.0 / ior[m] if entering else ior[m]    # n_incident / n_transmitted
-        cos_o = abs(woz)
-        sin2_t = eta_ratio * eta_ratio * max(0.0, 1.0 - cos_o * cos_o)
-        if sin2_t >= 1.0:   # total internal reflection
-            if kind == REFRACTION:
-                return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-            return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
-        cos_t = math.sqrt(1.0 - sin2_t)
-        tz = -cos_t if entering else cos_t
-        tx, ty = -eta_ratio * wox, -eta_ratio * woy
-        radiance_scale = eta_ratio * eta_ratio
-        if kind == REFRACTION:
-            s = radiance_scale / cos_t
-            return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
-                transmittance[m, 2] * s, 1.0
-        r0 = (1.0 - ior[m]) / (1.0 + ior[m])
-        r0 = r0 * r0
-        reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
-        if u3 < reflect:
-            s = reflect / cos_o
-            return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
-        s = (1.0 - reflect) * radiance_scale / cos_t
-        return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
-            transmittance[m, 2] * s, 1.0 - reflect
+        return pbr_sample(*args)
+    if kind == GLASS:
+        return glass_sample(*args)
+    if kind == REFRACTION:
+        return refraction_sample(*args)
     return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering

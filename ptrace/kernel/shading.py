@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from ..bsdf import bsdf_eval, bsdf_pdf, bsdf_sample, is_delta, uniform_hemisphere
+from ..bsdf import BSDFS, is_delta, uniform_hemisphere
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
@@ -193,11 +193,13 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     key = (kind, general, mode, hemisphere, guided)
     if key in _STAGES:
         return _STAGES[key]
-    KIND, GENERAL, MODE, HEMI = kind, general, mode, hemisphere
+    BSDF_SAMPLE, BSDF_EVAL, BSDF_PDF = BSDFS[kind]    # this kind's alone: no other compiles
+    GENERAL, MODE, HEMI = general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
     GUIDED = guided and not DELTA_KIND and not hemisphere
+    LIT = not DELTA_KIND     # light samples (a constant: a delta kind's code has none)
 
     @njit(cache=True, nogil=True, _nrt=False)
     def stage(shapes, materials, lights, options, mis, floats, ints, queue, n, shadow,
@@ -240,110 +242,113 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             if GUIDED:
                 leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, px, py, pz)
                 mix = guide.alpha
-            if HEMI and light_count:    # -H: the course's uniform hemisphere sampling
-                count = 0
-                for light in range(light_count):
-                    count += lights.kind[light] != EMITTER
-                count = max(count, 1) * samples
-                for j in range(count):
-                    u1, u2 = sample_2d(options, pixel, sample, sample * count + j,
-                                       base + DIM_LIGHT, base + DIM_LIGHT + 2 * j)
-                    lx, ly, lz = uniform_hemisphere(u1, u2)
-                    fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
-                                           materials.k, materials.specular, m, wox, woy, woz,
-                                           lx, ly, lz)
-                    scale = lz * 2.0 * math.pi / count
-                    wx = lx * xx + ly * yx + lz * nx
-                    wy = lx * xy + ly * yy + lz * ny
-                    wz = lx * xz + ly * yz + lz * nz
-                    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-                    rays += 1
-                    queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, wx, wy, wz,
-                              math.inf, tr * (fr * scale), tg * (fg * scale), tb * (fb * scale),
-                              i, base + RAY_KEYS * (1 + j))
-                    shadows += 1
-            j = 0
-            lit = 0 if HEMI else light_count     # (-H takes no light samples)
-            for outer in range(samples if CHOOSE and lit else lit):
-                light = outer
-                if CHOOSE:   # light sample `outer` of -l: one light, chosen by power or the tree
-                    index = sample * samples + outer
-                    u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE,
-                                   base + DIM_LIGHT + 4 * outer + 2)
-                    light_prim = -1
-                    if MODE == LIGHTS_BVH:
-                        light, light_prim, chosen = bvh_choose(lights, u0, px, py, pz, nx, ny, nz)
-                        if light < 0:
-                            continue
-                    else:
-                        light = choose(lights.select_cdf, u0)
-                        chosen = lights.select_pmf[light]
-                count = samples
-                delta_light = False
-                if GENERAL:
-                    delta_light = light_is_delta(lights.kind[light], lights.model[light])
-                    if delta_light or CHOOSE:
-                        count = 1
-                for s in range(count):
-                    if CHOOSE:   # weight: the light's expected samples at this vertex
-                        weight = samples * chosen
-                        lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light(
-                            shapes, materials, lights, options, pixel, sample, index, base,
-                            light, light_prim, outer, px, py, pz)
-                    elif GENERAL:
-                        weight = count
-                        index = sample * count + s
-                        lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
-                            shapes, materials, lights, options, pixel, sample, index, base,
-                            light, j, px, py, pz)
-                    else:
-                        weight = count
-                        index = sample * count + s
-                        u1, u2 = sample_2d(options, pixel, sample, index,
-                                           base + DIM_LIGHT + 2 * light,
-                                           base + DIM_LIGHT + 2 * j)
-                        lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py,
-                                                                        pz, u1, u2)
-                    j += 1
-                    if pdf < 1e-11:
-                        continue
+            if LIT:   # (a delta kind's kernel has no light sampling code at all)
+                if HEMI and light_count:    # -H: the course's uniform hemisphere sampling
+                    count = 0
+                    for light in range(light_count):
+                        count += lights.kind[light] != EMITTER
+                    count = max(count, 1) * samples
+                    for j in range(count):
+                        u1, u2 = sample_2d(options, pixel, sample, sample * count + j,
+                                           base + DIM_LIGHT, base + DIM_LIGHT + 2 * j)
+                        lx, ly, lz = uniform_hemisphere(u1, u2)
+                        fr, fg, fb = BSDF_EVAL(ar, ag, ab, alpha, metallic, materials.eta,
+                                               materials.k, materials.specular, m, wox, woy, woz,
+                                               lx, ly, lz)
+                        scale = lz * 2.0 * math.pi / count
+                        wx = lx * xx + ly * yx + lz * nx
+                        wy = lx * xy + ly * yy + lz * ny
+                        wz = lx * xz + ly * yz + lz * nz
+                        ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+                        rays += 1
+                        queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, wx, wy, wz,
+                                  math.inf, tr * (fr * scale), tg * (fg * scale), tb * (fb * scale),
+                                  i, base + RAY_KEYS * (1 + j))
+                        shadows += 1
+                j = 0
+                lit = 0 if HEMI else light_count     # (-H takes no light samples)
+                for outer in range(samples if CHOOSE and lit else lit):
+                    light = outer
+                    if CHOOSE:   # light sample `outer` of -l: one light, by power or the tree
+                        index = sample * samples + outer
+                        u0 = sample_1d(options, pixel, sample, index,
+                                       base + DIM_LIGHT + DIM_CHOOSE,
+                                       base + DIM_LIGHT + 4 * outer + 2)
+                        light_prim = -1
+                        if MODE == LIGHTS_BVH:
+                            light, light_prim, chosen = bvh_choose(lights, u0, px, py, pz, nx, ny,
+                                                                   nz)
+                            if light < 0:
+                                continue
+                        else:
+                            light = choose(lights.select_cdf, u0)
+                            chosen = lights.select_pmf[light]
+                    count = samples
+                    delta_light = False
                     if GENERAL:
-                        if lights.kind[light] == EMITTER and dist <= offset:
-                            # a point of p's own emissive surface: within rounding of p its
-                            # direction is noise, and no light leaves a surface into itself
+                        delta_light = light_is_delta(lights.kind[light], lights.model[light])
+                        if delta_light or CHOOSE:
+                            count = 1
+                    for s in range(count):
+                        if CHOOSE:   # weight: the light's expected samples at this vertex
+                            weight = samples * chosen
+                            lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light(
+                                shapes, materials, lights, options, pixel, sample, index, base,
+                                light, light_prim, outer, px, py, pz)
+                        elif GENERAL:
+                            weight = count
+                            index = sample * count + s
+                            lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
+                                shapes, materials, lights, options, pixel, sample, index, base,
+                                light, j, px, py, pz)
+                        else:
+                            weight = count
+                            index = sample * count + s
+                            u1, u2 = sample_2d(options, pixel, sample, index,
+                                               base + DIM_LIGHT + 2 * light,
+                                               base + DIM_LIGHT + 2 * j)
+                            lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py,
+                                                                            pz, u1, u2)
+                        j += 1
+                        if pdf < 1e-11:
                             continue
-                    wiz = wx * nx + wy * ny + wz * nz
-                    if wiz <= 0.0:
-                        continue
-                    wix = wx * xx + wy * xy + wz * xz
-                    wiy = wx * yx + wy * yy + wz * yz
-                    fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
-                                           materials.k, materials.specular, m, wox, woy, woz,
-                                           wix, wiy, wiz)
-                    scale = wiz / (weight * pdf)
-                    if options.mis and not delta_light:
-                        other = bsdf_pdf(KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix,
-                                         wiy, wiz)
-                        if GUIDED:   # the bounce's pdf is the mixture's
-                            other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
-                                                                           wz, nx, ny, nz)
-                        scale *= power_heuristic(weight * pdf, other)
-                    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-                    sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
-                    if dist != math.inf:
-                        # aim from the spawned origin at the light's point, stopping just short
-                        ax = px + dist * wx - ox
-                        ay = py + dist * wy - oy
-                        az = pz + dist * wz - oz
-                        length = math.sqrt(ax * ax + ay * ay + az * az)
-                        if length > 0.0:
-                            sdx, sdy, sdz = ax / length, ay / length, az / length
-                        tmax = length * (1.0 - SHADOW_SHORTEN)
-                    rays += 1
-                    queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, sdx, sdy,
-                              sdz, tmax, tr * (lr * fr * scale), tg * (lg * fg * scale),
-                              tb * (lb * fb * scale), i, base + RAY_KEYS * j)
-                    shadows += 1
+                        if GENERAL:
+                            if lights.kind[light] == EMITTER and dist <= offset:
+                                # a point of p's own emissive surface: within rounding of p its
+                                # direction is noise, and no light leaves a surface into itself
+                                continue
+                        wiz = wx * nx + wy * ny + wz * nz
+                        if wiz <= 0.0:
+                            continue
+                        wix = wx * xx + wy * xy + wz * xz
+                        wiy = wx * yx + wy * yy + wz * yz
+                        fr, fg, fb = BSDF_EVAL(ar, ag, ab, alpha, metallic, materials.eta,
+                                               materials.k, materials.specular, m, wox, woy, woz,
+                                               wix, wiy, wiz)
+                        scale = wiz / (weight * pdf)
+                        if options.mis and not delta_light:
+                            other = BSDF_PDF(ar, ag, ab, alpha, metallic, wox, woy, woz, wix,
+                                             wiy, wiz)
+                            if GUIDED:   # the bounce's pdf is the mixture's
+                                other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
+                                                                               wz, nx, ny, nz)
+                            scale *= power_heuristic(weight * pdf, other)
+                        ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+                        sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
+                        if dist != math.inf:
+                            # aim from the spawned origin at the light's point, stopping just short
+                            ax = px + dist * wx - ox
+                            ay = py + dist * wy - oy
+                            az = pz + dist * wz - oz
+                            length = math.sqrt(ax * ax + ay * ay + az * az)
+                            if length > 0.0:
+                                sdx, sdy, sdz = ax / length, ay / length, az / length
+                            tmax = length * (1.0 - SHADOW_SHORTEN)
+                        rays += 1
+                        queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, sdx, sdy,
+                                  sdz, tmax, tr * (lr * fr * scale), tg * (lg * fg * scale),
+                                  tb * (lb * fb * scale), i, base + RAY_KEYS * j)
+                        shadows += 1
             ints[RAYS, i] += rays
             if vertex == max_depth and not (DELTA_KIND or mis):
                 continue
@@ -359,14 +364,14 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                 wix = wx * xx + wy * xy + wz * xz
                 wiy = wx * yx + wy * yy + wz * yz
                 wiz = wx * nx + wy * ny + wz * nz
-                fr, fg, fb = bsdf_eval(KIND, ar, ag, ab, alpha, metallic, materials.eta,
+                fr, fg, fb = BSDF_EVAL(ar, ag, ab, alpha, metallic, materials.eta,
                                        materials.k, materials.specular, m, wox, woy, woz, wix,
                                        wiy, wiz)
-                pdf = mix * guided_pdf + (1.0 - mix) * bsdf_pdf(
-                    KIND, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+                pdf = mix * guided_pdf + (1.0 - mix) * BSDF_PDF(
+                    ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
             else:
-                wix, wiy, wiz, fr, fg, fb, pdf = bsdf_sample(
-                    KIND, ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
+                wix, wiy, wiz, fr, fg, fb, pdf = BSDF_SAMPLE(
+                    ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
                     materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2,
                     u3)
                 if GUIDED and pdf > 1e-11:

@@ -3,11 +3,14 @@ size, the threads or the crop, and `bvh` the same as `naive`; its memory does no
 -m or -l; it compiles a shading kernel only for the material kinds a scene has, and none for
 the normals integrator. (What the images should be is checked against analytic answers and
 Mitsuba's references elsewhere: test_estimators, test_light_transport, test_per_pixel.)"""
+import numba
 import numpy as np
 import pytest
+from numba.core import types
 
 import ptrace
-from ptrace.kernel import layout, wavefront
+from ptrace import bsdf, codes, integrator, lights
+from ptrace.kernel import layout, shading, wavefront
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import RenderJob
 from ptrace.scene import DIFFUSE, GLASS, MIRROR
@@ -83,3 +86,51 @@ def test_only_the_kinds_a_scene_has_get_a_kernel(cornell):
     spheres = ptrace.load(str(course_scene("sky/CBspheres.dae")))
     job = RenderJob.build(spheres, Settings(), camera)
     assert [kind for kind, _ in job.wavefront.stages] == [DIFFUSE, MIRROR, GLASS]
+
+
+def calls(dispatcher, signature=None):
+    """The numba functions that a kernel's own code calls, from its types: the kernel is typed
+    afresh (its cached copy keeps no types), with the signature it was compiled for."""
+    signature = signature or dispatcher.signatures[0]
+    fresh = numba.njit(nogil=True, _nrt=False)(dispatcher.py_func)
+    fresh.compile(signature)
+    typemap = fresh.overloads[signature].fndesc.typemap
+    return {ty.dispatcher.py_func for ty in typemap.values() if isinstance(ty, types.Dispatcher)}
+
+
+def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for_lights():
+    """Each kind's kernel calls its own kind's BSDF functions, not the dispatch over every kind
+    (which would compile every kind's code into it); a delta kind's has no light sampling."""
+    scene = ptrace.load(str(course_scene("sky/CBspheres.dae")))
+    ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=3)
+    plain = lambda kind: shading.shading_stage(kind, False, codes.LIGHTS_ALL, False, False)
+    diffuse, mirror = calls(plain(DIFFUSE)), calls(plain(MIRROR))
+    own = lambda kind: {f.py_func for f in bsdf.BSDFS[kind]}
+    every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS)) | {
+        f.py_func for f in (bsdf.bsdf_sample, bsdf.bsdf_eval, bsdf.bsdf_pdf)}
+    light_sampling = {f.py_func for f in (lights.sample_area, shading.any_light,
+                                          shading.chosen_light)}
+    # what the probe sees: the diffuse kernel's BSDF and its light samples
+    assert own(DIFFUSE) <= diffuse and lights.sample_area.py_func in diffuse
+    assert diffuse & every_kind == own(DIFFUSE)
+    assert bsdf.mirror_sample.py_func in mirror
+    assert mirror & every_kind <= own(MIRROR) and not mirror & light_sampling
+
+
+def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sampler(tmp_path):
+    """A scene of a point light (the general stages, every light sampled) compiles nothing of
+    the light BVH's or the power sampler's weights; the light BVH's variant, typed for the
+    same arguments, does call the tree's."""
+    path = tmp_path / "point.xml"
+    path.write_text('<scene version="3.0.0"><shape type="rectangle"><bsdf type="diffuse"/>'
+                    '</shape><emitter type="point"><point name="position" x="0" y="0" z="1"/>'
+                    '</emitter></scene>', encoding="utf-8")
+    ptrace.render(ptrace.load(str(path)), spp=1, resolution=(8, 6), max_depth=3,
+                  light_sampler="all")
+    found = integrator.emission_found(codes.LIGHTS_ALL)
+    signature = found.signatures[0]
+    tree = {integrator.tree_samples.py_func, integrator.bvh_prim_pmf.py_func}
+    every = calls(found)
+    assert integrator.every_light_samples.py_func in every
+    assert not every & (tree | {integrator.power_samples.py_func})
+    assert tree <= calls(integrator.emission_found(codes.LIGHTS_BVH), signature)
