@@ -105,7 +105,7 @@ class Wavefront:
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
         self.materials = materials     # the full record: the AOVs read it
         if mode == codes.LIGHTS_BVH and lights.bvh_pmf.shape[0] == 0:
-            mode = codes.LIGHTS_POWER     # records without the tree (integrator.light_mode)
+            mode = codes.LIGHTS_POWER     # records without the tree choose by power
         self.hemisphere = bool(options.hemisphere)
         general = not area_only or mode != codes.LIGHTS_ALL or self.hemisphere
         if general:     # any light: the full records

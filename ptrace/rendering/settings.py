@@ -178,9 +178,9 @@ class Settings:
 
     def light_mode(self, scene, emitters=None):
         """The light sampler a render of this scene uses (LIGHTS_ALL, LIGHTS_POWER or
-        LIGHTS_BVH): auto resolved as the integrator resolves it (ptrace.integrator.light_mode),
-        by the file's lights and the emissive primitives counting as one (emitters: their
-        count, if the caller has it)."""
+        LIGHTS_BVH; the stages are made for it, ptrace.kernel.wavefront): auto resolved by the
+        file's lights and the emissive primitives counting as one (emitters: their count, if
+        the caller has it)."""
         code = LIGHT_SAMPLER_CODES[self.light_sampler]
         if code != codes.LIGHTS_AUTO:
             return code
