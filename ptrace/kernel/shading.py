@@ -3,8 +3,8 @@ the kinds a scene has: at each queued vertex, -l samples of every area light unl
 delta (each a shadow ray in the wave's shadow queue, carrying the light it would add, weighted
 by the power heuristic against the BSDF's sample with multiple importance sampling), then the
 BSDF's sample, roulette, and the next ray. A kernel calls its own kind's BSDF functions
-(ptrace.bsdf.BSDFS), so no other kind's code is compiled into it. Random numbers are keyed by (pixel, sample,
-dimension), with the dimensions of ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
+(ptrace.bsdf.BSDFS), so no other kind's code is compiled into it. Random numbers are keyed by
+(pixel, sample, dimension), with the dimensions of ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
 import math
 
 from numba import njit
