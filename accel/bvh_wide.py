@@ -20,11 +20,11 @@ A leaf's triangles are stored by _fill_rows in blocks of four, as the mesh's own
 (each lane of accel.simd's block test computes what the scalar test of accel.kernels computes on
 those values, bit for bit, so bvh and naive agree exactly), and tested four at a time. They are
 float32 when every coordinate of the mesh is a float32 value (a float PLY's, a glTF's: widened
-as they are loaded, they are the same float64 values in half the memory), else float64. What each of these
-choices bought is measured side by side in benchmarks/results/bvh_changes.md: 8-wide with
-vector slab and block tests over the earlier 4-wide scalar traversal, float32 planes over
-float64 ones, unsigned stack indices, entering a node's only child hit directly, float32 slab
-arithmetic over float64.
+as they are loaded, they are the same float64 values in half the memory), else float64. What
+each of these choices bought is measured side by side in benchmarks/results/bvh_changes.md:
+8-wide with vector slab and block tests over the earlier 4-wide scalar traversal, float32
+planes over float64 ones, unsigned stack indices, entering a node's only child hit directly,
+float32 slab arithmetic over float64.
 """
 import numpy as np
 from numba import njit
