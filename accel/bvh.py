@@ -24,6 +24,7 @@ from .bvh_build import (  # noqa: F401 - the build's names, re-exported as befor
     SPLITS,
     STACK_SIZE,
     _build,
+    _primitive_boxes,
 )
 from .bvh_slab import _hi32, _ray_planes  # noqa: F401 - _ray_planes re-exported as before
 from .bvh_wide import (  # noqa: F401 - the rows' names, re-exported as before
@@ -32,8 +33,10 @@ from .bvh_wide import (  # noqa: F401 - the rows' names, re-exported as before
     WIDTH,
     _fill_rows,
     _float32_down,
+    _float32_exact,
     _float32_up,
     _node_rows,
+    _traversal_rows,
     _wide_rows,
 )
 from .kernels import (
@@ -57,8 +60,10 @@ ROOT, MISS = np.int64(0), np.int64(NO_HIT)
 BINARY_FIELDS = ("lower", "upper", "child_or_first", "count", "order")
 
 
-BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_tri", "centers",
-                                     "radii", "triangle"])
+# blocks: the leaves' triangles as float64 coordinates, or (0, BLOCK_COLUMNS) where blocks32 holds
+# them as float32 (every coordinate a float32 value: _fill_rows); one record type either way
+BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "blocks32", "prims", "n_tri",
+                                     "centers", "radii", "triangle"])
 
 
 @njit(cache=True)
@@ -69,10 +74,20 @@ def new_scratch(record):
 
 @njit(cache=True, inline="always")
 def _block_test(record, block, shear, ray, lo, hi):
-    """The record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes."""
+    """The record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes, from
+    its float32 blocks where it has them (the same float64 values), else its float64 ones."""
+    if record.blocks32.shape[0] != 0:
+        if record.triangle == WATERTIGHT:
+            return watertight_block(record.blocks32, block, shear, lo, hi)
+        return moller_trumbore_block(record.blocks32, block, ray, lo, hi)
     if record.triangle == WATERTIGHT:
         return watertight_block(record.blocks, block, shear, lo, hi)
     return moller_trumbore_block(record.blocks, block, ray, lo, hi)
+
+
+@njit(cache=True, inline="always")
+def _block_count(record):
+    return record.blocks.shape[0] + record.blocks32.shape[0]   # one of them is empty
 
 
 @njit(cache=True, inline="always")
@@ -146,7 +161,7 @@ def _every_closest(record, shear, ray, lo, hi):
     """The closest hit by testing every primitive, for a ray with a direction component float32
     cannot invert (_ray_planes): (t, prim, u, v, 0, tests)."""
     best_t, best_prim, best_u, best_v = _blocks_closest(
-        record, ROOT, record.blocks.shape[0], shear, ray, lo, hi, MISS, 0.0, 0.0)
+        record, ROOT, _block_count(record), shear, ray, lo, hi, MISS, 0.0, 0.0)
     ox, oy, oz, dx, dy, dz = ray
     best_t, best_prim, best_u, best_v = spheres_closest(
         record.centers, record.radii, record.n_tri, ox, oy, oz, dx, dy, dz, lo, best_t,
@@ -242,7 +257,7 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
     if wild:   # a direction float32 cannot invert: every primitive
-        return (_blocks_any(record, ROOT, record.blocks.shape[0], shear, ray, lo, hi)
+        return (_blocks_any(record, ROOT, _block_count(record), shear, ray, lo, hi)
                 or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
     top = 0
     payload = ROOT
@@ -297,50 +312,52 @@ class BVHAccelerator(compiled.CompiledFace):
         self.split = split
         self.triangle = triangle
         start = time.perf_counter()
-        tree = self._binary_tree()
-        self.max_depth = tree[5]
-        count = tree[3]
+        lower, upper, child_or_first, count, order, self.max_depth = self._binary_tree()
         self._tree_stats = (int(count.shape[0]), int((count > 0).sum()),
                             int(count.max(initial=0)))
-        wide = _wide_rows(*tree[:4])
-        self._nodes, payloads = _node_rows(wide.shape[0])
-        self._blocks, self._prims = _fill_rows(wide, self._nodes, payloads, tree[4],
-                                               geometry.triangle_count, geometry.vertices,
-                                               geometry.faces)
-        del wide, tree, count     # the binary tree is rebuilt if asked for (_binary_tree)
+        self._nodes, payloads = _traversal_rows(lower, upper, child_or_first, count)
+        # the binary tree goes before the leaves' blocks are made (it is rebuilt if asked for:
+        # __getattr__); only the order of its primitives is needed for them
+        del lower, upper, child_or_first, count
+        blocks, blocks32, self._prims = _fill_rows(
+            self._nodes, payloads, order, geometry.triangle_count, geometry.vertices,
+            geometry.faces, _float32_exact(geometry.vertices))
+        del order
+        self._blocks = blocks32 if blocks32.shape[0] else blocks
         self._build_seconds = time.perf_counter() - start
         # A wide row at level L comes from a binary node at depth >= L, and popping it leaves
         # at most (WIDTH - 1) L + WIDTH entries on a traversal stack: depth < STACK_SIZE - 1
         # keeps that within WIDE_STACK.
         if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
             raise RuntimeError("BVH deeper than the traversal stack")
-        self.compiled = BVHRecord(self._nodes, payloads, self._blocks, self._prims,
+        self.compiled = BVHRecord(self._nodes, payloads, blocks, blocks32, self._prims,
                                   geometry.triangle_count, geometry.centers, geometry.radii, test)
 
     def _binary_tree(self):
         """(lower, upper, child_or_first, count, order, max_depth) of the binary tree that the
-        wide rows fold, as accel.bvh_build lays it out. The build is deterministic, so the
-        tree is made again from the geometry when asked for rather than kept beside the rows;
-        the primitives' boxes and centroids are freed before the tree is trimmed."""
-        prim_lower, prim_upper = self.geometry.primitive_bounds()
-        centroid = 0.5 * (prim_lower + prim_upper)
+        wide rows fold, as accel.bvh_build lays it out, its boxes float32 (views of arrays
+        made for the worst case: accel.bvh_build). The build is deterministic, so the tree is
+        made again from the geometry when asked for rather than kept beside the rows; the
+        primitives' boxes and centroids are freed when the build returns."""
+        geometry = self.geometry
         # Pad every box by a hair (1e-9 of the scene's largest coordinate) so the slab test's
         # rounding can never reject a hit that the primitive test accepts.
-        scale = max(np.abs(prim_lower).max(initial=0.0), np.abs(prim_upper).max(initial=0.0))
-        prim_lower -= 1e-9 * scale
-        prim_upper += 1e-9 * scale
-        lower, upper, child_or_first, count, order, max_depth = _build(
-            prim_lower, prim_upper, centroid, self.max_leaf_size, MEAN_SPLIT_DEPTH,
-            self.split == "sah")
-        del prim_lower, prim_upper, centroid
-        # the build returns views of buffers sized for 2n - 1 nodes: copy to free the rest
-        return lower.copy(), upper.copy(), child_or_first.copy(), count.copy(), order, max_depth
+        bounds = geometry.bounds()
+        scale = 0.0 if bounds is None else float(max(np.abs(bounds[0]).max(),
+                                                     np.abs(bounds[1]).max()))
+        prim_lower, prim_upper, centroid = _primitive_boxes(
+            geometry.vertices, geometry.faces, geometry.centers, geometry.radii, 1e-9 * scale)
+        return _build(prim_lower, prim_upper, centroid, self.max_leaf_size, MEAN_SPLIT_DEPTH,
+                      self.split == "sah")
 
     def __getattr__(self, name):
         """The binary tree's arrays (lower, upper, child_or_first, count, order), for tests
-        and studies: made again on first use (_binary_tree) and kept from then on."""
+        and studies: made again on first use (_binary_tree), trimmed to the nodes used, the
+        boxes as float64, and kept from then on."""
         if name in BINARY_FIELDS and "geometry" in self.__dict__:
-            self.__dict__.update(zip(BINARY_FIELDS, self._binary_tree()[:5]))
+            tree = [array.copy() for array in self._binary_tree()[:5]]
+            tree[0], tree[1] = tree[0].astype(np.float64), tree[1].astype(np.float64)
+            self.__dict__.update(zip(BINARY_FIELDS, tree))
             return self.__dict__[name]
         raise AttributeError(name)
 

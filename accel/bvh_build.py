@@ -14,9 +14,18 @@ the traversal stack.
 Layout of that binary tree (structure of arrays): lower[n], upper[n] boxes; child_or_first[n] is
 the left child index (the right child is the next node) for an interior node, or the first entry
 in `order` for a leaf; count[n] is 0 for an interior node and the number of primitives for a leaf.
+
+Memory. The primitives' boxes come in as float32, rounded outward (_primitive_boxes): the traversal
+rounds every box outward to float32 anyway, and the least float32 at or below a set's minimum is
+the minimum of the least float32s at or below each, so the rows it walks are the same as from
+float64 boxes. The nodes' boxes are therefore float32 too. The node arrays are made for the worst
+case of 2n - 1 nodes with np.empty and returned as views of the nodes used: the pages of nodes
+never written are never touched, so they cost address space, not memory.
 """
 import numpy as np
 from numba import njit
+
+from .bvh_wide import _float32_down, _float32_up, _half_area
 
 STACK_SIZE = 128
 MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2(n) < STACK_SIZE
@@ -24,12 +33,6 @@ MEAN_SPLIT_DEPTH = 64   # below this depth only count splits: depth <= 64 + log2
 # bounds); a binned surface-area heuristic
 SPLITS = ("mean", "sah")
 SAH_BINS = 16
-
-
-@njit(cache=True, inline="always")
-def _half_area(lx, ly, lz, hx, hy, hz):
-    dx, dy, dz = hx - lx, hy - ly, hz - lz
-    return dx * dy + dy * dz + dz * dx
 
 
 @njit(cache=True)
@@ -102,10 +105,11 @@ def _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo, c_
 def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, use_sah):
     n = prim_lower.shape[0]
     max_nodes = max(2 * n - 1, 1)
-    lower = np.empty((max_nodes, 3))
-    upper = np.empty((max_nodes, 3))
-    child_or_first = np.zeros(max_nodes, dtype=np.int64)
-    count = np.zeros(max_nodes, dtype=np.int64)
+    # every node used gets all four written; np.empty leaves the pages of the rest untouched
+    lower = np.empty((max_nodes, 3), dtype=prim_lower.dtype)
+    upper = np.empty((max_nodes, 3), dtype=prim_upper.dtype)
+    child_or_first = np.empty(max_nodes, dtype=np.int64)
+    count = np.empty(max_nodes, dtype=np.int64)
     order = np.arange(n)
     if n == 0:
         return lower[:0], upper[:0], child_or_first[:0], count[:0], order, 0
@@ -194,3 +198,31 @@ def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, us
             left_child, start, mid, depth + 1
         top += 1
     return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
+
+
+@njit(cache=True)
+def _primitive_boxes(vertices, faces, centers, radii, pad):
+    """(lower, upper, centroid) of every primitive for _build, in one pass without temporaries:
+    the box of its corners (a sphere's centre -+ radius) widened by `pad`, rounded outward to
+    float32, and the float64 centroid of the box before widening (as accel.Geometry's
+    primitive_bounds computes them)."""
+    n_tri = faces.shape[0]
+    n = n_tri + centers.shape[0]
+    lower = np.empty((n, 3), dtype=np.float32)
+    upper = np.empty((n, 3), dtype=np.float32)
+    centroid = np.empty((n, 3))
+    for p in range(n):
+        for a in range(3):
+            if p < n_tri:
+                x0 = vertices[faces[p, 0], a]
+                x1 = vertices[faces[p, 1], a]
+                x2 = vertices[faces[p, 2], a]
+                lo = min(min(x0, x1), x2)
+                hi = max(max(x0, x1), x2)
+            else:
+                lo = centers[p - n_tri, a] - radii[p - n_tri]
+                hi = centers[p - n_tri, a] + radii[p - n_tri]
+            centroid[p, a] = 0.5 * (lo + hi)
+            lower[p, a] = _float32_down(lo - pad)
+            upper[p, a] = _float32_up(hi + pad)
+    return lower, upper, centroid

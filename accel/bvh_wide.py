@@ -1,5 +1,5 @@
 """The BVH's traversal rows: the binary tree of accel.bvh_build folded into 8-wide nodes
-and written out as the float32 rows and float64 triangle blocks that accel.bvh walks.
+and written out as the float32 rows and triangle blocks that accel.bvh walks.
 
 Separate from the build because it is a second, independent step with its own cost model
 and layout: the build only decides which primitives share a leaf; this module decides how
@@ -16,26 +16,34 @@ first triangle block and its triangle and sphere counts. The slab test computes 
 the ray's origin moved outward and its inverse direction scaled outward per axis (accel.bvh_slab),
 so that rounding can only keep a box, never lose one; which primitive is hit, and its t, come
 from the leaves' float64 tests alone.
-A leaf's triangles are stored by _fill_rows in blocks of four, as float64 coordinates (the
-mesh's own values: each lane of accel.simd's block test computes what the scalar test of
-accel.kernels computes on those values, bit for bit, so bvh and naive agree exactly), and
-tested four at a time. What each of these
-choices bought is measured side by side in benchmarks/results/bvh_changes.md: 8-wide with
-vector slab and block tests over the earlier 4-wide scalar traversal, float32 planes over
-float64 ones, unsigned stack indices, entering a node's only child hit directly, float32 slab
-arithmetic over float64.
+A leaf's triangles are stored by _fill_rows in blocks of four, as the mesh's own coordinates
+(each lane of accel.simd's block test computes what the scalar test of accel.kernels computes on
+those values, bit for bit, so bvh and naive agree exactly), and tested four at a time. They are
+float32 when every coordinate of the mesh is a float32 value (a float PLY's, a glTF's: widened
+as they are loaded, they are the same float64 values in half the memory), else float64. What
+each of these choices bought is measured side by side in benchmarks/results/bvh_changes.md:
+8-wide with vector slab and block tests over the earlier 4-wide scalar traversal, float32
+planes over float64 ones, unsigned stack indices, entering a node's only child hit directly,
+float32 slab arithmetic over float64.
 """
 import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import viewer  # numba's bitcast
 
-from .bvh_build import _half_area
 from .simd import BLOCK, BLOCK_COLUMNS
 
 WIDTH = 8                # children per node of the traversal's tree (_closest's tournament: 8)
 NODE_COLUMNS = 64        # float32 columns of a wide node's row: 6 * WIDTH planes, WIDTH payloads
 PAYLOAD = 6 * WIDTH // 2   # the first payload's column in the row's int64 view
 MAX_LEAF_SIZE = 0xffff   # a leaf payload holds its triangle and sphere counts in 16 bits each
+
+
+@njit(cache=True, inline="always")
+def _half_area(lx, ly, lz, hx, hy, hz):
+    """Half the surface area of a box, in float64 (of float32 corners too)."""
+    dx, dy, dz = (np.float64(hx) - np.float64(lx), np.float64(hy) - np.float64(ly),
+                  np.float64(hz) - np.float64(lz))
+    return dx * dy + dy * dz + dz * dx
 
 
 def _aligned_empty(rows, columns, dtype=np.float64):
@@ -90,14 +98,17 @@ def _slot_costs(lower, upper, child_or_first, count):
 
 
 @njit(cache=True)
-def _collapse(lower, upper, child_or_first, count, wide):
-    """Fold the binary tree into WIDTH-wide float64 rows of `wide`; row 0 is the root. A row holds
-    the six planes lower x, y, z, upper x, y, z of its WIDTH children, then each child's link (a
-    wide row for an interior child, its first `order` entry for a leaf), then its count (0 for
-    an interior child); an unused slot has an empty box (lower +inf, upper -inf). Which binary
-    nodes become wide nodes is _slot_costs' least-cost choice; a row's children are in the
-    binary tree's left-to-right order. _node_rows and _fill_rows turn these rows into the
-    traversal's. Returns the number of rows used (at most the binary tree's node count)."""
+def _collapse(lower, upper, child_or_first, count, planes, links, link_column):
+    """Fold the binary tree into WIDTH-wide rows; row 0 is the root. Row w of `planes` holds in
+    its first 6 * WIDTH columns the six planes lower x, y, z, upper x, y, z of its WIDTH
+    children (their binary boxes as they are: float32 values when written to the traversal's
+    float32 rows), and row w of `links`, from column `link_column`, each child's link: a wide
+    row for an interior child, or first | count << 32 for a leaf (its first `order` entry and
+    its primitive count, so nonzero above bit 31, as a leaf's traversal payload is); an unused
+    slot has an empty box (lower +inf, upper -inf) and link 0. Which binary nodes become wide
+    nodes is _slot_costs' least-cost choice; a row's children are in the binary tree's
+    left-to-right order. _fill_rows then lays out the leaves. Returns the number of rows used
+    (at most the binary tree's interior node count, or 1 for a leaf root)."""
     n = lower.shape[0]
     if n == 0:
         return 0
@@ -139,37 +150,60 @@ def _collapse(lower, upper, child_or_first, count, wide):
         for k in range(WIDTH):
             if k >= m:
                 for a in range(3):
-                    wide[w, a * WIDTH + k] = np.inf
-                    wide[w, (3 + a) * WIDTH + k] = -np.inf
-                wide[w, 6 * WIDTH + k] = 0.0
-                wide[w, 7 * WIDTH + k] = 0.0
+                    planes[w, a * WIDTH + k] = np.inf
+                    planes[w, (3 + a) * WIDTH + k] = -np.inf
+                links[w, link_column + k] = 0
                 continue
             c = kids[k]
             for a in range(3):
-                wide[w, a * WIDTH + k] = lower[c, a]
-                wide[w, (3 + a) * WIDTH + k] = upper[c, a]
+                planes[w, a * WIDTH + k] = lower[c, a]
+                planes[w, (3 + a) * WIDTH + k] = upper[c, a]
             if count[c] > 0:
-                wide[w, 6 * WIDTH + k] = child_or_first[c]
-                wide[w, 7 * WIDTH + k] = count[c]
+                links[w, link_column + k] = child_or_first[c] | (count[c] << 32)
             else:
-                wide[w, 6 * WIDTH + k] = used
-                wide[w, 7 * WIDTH + k] = 0.0
+                links[w, link_column + k] = used
                 todo_binary[top], todo_wide[top] = c, used
                 top += 1
                 used += 1
     return used
 
 
+def _traversal_rows(lower, upper, child_or_first, count):
+    """(nodes, payloads) of _node_rows with the collapse written straight into them (a leaf's
+    payload still first | count << 32, for _fill_rows). The rows are made for the worst case (a
+    row per interior binary node; untouched pages cost nothing) and, where fewer are used, the
+    used ones copied into rows of their own. The boxes must be float32 (the build's): the rows
+    hold them as they are."""
+    if lower.dtype != np.float32 or upper.dtype != np.float32:
+        raise TypeError("the traversal rows take the build's float32 boxes")
+    interior = max(1, int(np.count_nonzero(count == 0))) if count.shape[0] else 0
+    nodes, payloads = _node_rows(interior)
+    used = _collapse(lower, upper, child_or_first, count, nodes, payloads, PAYLOAD)
+    if used == interior:
+        return nodes, payloads
+    kept, kept_payloads = _node_rows(used)
+    kept[:] = nodes[:used]
+    return kept, kept_payloads
 
 
 @njit(cache=True)
 def _wide_rows(lower, upper, child_or_first, count):
-    """_collapse into a staging array sized for the worst case (a row per interior binary node,
-    or the one row of a leaf root), returned as a copy of the rows used."""
+    """The collapse as float64 rows of 8 * WIDTH columns, for tests and studies: the planes,
+    then each child's link (a wide row, or its first `order` entry for a leaf), then its count
+    (0 for an interior child or an unused slot)."""
     interior = max(1, int((count == 0).sum()))
-    wide = np.empty((interior, 8 * WIDTH))
-    used = _collapse(lower, upper, child_or_first, count, wide)
-    return wide[:used].copy()
+    planes = np.empty((interior, 6 * WIDTH))
+    links = np.empty((interior, WIDTH), dtype=np.int64)
+    used = _collapse(lower, upper, child_or_first, count, planes, links, 0)
+    wide = np.empty((used, 8 * WIDTH))
+    for r in range(used):
+        for k in range(6 * WIDTH):
+            wide[r, k] = planes[r, k]
+        for k in range(WIDTH):
+            link = links[r, k]
+            wide[r, 6 * WIDTH + k] = link & 0xffffffff if link >> 32 else link
+            wide[r, 7 * WIDTH + k] = link >> 32
+    return wide
 
 
 @njit(cache=True, inline="always")
@@ -195,48 +229,62 @@ def _float32_up(x):
 
 
 @njit(cache=True)
-def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
-    """The traversal's rows (see _node_rows) from _collapse's: the planes rounded outward to
-    float32, so a float32 box always contains its float64 box, and each child's payload; and the
-    leaves as blocks of BLOCK triangles, in the order the rows reach them.
+def _float32_exact(vertices):
+    """True when every coordinate is a float32 value (a float PLY's, a glTF's): the leaves'
+    blocks can then hold float32 coordinates, widened to exactly the same float64 values."""
+    for i in range(vertices.shape[0]):
+        for a in range(3):
+            if np.float64(np.float32(vertices[i, a])) != vertices[i, a]:
+                return False
+    return True
 
-    For each leaf slot (count > 0) of each row: its triangles fill ceil(triangles / BLOCK)
-    consecutive blocks (NaN in unused lanes, which every triangle test misses), then its spheres
-    take ceil(spheres / BLOCK) more block rows of `prims` (their `blocks` rows stay NaN), so every
-    leaf starts on a block. Returns (blocks, prims): the float64 (blocks, BLOCK_COLUMNS) vertex
-    coordinates and the int64 primitive id of each lane (-1 unused)."""
-    rows, width = wide.shape[0], WIDTH
-    for r in range(rows):
-        for k in range(3 * WIDTH):
-            nodes[r, k] = _float32_down(wide[r, k])
-            nodes[r, 3 * WIDTH + k] = _float32_up(wide[r, 3 * WIDTH + k])
-    links = wide[:, 6 * WIDTH:7 * WIDTH].astype(np.int64)
-    counts = wide[:, 7 * WIDTH:8 * WIDTH].astype(np.int64)
+
+@njit(cache=True)
+def _fill_rows(nodes, payloads, order, n_tri, vertices, faces, single):
+    """The leaves as blocks of BLOCK triangles, in the order the rows reach them, and each leaf
+    slot's traversal payload (_node_rows) in place of _collapse's first | count << 32.
+
+    For each leaf slot of each row: its triangles fill ceil(triangles / BLOCK) consecutive
+    blocks (NaN in unused lanes, which every triangle test misses), then its spheres take
+    ceil(spheres / BLOCK) more block rows of `prims` (their block rows stay NaN), so every leaf
+    starts on a block. Returns (blocks, blocks32, prims): the (blocks, BLOCK_COLUMNS) vertex
+    coordinates, float64 in `blocks`, or float32 in `blocks32` where `single` (every coordinate a
+    float32 value: _float32_exact), the other array empty; and the int64 primitive id of each
+    lane (-1 unused)."""
+    rows = nodes.shape[0]
     n_blocks = 0
     for r in range(rows):
-        for c in range(width):
-            if counts[r, c] > 0:
+        for c in range(WIDTH):
+            link = payloads[r, PAYLOAD + c]
+            if link >> 32:
+                first, size = link & 0xffffffff, link >> 32
                 n_tri_leaf = 0
-                for i in range(links[r, c], links[r, c] + counts[r, c]):
+                for i in range(first, first + size):
                     n_tri_leaf += order[i] < n_tri
-                n_sph = counts[r, c] - n_tri_leaf
+                n_sph = size - n_tri_leaf
                 n_blocks += (n_tri_leaf + BLOCK - 1) // BLOCK + (n_sph + BLOCK - 1) // BLOCK
-    blocks = np.full((n_blocks, BLOCK_COLUMNS), np.nan)
+    blocks = np.full((0 if single else n_blocks, BLOCK_COLUMNS), np.nan)
+    blocks32 = np.full((n_blocks if single else 0, BLOCK_COLUMNS), np.nan, dtype=np.float32)
     prims = np.full(n_blocks * BLOCK, -1, dtype=np.int64)
     block = 0
     for r in range(rows):
-        for c in range(width):
-            if counts[r, c] == 0:
-                payloads[r, PAYLOAD + c] = links[r, c]
+        for c in range(WIDTH):
+            link = payloads[r, PAYLOAD + c]
+            if link >> 32 == 0:
                 continue
+            first_entry, size = link & 0xffffffff, link >> 32
             first = block
             lane = 0
-            for i in range(links[r, c], links[r, c] + counts[r, c]):   # triangles first
+            for i in range(first_entry, first_entry + size):   # triangles first
                 p = order[i]
                 if p < n_tri:
                     for j in range(3):
                         for a in range(3):
-                            blocks[block, (3 * j + a) * BLOCK + lane] = vertices[faces[p, j], a]
+                            column = (3 * j + a) * BLOCK + lane
+                            if single:
+                                blocks32[block, column] = vertices[faces[p, j], a]
+                            else:
+                                blocks[block, column] = vertices[faces[p, j], a]
                     prims[block * BLOCK + lane] = p
                     lane += 1
                     if lane == BLOCK:
@@ -245,14 +293,14 @@ def _fill_rows(wide, nodes, payloads, order, n_tri, vertices, faces):
             if lane > 0:
                 block, lane = block + 1, 0
             spheres = block * BLOCK
-            for i in range(links[r, c], links[r, c] + counts[r, c]):
+            for i in range(first_entry, first_entry + size):
                 if order[i] >= n_tri:
                     prims[spheres] = order[i]
                     spheres += 1
             n_sph = spheres - block * BLOCK
             block += (n_sph + BLOCK - 1) // BLOCK
             payloads[r, PAYLOAD + c] = first | (n_tri_leaf << 32) | (n_sph << 48)
-    return blocks, prims
+    return blocks, blocks32, prims
 
 
 def _node_rows(rows):
@@ -264,6 +312,6 @@ def _node_rows(rows):
     payload. A payload is a row for an interior child, or for a leaf first_block | n_triangles
     << 32 | n_spheres << 48 (n_triangles + n_spheres > 0, so payload >> 32 is not 0), its
     triangles in blocks first_block.. and its spheres' ids in the `prims` entries after them
-    (_fill_rows)."""
+    (_fill_rows). Made with np.empty: the pages of rows never written cost no memory."""
     nodes = _aligned_empty(rows, NODE_COLUMNS, np.float32)
     return nodes, nodes.view(np.int64)

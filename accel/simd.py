@@ -151,7 +151,10 @@ def make_slab_test(width):
 
 
 # A leaf's triangles are stored in blocks of BLOCK: row b of a float64 (blocks, 9 * BLOCK) array
-# holds vertex j's coordinate a of lane l at column (3 j + a) BLOCK + l; unused lanes are NaN.
+# holds vertex j's coordinate a of lane l at column (3 j + a) BLOCK + l; unused lanes are NaN. A
+# float32 array of blocks is read the same way, each coordinate widened to float64 as it is
+# loaded (for meshes whose coordinates are all float32 values: the same float64s, in half the
+# memory).
 BLOCK = 4
 BLOCK_COLUMNS = 9 * BLOCK
 
@@ -161,7 +164,7 @@ def _block_coordinate(context, builder, array_type, blocks, block, vertex, axis)
     column = builder.add(ir.Constant(_I64, 3 * BLOCK * vertex),
                          builder.mul(axis, ir.Constant(_I64, BLOCK)))
     pointer = _row_pointer(context, builder, array_type, blocks, block, column)
-    return _load(builder, pointer, _F64, BLOCK)
+    return _load(builder, pointer, _F32 if array_type.dtype == types.float32 else _F64, BLOCK)
 
 
 def _block_result(context, builder, signature, miss, t, u, v, lo, hi):
@@ -177,7 +180,9 @@ def _block_result(context, builder, signature, miss, t, u, v, lo, hi):
 
 
 def _block_signature(blocks, block, ray, lo, hi):
-    _check_array(blocks, types.float64, "blocks")
+    dtype = getattr(blocks, "dtype", None)   # float64 or float32 blocks
+    _check_array(blocks, dtype if dtype in (types.float32, types.float64) else types.float64,
+                 "blocks")
     lanes = types.UniTuple(types.float64, BLOCK)
     return types.Tuple((types.int64, lanes, lanes, lanes))(blocks, block, ray, lo, hi)
 

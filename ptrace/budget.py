@@ -46,10 +46,11 @@ LIGHT_TREE_BYTES = 3000
 # a band of rows at a time peaks at TEXTURE_PEAK_BYTES a texel (an image file read by
 # OpenImageIO about 16; a glTF's image decoded by Pillow keeps its 8-bit pixels meanwhile).
 TEXEL_BYTES, TEXTURE_PEAK_BYTES = 12, 24
-# An environment map (-e): float32 radiance (12 bytes a pixel) and its float32 sampling tables
-# (8) stay; reading it and building the tables a band of rows at a time peaks at
-# ENVIRONMENT_BYTES a pixel.
-ENVIRONMENT_BYTES = 28
+# An environment map (-e): float32 radiance (12 bytes a pixel) and its float32 conditional cdfs
+# (4; the density is their steps, not a table of its own) stay; reading it and building the cdfs
+# a band of rows at a time peaks at ENVIRONMENT_BYTES a pixel (16.1 measured on a 16384 x 8192
+# PNG: benchmarks/results/memory.md).
+ENVIRONMENT_BYTES = 20
 UNITS = {"": 1, "K": 2 ** 10, "M": 2 ** 20, "G": 2 ** 30, "T": 2 ** 40}
 RAISE = "--max-memory SIZE (max_memory= in Python) raises it"
 

@@ -14,6 +14,13 @@ axis: a bright pixel's light reaches a quarter of each neighbouring cell) times 
 floor of 1e-3 of its mean. So the density follows what the lookup returns (radiance / pdf stays
 bounded: no rare huge samples beside a small sun) and is positive wherever a lookup can be, and
 light sampling alone stays unbiased.
+
+The table is not kept: the density of a cell is its row's probability times the rows, times its
+step of the row's conditional cdf times the columns, which is what the sampler draws by (so the
+pdf it reports is that of the float32 cdf it inverts, not of a table beside it). The conditional
+cdfs are one float32 array of W + 1 columns a row: column 0 holds the row's probability times
+the rows, columns 1.. W the cdf at each cell's right edge (the last 1; the cdf at the left edge
+of cell 0 is 0). An environment costs 16 bytes a pixel: 12 of radiance, 4 of that array.
 """
 import math
 from dataclasses import dataclass
@@ -129,17 +136,20 @@ def _read_bands(text, reader, spec):
 
 
 def environment_arrays(environment):
-    """(image (H, W, 3) float32, marginal cdf (H + 1) float64, conditional cdfs (H, W + 1)
-    float32, table (H, W) float32 with mean 1, so it is the density p over [0, 1)^2) of an
-    Environment, or empty arrays of the same types. The table and the cdfs are computed in
-    float64 a band of rows at a time and stored in float32."""
+    """(image (H, W, 3) float32, marginal cdf (H + 1) float64, conditional (H, W + 1) float32,
+    table) of an Environment, or empty arrays of the same types: the conditional cdfs with each
+    row's density in column 0 (the module docstring), and `table` the same array (what
+    environment_pdf reads; the density over [0, 1)^2 of cell (j, i) is environment_density's).
+    The density and the cdfs are computed in float64 a band of rows at a time, the density
+    first stored (as float32) where its cdf then goes."""
     if environment is None:
-        return (np.zeros((0, 0, 3), np.float32), np.zeros(1), np.zeros((0, 1), np.float32),
-                np.zeros((0, 0), np.float32))
+        empty = np.zeros((0, 1), np.float32)
+        return np.zeros((0, 0, 3), np.float32), np.zeros(1), empty, empty
     image = environment.image
     rows, columns = image.shape[:2]
     step = band_rows(columns)
-    table = np.empty((rows, columns), np.float32)
+    conditional = np.empty((rows, columns + 1), np.float32)
+    density = conditional[:, 1:]      # the table's cells until each row's cdf replaces them
     total = 0.0
     for start in range(0, rows, step):
         end = min(start + step, rows)
@@ -153,17 +163,14 @@ def environment_arrays(environment):
         sin_theta = np.sin((np.arange(start, end) + 0.5) / rows * np.pi)
         band = luminance * sin_theta[:, None]
         total += float(band.sum())
-        table[start:end] = band
+        density[start:end] = band
     mean = total / (rows * columns)
     floor = FLOOR * (mean if mean > 0 else 1.0)
     scale = 1.0 / (mean + floor)     # the table's mean is then 1
-    conditional = np.empty((rows, columns + 1), np.float32)
-    conditional[:, 0] = 0.0
     row_sums = np.empty(rows)
     for start in range(0, rows, step):
         end = min(start + step, rows)
-        band = (np.asarray(table[start:end], dtype=np.float64) + floor) * scale
-        table[start:end] = band
+        band = (np.asarray(density[start:end], dtype=np.float64) + floor) * scale
         sums = np.cumsum(band, axis=1)
         row_sums[start:end] = sums[:, -1]
         conditional[start:end, 1:] = sums / sums[:, -1:]
@@ -172,7 +179,36 @@ def environment_arrays(environment):
     marginal[1:] = np.cumsum(row_sums)
     marginal /= marginal[-1]
     marginal[-1] = 1.0
-    return image, marginal, conditional, table
+    conditional[:, 0] = np.diff(marginal) * rows
+    return image, marginal, conditional, conditional
+
+
+def environment_density(table):
+    """The (H, W) density over [0, 1)^2 (mean 1) that the sampler draws cells by, from the
+    conditional array of environment_arrays: for tests and studies."""
+    cdf = np.asarray(table[:, 1:], dtype=np.float64)
+    steps = np.diff(cdf, axis=1, prepend=0.0)
+    return steps * (table.shape[1] - 1) * np.asarray(table[:, :1], dtype=np.float64)
+
+
+@njit(cache=True, inline="always")
+def _cell(row, i):
+    """(cdf at the left edge, at the right edge) of cell i of a conditional row, in float64."""
+    return (np.float64(row[i]) if i > 0 else 0.0), np.float64(row[i + 1])
+
+
+@njit(cache=True, inline="always")
+def _find_cell(row, u):
+    """The cell i of a conditional row (column 0 its density, not its cdf) whose cdf interval
+    holds u: cdf(i) <= u < cdf(i + 1), cdf(0) being 0."""
+    lo, hi = 0, row.shape[0] - 2
+    while lo < hi:
+        mid = (lo + hi + 1) // 2     # at least 1: column 0 is never read as a cdf
+        if row[mid] <= u:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
 
 
 @njit(cache=True, inline="always")
@@ -223,24 +259,27 @@ def environment_radiance(image, dx, dy, dz):
 @njit(cache=True, _nrt=False, forceinline=True)
 def environment_pdf(table, dx, dy, dz):
     """Density per unit solid angle with which environment_sample returns unit direction d."""
-    rows, columns = table.shape[0], table.shape[1]
+    rows, columns = table.shape[0], table.shape[1] - 1
     u, v, sin_theta = _image_point(dx, dy, dz)
     if sin_theta <= 0.0:
         return 0.0
     i = min(int(u * columns), columns - 1)
     j = min(int(v * rows), rows - 1)
-    return table[j, i] / (2.0 * math.pi * math.pi * sin_theta)
+    left, right = _cell(table[j], i)
+    return table[j, 0] * (right - left) * columns / (2.0 * math.pi * math.pi * sin_theta)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def environment_sample(marginal, conditional, table, u1, u2):
-    """A direction by the table's distribution from two numbers in [0, 1): (x, y, z, pdf)."""
-    rows, columns = table.shape[0], table.shape[1]
+    """A direction by the table's distribution from two numbers in [0, 1): (x, y, z, pdf).
+    `table` is `conditional` (environment_arrays), taken for the callers' sake."""
+    rows, columns = conditional.shape[0], conditional.shape[1] - 1
     j = _find(marginal, u2)
     dv = (u2 - marginal[j]) / max(marginal[j + 1] - marginal[j], 1e-300)
     row = conditional[j]
-    i = _find(row, u1)
-    du = (u1 - row[i]) / max(row[i + 1] - row[i], 1e-300)
+    i = _find_cell(row, u1)
+    left, right = _cell(row, i)
+    du = (u1 - left) / max(right - left, 1e-300)
     u = (i + min(du, 1.0)) / columns
     v = (j + min(dv, 1.0)) / rows
     theta = v * math.pi
@@ -250,4 +289,5 @@ def environment_sample(marginal, conditional, table, u1, u2):
         return 0.0, 1.0, 0.0, 0.0
     x = sin_theta * math.cos(phi)
     z = -sin_theta * math.sin(phi)
-    return x, math.cos(theta), z, table[j, i] / (2.0 * math.pi * math.pi * sin_theta)
+    return x, math.cos(theta), z, \
+        row[0] * (right - left) * columns / (2.0 * math.pi * math.pi * sin_theta)

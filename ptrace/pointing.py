@@ -110,13 +110,43 @@ def file_camera_notes(scene, index, width, height):
                      f"across than the file's")
     bounds = scene.bounds()
     if record.zfar is not None and bounds is not None:
-        with np.errstate(over="ignore"):
-            reach = float(np.linalg.norm(_corners(*bounds) - record.position, axis=1).max())
-        if reach > record.zfar:
+        nearest, reach = _distances(bounds, record.position)
+        if reach > record.zfar >= nearest:   # below nearest: reach_note says nothing is seen
             notes.append(f"{where} ({record.name!r}) stops its rays at its zfar {record.zfar:g}"
                          f", nearer than the far side of the scene's bounds ({reach:.4g}): "
                          f"what lies beyond is not seen")
     return notes
+
+
+def _distances(bounds, position):
+    """The distances from `position` to the nearest point of the box `bounds` (0 inside it)
+    and to its farthest corner."""
+    lower, upper = bounds
+    with np.errstate(over="ignore", invalid="ignore"):
+        outside = np.maximum(np.maximum(lower - position, position - upper), 0.0)
+        nearest = float(np.linalg.norm(outside))
+        reach = float(np.linalg.norm(_corners(lower, upper) - position, axis=1).max())
+    return nearest, reach
+
+
+def reach_note(scene, camera):
+    """The note, naming the scene's file, when the camera's rays (from its znear to its zfar,
+    unit directions, from its lens when it has one) cannot reach anything in the scene's
+    bounds, so the image shows nothing of the scene; None when they can (or it is empty)."""
+    bounds = scene.bounds()
+    if bounds is None:
+        return None
+    nearest, reach = _distances(bounds, np.asarray(camera.position, dtype=np.float64))
+    lens = float(camera.lens_radius)
+    nearest, reach = max(0.0, nearest - lens), reach + lens
+    where = f"{scene.path}: the camera" if getattr(scene, "path", None) else "the camera"
+    if camera.znear > reach:
+        return (f"{where} starts its rays at its znear {camera.znear:g}, beyond the far side of "
+                f"the scene's bounds ({reach:.4g} away): the scene is not seen")
+    if camera.zfar < nearest:
+        return (f"{where} stops its rays at its zfar {camera.zfar:g}, nearer than the scene's "
+                f"bounds ({nearest:.4g} away): the scene is not seen")
+    return None
 
 
 def _file_camera_record(scene, index, names):

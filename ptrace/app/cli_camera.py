@@ -135,6 +135,7 @@ def camera_from_flags(scene, args, width, height):
         framing_camera,
         is_course_scene,
         look_at,
+        reach_note,
     )
     if not is_course_scene(scene):
         if getattr(args, "no_default_light", False):
@@ -161,9 +162,9 @@ def camera_from_flags(scene, args, width, height):
         scene.notes.extend(file_camera_notes(scene, file_index, width, height))
     if args.lens_radius is not None or args.focal_distance is not None:
         camera = camera.with_lens(args.lens_radius, args.focal_distance)
-    note = up_note(scene, args.up)
-    if note is not None:
-        scene.notes.append(note)
+    for note in (up_note(scene, args.up), reach_note(scene, camera)):
+        if note is not None:
+            scene.notes.append(note)
     return camera
 
 

@@ -145,7 +145,7 @@ def test_an_environment_image_past_the_budget_is_refused(tmp_path, capsys):
     sky.write_bytes(png(4096, 2048))
     code, line = one_line(capsys, "-f", tmp_path / "x.png", "--max-memory", "100M", "-e", sky,
                           SHIPPED)
-    need = budget.size_text(4096 * 2048 * budget.ENVIRONMENT_BYTES)    # 224.0 MiB
+    need = budget.size_text(4096 * 2048 * budget.ENVIRONMENT_BYTES)    # 160.0 MiB
     assert code == 2 and line.startswith(f"ptrace: error: {sky}: the 4096x2048 environment "
                                          f"map would need about {need}"), line
     assert "--max-memory" in line
@@ -175,10 +175,13 @@ def test_the_default_follows_an_address_space_limit():
 
 @pytest.mark.slow
 def test_the_issues_environment_under_ulimit(tmp_path):
+    """The issue's 16384 x 8192 environment under an address-space limit it does not fit: one
+    line naming the limit. (Under 4,096,000,000 bytes, the limit this test first had, it now
+    fits: 16 bytes a pixel, benchmarks/results/memory.md.)"""
     sky = tmp_path / "sky.png"
     sky.write_bytes(png(16384, 8192))
-    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (4096000000, "
-            "4096000000)); from ptrace.app.cli import main; sys.exit(main(sys.argv[1:]))")
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (3000000000, "
+            "3000000000)); from ptrace.app.cli import main; sys.exit(main(sys.argv[1:]))")
     result = subprocess.run([sys.executable, "-c", code, "--info", "-e", str(sky),
                              str(SHIPPED)], capture_output=True, text=True, timeout=120)
     lines = result.stderr.strip().splitlines()

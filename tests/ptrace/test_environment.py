@@ -14,6 +14,7 @@ from ptrace.camera import Camera
 from ptrace.environment import (
     Environment,
     environment_arrays,
+    environment_density,
     environment_pdf,
     environment_radiance,
     environment_sample,
@@ -72,21 +73,45 @@ def bright_sun(rows=32, columns=64):
     return Environment(image, name="sun")
 
 
+def reference_table(image):
+    """The density the module docstring defines, written out cell by cell: the luminance of
+    the pixels blurred by [1/8, 3/4, 1/8] along each axis (wrapping around in phi, clamped at
+    the poles), times sin theta, plus 1e-3 of its mean, scaled to mean 1."""
+    rows, columns = image.shape[:2]
+    lum = image.astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    blurred = np.zeros((rows, columns))
+    for j in range(rows):
+        for i in range(columns):
+            for dj, wj in ((-1, 0.125), (0, 0.75), (1, 0.125)):
+                for di, wi in ((-1, 0.125), (0, 0.75), (1, 0.125)):
+                    blurred[j, i] += wj * wi * lum[min(max(j + dj, 0), rows - 1),
+                                                   (i + di) % columns]
+    table = blurred * np.sin((np.arange(rows) + 0.5) / rows * np.pi)[:, None]
+    table += 1e-3 * table.mean()
+    return table / table.mean()
+
+
 def test_the_sampler_draws_directions_by_its_pdf():
-    """Chi-square of sampled image cells against the table's probabilities, and the pdf the
-    sampler reports is environment_pdf of the direction it returns."""
+    """Chi-square of sampled image cells against the table's probabilities (computed here, on
+    their own: reference_table), the density the sampler keeps (its cdfs' steps) is that table,
+    and the pdf the sampler reports is environment_pdf of the direction it returns."""
     environment = Environment(np.random.default_rng(1).random((8, 16, 3)) ** 3 * 4, name="r")
     image, marginal, conditional, table = environment_arrays(environment)
-    rows, columns = table.shape
+    reference = reference_table(environment.image)
+    np.testing.assert_allclose(environment_density(table), reference, rtol=1e-5)
+    rows, columns = reference.shape
     rng = np.random.default_rng(2)
     counts = np.zeros((rows, columns))
     for u1, u2 in rng.random((40000, 2)):
         x, y, z, pdf = environment_sample(marginal, conditional, table, u1, u2)
         assert pdf == pytest.approx(environment_pdf(table, x, y, z), rel=1e-9)
         theta, phi = math.acos(y), math.atan2(-z, x) + math.pi
-        counts[min(int(theta / math.pi * rows), rows - 1),
-               min(int(phi / (2 * math.pi) * columns), columns - 1)] += 1
-    expected = table / table.sum() * counts.sum()
+        j = min(int(theta / math.pi * rows), rows - 1)
+        i = min(int(phi / (2 * math.pi) * columns), columns - 1)
+        assert pdf == pytest.approx(reference[j, i] / (2 * math.pi ** 2 * math.sin(theta)),
+                                    rel=1e-5)
+        counts[j, i] += 1
+    expected = reference / reference.sum() * counts.sum()
     p = stats.chisquare(counts.ravel(), expected.ravel()).pvalue
     print(f"chi-square p = {p:.3g}")
     assert p > 1e-3

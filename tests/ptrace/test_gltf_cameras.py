@@ -177,3 +177,21 @@ def test_a_zfar_that_cuts_off_the_scene_is_kept_and_noted(tmp_path, capsys):
                  name="far.gltf")
     assert main(["--info", str(path)]) == 0
     assert not any("zfar" in n for n in json.loads(capsys.readouterr().out)["notes"])
+
+
+def test_a_camera_whose_rays_cannot_reach_the_scene_is_noted_naming_the_file(tmp_path, capsys):
+    """A znear beyond the far side of the scene's bounds, or a zfar short of their nearest
+    point: nothing of the scene can be seen, and the note says so, naming the file."""
+    for name, numbers, words in (("near.gltf", {"znear": 10.0, "zfar": 100.0}, "znear 10"),
+                                 ("far.gltf", {"znear": 0.1, "zfar": 4.0}, "zfar 4")):
+        camera = {"type": "perspective", "perspective": {"yfov": 0.6, **numbers}}
+        path = write(tmp_path, [{"camera": 0, "translation": [0.0, 0.0, 5.0]}], [camera],
+                     name=name)
+        assert main(["--info", str(path)]) == 0
+        notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if words in n]
+        assert len(notes) == 1 and str(path) in notes[0], notes
+        assert "the scene is not seen" in notes[0]
+    path = write(tmp_path, [{"camera": 0, "translation": [0.0, 0.0, 5.0]}], [PERSPECTIVE],
+                 name="seen.gltf")
+    assert main(["--info", str(path)]) == 0
+    assert not any("not seen" in n for n in json.loads(capsys.readouterr().out)["notes"])

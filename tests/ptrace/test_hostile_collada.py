@@ -5,6 +5,7 @@ infinities are refused by the document reader already (one case each here, so th
 The course's own files hold none of these: they load unchanged (test_load_course_scenes.py) and
 their values are checked against the same rules below."""
 import glob
+import json
 
 import numpy as np
 import pytest
@@ -95,3 +96,23 @@ def test_the_course_files_are_inside_the_rules():
         assert (materials.alpha[materials.kind == MICROFACET] > 0).all(), file
         if scene.camera is not None:
             assert 0 <= scene.camera.znear < scene.camera.zfar, file
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("<zfar>100</zfar>", "<zfar>0.5</zfar>", "zfar 0.5"),
+    ("<znear>0.1</znear>", "<znear>50</znear>", "znear 50"),
+])
+def test_a_collada_camera_whose_rays_cannot_reach_the_scene_is_noted(tmp_path, capsys, old,
+                                                                      new, words):
+    """The shipped Cornell box with its camera's zfar short of the box, or its znear past it:
+    the render would show nothing of the scene, and one note says so, naming the file."""
+    from pathlib import Path
+
+    from ptrace.app.cli import main
+    text = (Path(__file__).resolve().parents[2] / "scenes" / "cornell.dae").read_text()
+    assert old in text
+    path = tmp_path / "cornell.dae"
+    path.write_text(text.replace(old, new))
+    assert main(["--info", str(path)]) == 0
+    notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if "not seen" in n]
+    assert len(notes) == 1 and words in notes[0] and str(path) in notes[0], notes
