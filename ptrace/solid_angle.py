@@ -34,6 +34,7 @@ import math
 from numba import njit
 
 from .solid_angle_sphere import sphere_pdf, sphere_sample  # noqa: F401 - re-exported
+from .trig import sincos
 
 # Below these solid angles (steradians) the spherical maps give way to area sampling ...
 RECTANGLE_MIN_SOLID_ANGLE = 1e-9
@@ -44,6 +45,7 @@ TRIANGLE_MIN_SOLID_ANGLE = 1e-18
 RECTANGLE_MAX_GRAZING = 1e8
 RIGHT_ANGLE_TOLERANCE = 1e-7
 TWO_PI = 2.0 * math.pi
+_PRODUCTS_LOW, _PRODUCTS_HIGH = 1e-140, 1e140   # where the solid angle's products are normal
 
 
 @njit(cache=True, inline="always")
@@ -97,7 +99,16 @@ def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
               + (x1 * x1 + y0 * y1 + w) * l00)
         d2 = (l00 * l11 * l01 + d00_11 * l01 + (x0 * x0 + y0 * y1 + w) * l11
               + (x0 * x1 + y1 * y1 + w) * l00)
-        omega = 2.0 * (math.atan2(triple, d1) + math.atan2(triple, d2))
+        # 2 (atan2(triple, d1) + atan2(triple, d2)), in one call where the products stay
+        # within float64's range: the sum is the argument of (d1 + i triple) (d2 + i triple),
+        # in (0, 2 pi)
+        if _PRODUCTS_LOW < max(abs(d1), abs(d2), triple) < _PRODUCTS_HIGH:
+            half = math.atan2(triple * (d1 + d2), d1 * d2 - triple * triple)
+            if half < 0.0:
+                half += TWO_PI
+        else:
+            half = math.atan2(triple, d1) + math.atan2(triple, d2)
+        omega = 2.0 * half
         dx = max(0.0, max(x0, -x1))         # from p's foot to the rectangle, in its plane
         dy = max(0.0, max(y0, -y1))
         spherical = (right and omega >= RECTANGLE_MIN_SOLID_ANGLE
@@ -126,7 +137,7 @@ def _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2):
     scale = 1.0 / math.sqrt((c2 * c2 + s2 * s2) * (c3 * c3 + s3 * s3))
     ck, sk = (c2 * c3 - s2 * s3) * scale, -(s2 * c3 + c2 * s3) * scale
     phi = u1 * omega
-    cp, sp = math.cos(phi), math.sin(phi)
+    cp, sp = sincos(phi)
     s, c = sk * cp + ck * sp, ck * cp - sk * sp
     b0 = -y0 / math.sqrt(w + y0 * y0)
     b1 = y1 / math.sqrt(w + y1 * y1)
