@@ -14,6 +14,7 @@ from numba import njit
 
 from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
 from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, REFRACTION
+from .trig import sincos_2pi
 
 SQRT_PI = math.sqrt(math.pi)
 
@@ -27,8 +28,8 @@ def is_delta(kind):
 def cosine_hemisphere(u1, u2):
     """Cosine-weighted direction about +z (docs/course.md#bsdfs): r = sqrt(u1), z = sqrt(1 - u1)."""
     r = math.sqrt(u1)
-    phi = 2.0 * math.pi * u2
-    return r * math.cos(phi), r * math.sin(phi), math.sqrt(max(0.0, 1.0 - u1))
+    c, s = sincos_2pi(u2)     # (cos, sin) of phi = 2 pi u2, inline (ptrace.trig)
+    return r * c, r * s, math.sqrt(max(0.0, 1.0 - u1))
 
 
 @njit(cache=True, inline="always")
@@ -36,8 +37,8 @@ def uniform_hemisphere(u1, u2):
     """Uniform direction about +z: z = u1, pdf 1 / (2 pi)."""
     z = u1
     r = math.sqrt(max(0.0, 1.0 - z * z))
-    phi = 2.0 * math.pi * u2
-    return r * math.cos(phi), r * math.sin(phi), z
+    c, s = sincos_2pi(u2)
+    return r * c, r * s, z
 
 
 # -- microfacet (Beckmann, Smith G, conductor Fresnel) --------------------------------------------
@@ -151,8 +152,8 @@ def beckmann_half_vector(alpha, u1, u2):
     tan2 = -alpha * alpha * math.log(max(1.0 - u1, 1e-300))
     cos_h = 1.0 / math.sqrt(1.0 + tan2)
     sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
-    phi = 2.0 * math.pi * u2
-    return sin_h * math.cos(phi), sin_h * math.sin(phi), cos_h
+    c, s = sincos_2pi(u2)
+    return sin_h * c, sin_h * s, cos_h
 
 
 # -- one kind's sample, eval and pdf ---------------------------------------------------------------

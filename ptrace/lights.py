@@ -18,7 +18,13 @@ from numba import njit
 
 from .emitters import EMITTER, _emitters, emitter_arrays  # noqa: F401 - re-exported
 from .scene import AMBIENT, AREA, DIRECTIONAL, PHYSICAL, POINT, SPOT
-from .solid_angle import rectangle_pdf, rectangle_sample, triangle_pdf, triangle_sample
+from .solid_angle import (
+    rectangle_pdf,
+    rectangle_sample,
+    rectangle_sample_row,
+    triangle_pdf,
+    triangle_sample,
+)
 from .solid_angle_sphere import sphere_pdf, sphere_sample
 from .textures import surface_emission
 
@@ -51,16 +57,34 @@ def sample_area(lights, i, px, py, pz, u1, u2):
     and area) sampled from p by solid angle (ptrace.solid_angle: spherical rectangles, area
     sampling where the solid angle is too small to be stable): sample_light's values. The light
     is one-sided: nothing reaches a point behind its plane (pdf 0)."""
+    return _sample_area(lights, i, px, py, pz, u1, u2, lights.position, False)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def sample_area_row(lights, i, px, py, pz, u1, u2):
+    """sample_area, bit for bit, of a record that holds its lights' rectangle_axes_table as
+    `axes` (ptrace.kernel.wavefront.AreaLights): the light's own frame is not recomputed."""
+    return _sample_area(lights, i, px, py, pz, u1, u2, lights.axes, True)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _sample_area(lights, i, px, py, pz, u1, u2, axes, ROW):
     position, direction = lights.position, lights.direction
     edge_x, edge_y, radiance = lights.edge_x, lights.edge_y, lights.radiance
     if lights.area[i] <= 0.0 or ((position[i, 0] - px) * direction[i, 0]
                                  + (position[i, 1] - py) * direction[i, 1]
                                  + (position[i, 2] - pz) * direction[i, 2]) >= 0.0:
         return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-    qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
-                                       position[i, 2], edge_x[i, 0], edge_x[i, 1],
-                                       edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
-                                       edge_y[i, 2], u1, u2)
+    if ROW:
+        qx, qy, qz, pdf = rectangle_sample_row(px, py, pz, position[i, 0], position[i, 1],
+                                               position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                               edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                               edge_y[i, 2], axes, i, u1, u2)
+    else:
+        qx, qy, qz, pdf = rectangle_sample(px, py, pz, position[i, 0], position[i, 1],
+                                           position[i, 2], edge_x[i, 0], edge_x[i, 1],
+                                           edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                           edge_y[i, 2], u1, u2)
     dx, dy, dz = qx - px, qy - py, qz - pz
     dist = math.sqrt(dx * dx + dy * dy + dz * dz)
     if dist == 0.0 or not pdf > 0.0:

@@ -31,9 +31,11 @@ components; a returned pdf of 0 means no sample (a degenerate shape, or one seen
 """
 import math
 
+import numpy as np
 from numba import njit
 
 from .solid_angle_sphere import sphere_pdf, sphere_sample  # noqa: F401 - re-exported
+from .trig import sincos
 
 # Below these solid angles (steradians) the spherical maps give way to area sampling ...
 RECTANGLE_MIN_SOLID_ANGLE = 1e-9
@@ -44,6 +46,7 @@ TRIANGLE_MIN_SOLID_ANGLE = 1e-18
 RECTANGLE_MAX_GRAZING = 1e8
 RIGHT_ANGLE_TOLERANCE = 1e-7
 TWO_PI = 2.0 * math.pi
+_PRODUCTS_LOW, _PRODUCTS_HIGH = 1e-140, 1e140   # where the solid angle's products are normal
 
 
 @njit(cache=True, inline="always")
@@ -54,6 +57,45 @@ def _clamp(x, lo, hi):
 # -- rectangles ------------------------------------------------------------------------------------
 
 @njit(cache=True, _nrt=False, forceinline=True)
+def rectangle_axes(cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
+    """The part of _rectangle_frame that does not depend on p (a light's own, computed once per
+    render by rectangle_axes_table): unit axes x, y, z (z the plane's normal, e_x x e_y),
+    exl, eyx_, eyl, area, whether it has a right angle (1.0 or 0.0), and the corner
+    k = c - e_x/2 - e_y/2; area 0 for a degenerate parallelogram."""
+    exl = math.sqrt(exx * exx + exy * exy + exz * exz)
+    nx, ny, nz = exy * eyz - exz * eyy, exz * eyx - exx * eyz, exx * eyy - exy * eyx
+    area = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if area == 0.0:
+        return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                0.0)
+    xx, xy, xz = exx / exl, exy / exl, exz / exl
+    zx, zy, zz = nx / area, ny / area, nz / area
+    yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
+    eyx_ = eyx * xx + eyy * xy + eyz * xz
+    eyl = area / exl
+    right = abs(eyx_) <= RIGHT_ANGLE_TOLERANCE * math.sqrt(eyx_ * eyx_ + eyl * eyl)
+    return (xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area, 1.0 if right else 0.0,
+            cx - 0.5 * (exx + eyx), cy - 0.5 * (exy + eyy), cz - 0.5 * (exz + eyz))
+
+
+RECTANGLE_AXES = 17     # rectangle_axes' values, a row of rectangle_axes_table
+
+
+@njit(cache=True)
+def rectangle_axes_table(position, edge_x, edge_y):
+    """rectangle_axes of each rectangle c + s e_x + t e_y (rows of position, edge_x, edge_y):
+    an (n, RECTANGLE_AXES) array."""
+    out = np.zeros((position.shape[0], RECTANGLE_AXES))
+    for i in range(position.shape[0]):
+        values = rectangle_axes(position[i, 0], position[i, 1], position[i, 2], edge_x[i, 0],
+                                edge_x[i, 1], edge_x[i, 2], edge_y[i, 0], edge_y[i, 1],
+                                edge_y[i, 2])
+        for j in range(RECTANGLE_AXES):
+            out[i, j] = values[j]
+    return out
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
 def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
     """The parallelogram c + s e_x + t e_y (|s|, |t| <= 1/2) in a frame at p: unit axes x (along
     e_x), y (in the plane, normal to x) and z (normal to the plane, pointing from the plane's side
@@ -62,21 +104,22 @@ def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
     rectangle [x0, x0 + exl] x [y0, y0 + eyl], the parallelogram itself when it has a right
     angle); the corner's distance; and whether to sample it by solid angle (a right angle, a
     solid angle of at least RECTANGLE_MIN_SOLID_ANGLE, and not too grazing)."""
-    exl = math.sqrt(exx * exx + exy * exy + exz * exz)
-    nx, ny, nz = exy * eyz - exz * eyy, exz * eyx - exx * eyz, exx * eyy - exy * eyx
-    area = math.sqrt(nx * nx + ny * ny + nz * nz)
+    (xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area, right, kx, ky,
+     kz) = rectangle_axes(cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    return _rectangle_at(px, py, pz, xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area,
+                         right, kx, ky, kz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rectangle_at(px, py, pz, xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area, right,
+                  kx, ky, kz):
+    """_rectangle_frame from the rectangle's axes (rectangle_axes)."""
     if area == 0.0:
         return (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
                 0.0, 0.0, False)
-    xx, xy, xz = exx / exl, exy / exl, exz / exl
-    zx, zy, zz = nx / area, ny / area, nz / area
-    yx, yy, yz = zy * xz - zz * xy, zz * xx - zx * xz, zx * xy - zy * xx
-    eyx_ = eyx * xx + eyy * xy + eyz * xz
-    eyl = area / exl
-    right = abs(eyx_) <= RIGHT_ANGLE_TOLERANCE * math.sqrt(eyx_ * eyx_ + eyl * eyl)
-    sx = cx - 0.5 * (exx + eyx) - px
-    sy = cy - 0.5 * (exy + eyy) - py
-    sz = cz - 0.5 * (exz + eyz) - pz
+    sx = kx - px
+    sy = ky - py
+    sz = kz - pz
     x0, y0, z0 = (sx * xx + sy * xy + sz * xz, sx * yx + sy * yy + sz * yz,
                   sx * zx + sy * zy + sz * zz)
     if z0 > 0.0:
@@ -97,10 +140,19 @@ def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
               + (x1 * x1 + y0 * y1 + w) * l00)
         d2 = (l00 * l11 * l01 + d00_11 * l01 + (x0 * x0 + y0 * y1 + w) * l11
               + (x0 * x1 + y1 * y1 + w) * l00)
-        omega = 2.0 * (math.atan2(triple, d1) + math.atan2(triple, d2))
+        # 2 (atan2(triple, d1) + atan2(triple, d2)), in one call where the products stay
+        # within float64's range: the sum is the argument of (d1 + i triple) (d2 + i triple),
+        # in (0, 2 pi)
+        if _PRODUCTS_LOW < max(abs(d1), abs(d2), triple) < _PRODUCTS_HIGH:
+            half = math.atan2(triple * (d1 + d2), d1 * d2 - triple * triple)
+            if half < 0.0:
+                half += TWO_PI
+        else:
+            half = math.atan2(triple, d1) + math.atan2(triple, d2)
+        omega = 2.0 * half
         dx = max(0.0, max(x0, -x1))         # from p's foot to the rectangle, in its plane
         dy = max(0.0, max(y0, -y1))
-        spherical = (right and omega >= RECTANGLE_MIN_SOLID_ANGLE
+        spherical = (right != 0.0 and omega >= RECTANGLE_MIN_SOLID_ANGLE
                      and dx * dx + dy * dy <= RECTANGLE_MAX_GRAZING * w)
     return (xx, xy, xz, yx, yy, yz, zx, zy, zz, x0, y0, z0, exl, eyx_, eyl, area, omega, l00,
             spherical)
@@ -126,7 +178,7 @@ def _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2):
     scale = 1.0 / math.sqrt((c2 * c2 + s2 * s2) * (c3 * c3 + s3 * s3))
     ck, sk = (c2 * c3 - s2 * s3) * scale, -(s2 * c3 + c2 * s3) * scale
     phi = u1 * omega
-    cp, sp = math.cos(phi), math.sin(phi)
+    cp, sp = sincos(phi)
     s, c = sk * cp + ck * sp, ck * cp - sk * sp
     b0 = -y0 / math.sqrt(w + y0 * y0)
     b1 = y1 / math.sqrt(w + y1 * y1)
@@ -157,13 +209,35 @@ def rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, u1, u
     from p to q. Uniform in solid angle (pdf 1 / solid angle) unless the thresholds above say
     otherwise; then uniform by area, as lights.sample_light's (pdf distance^2 / (area cos)).
     pdf 0: no sample."""
+    (xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area, right, kx, ky,
+     kz) = rectangle_axes(cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+    return _rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, xx, xy, xz,
+                             yx, yy, yz, zx, zy, zz, exl, eyx_, eyl, area, right, kx, ky, kz,
+                             u1, u2)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rectangle_sample_row(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, axes, i, u1,
+                         u2):
+    """rectangle_sample with the rectangle's axes read from row i of rectangle_axes_table's
+    array: the same numbers, bit for bit, without recomputing them at every point."""
+    return _rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, axes[i, 0],
+                             axes[i, 1], axes[i, 2], axes[i, 3], axes[i, 4], axes[i, 5],
+                             axes[i, 6], axes[i, 7], axes[i, 8], axes[i, 9], axes[i, 10],
+                             axes[i, 11], axes[i, 12], axes[i, 13], axes[i, 14], axes[i, 15],
+                             axes[i, 16], u1, u2)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rectangle_sample(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz, xx, xy, xz, yx, yy,
+                      yz, zx, zy, zz, exl, eyx_, eyl, area, right, kx, ky, kz, u1, u2):
     (xx, xy, xz, yx, yy, yz, zx, zy, zz, x0, y0, z0, exl, eyx_, eyl, area, omega, l00,
-     spherical) = _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz)
+     spherical) = _rectangle_at(px, py, pz, xx, xy, xz, yx, yy, yz, zx, zy, zz, exl, eyx_, eyl,
+                                area, right, kx, ky, kz)
     if spherical:
         xu, yv = _rectangle_spherical(x0, y0, z0, exl, eyl, omega, l00, u1, u2)
         a, b = xu - x0, yv - y0
-        return (cx - 0.5 * (exx + eyx) + a * xx + b * yx, cy - 0.5 * (exy + eyy) + a * xy + b * yy,
-                cz - 0.5 * (exz + eyz) + a * xz + b * yz, 1.0 / omega)
+        return kx + a * xx + b * yx, ky + a * xy + b * yy, kz + a * xz + b * yz, 1.0 / omega
     s, t = u1 - 0.5, u2 - 0.5
     qx, qy, qz = cx + s * exx + t * eyx, cy + s * exy + t * eyy, cz + s * exz + t * eyz
     dx, dy, dz = qx - px, qy - py, qz - pz

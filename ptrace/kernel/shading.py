@@ -35,7 +35,7 @@ from ..lights import (
     EMITTER,
     choose,
     light_is_delta,
-    sample_area,
+    sample_area_row,
     sample_emitter,
     sample_light,
     sample_primitive,
@@ -307,8 +307,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                             u1, u2 = sample_2d(options, pixel, sample, index,
                                                base + DIM_LIGHT + 2 * light,
                                                base + DIM_LIGHT + 2 * j)
-                            lr, lg, lb, wx, wy, wz, dist, pdf = sample_area(lights, light, px, py,
-                                                                            pz, u1, u2)
+                            lr, lg, lb, wx, wy, wz, dist, pdf = sample_area_row(lights, light,
+                                                                                px, py, pz, u1,
+                                                                                u2)
                         j += 1
                         if pdf < 1e-11:
                             continue

@@ -29,6 +29,7 @@ from ..scene import (
     MIRROR,
     REFRACTION,
 )
+from ..solid_angle import rectangle_axes_table
 from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
 from .layout import Wave
 from .shading import shading_stage
@@ -62,7 +63,7 @@ SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR)   # 
 
 AreaLights = namedtuple("AreaLights", ["radiance", "position", "direction", "edge_x", "edge_y",
                                        "area", "faced", "hit_lower", "hit_upper", "hit_skip",
-                                       "hit_light"])
+                                       "hit_light", "axes"])
 SurfaceArrays = namedtuple("SurfaceArrays", ["kind", "emission", "albedo", "transmittance",
                                              "ior", "alpha", "metallic", "eta", "k",
                                              "specular"])
@@ -118,7 +119,9 @@ class Wavefront:
             self.lights = AreaLights(lights.radiance, lights.position, lights.direction,
                                      lights.edge_x, lights.edge_y, lights.area, lights.faced,
                                      lights.hit_lower, lights.hit_upper, lights.hit_skip,
-                                     lights.hit_light)
+                                     lights.hit_light,
+                                     rectangle_axes_table(lights.position, lights.edge_x,
+                                                          lights.edge_y))
             findable = lights.radiance.shape[0] > 0
         # the shading kernels of the kinds the scene has: no other is ever compiled (none at
         # all for the normals integrator)

@@ -11,8 +11,10 @@ from ptrace.solid_angle import (
     RECTANGLE_MAX_GRAZING,
     RECTANGLE_MIN_SOLID_ANGLE,
     TRIANGLE_MIN_SOLID_ANGLE,
+    rectangle_axes_table,
     rectangle_pdf,
     rectangle_sample,
+    rectangle_sample_row,
     rectangle_solid_angle,
     sphere_pdf,
     sphere_sample,
@@ -487,3 +489,23 @@ def test_sphere_fallbacks():
     assert sphere_sample(0, 0, 0, 1.0, 0, 0, 0.0, 0.5, 0.5)[3] == 0
     assert sphere_pdf(0, 0, 0, 0, 0, 2.0, 0.5, 0, 1.0, 0) == 0
     assert sphere_pdf(0, 0, 0, 0, 0, 2.0, 0.5, 0, 0, -1.0) == 0
+
+
+def test_rectangle_sampler_from_a_table_of_axes_is_the_same_bit_for_bit():
+    """rectangle_sample_row (the shading kernel's, with the light's axes computed once per render
+    by rectangle_axes_table) gives rectangle_sample's numbers exactly: near, far, grazing,
+    behind and on the plane, a parallelogram without a right angle and a degenerate one."""
+    rng = np.random.default_rng(5)
+    shapes = [(CENTRE, EX, EY), (CENTRE, EX, EY + 0.3 * EX), (CENTRE, EX, 2.0 * EX),
+              (np.array([3.0, -2.0, 1.0]), np.array([0.0, 1e-4, 0.0]), np.array([0.0, 0.0, 2e-4]))]
+    points = np.concatenate([rng.uniform(-2.0, 2.0, (40, 3)), [[0.0, 1.49, 0.0], [5.0, 1.49, 0.1],
+                                                                [0.1, 1.49 - 1e-9, 0.05],
+                                                                [1e4, 1.4899, 0.0]]])
+    for centre, ex, ey in shapes:
+        axes = rectangle_axes_table(centre[None], ex[None], ey[None])
+        shape = tuple(float(a) for a in (*centre, *ex, *ey))
+        for p in points.tolist():
+            for u1, u2 in rng.uniform(0.0, 1.0, (4, 2)).tolist():
+                expected = rectangle_sample(*p, *shape, u1, u2)
+                got = rectangle_sample_row(*p, *shape, axes, 0, u1, u2)
+                assert got == expected, (centre, ex, ey, p, u1, u2)

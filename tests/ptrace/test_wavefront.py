@@ -108,10 +108,10 @@ def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for
     own = lambda kind: {f.py_func for f in bsdf.BSDFS[kind]}
     every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS)) | {
         f.py_func for f in (bsdf.bsdf_sample, bsdf.bsdf_eval, bsdf.bsdf_pdf)}
-    light_sampling = {f.py_func for f in (lights.sample_area, shading.any_light,
-                                          shading.chosen_light)}
+    light_sampling = {f.py_func for f in (lights.sample_area, lights.sample_area_row,
+                                          shading.any_light, shading.chosen_light)}
     # what the probe sees: the diffuse kernel's BSDF and its light samples
-    assert own(DIFFUSE) <= diffuse and lights.sample_area.py_func in diffuse
+    assert own(DIFFUSE) <= diffuse and lights.sample_area_row.py_func in diffuse
     assert diffuse & every_kind == own(DIFFUSE)
     assert bsdf.mirror_sample.py_func in mirror
     assert mirror & every_kind <= own(MIRROR) and not mirror & light_sampling
