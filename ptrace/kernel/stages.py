@@ -14,6 +14,7 @@ from ..codes import LIGHTS_ALL
 from ..environment import LUMINANCE, environment_radiance
 from ..integrator import (
     SHADOW_SHORTEN,
+    area_light_crossed,
     camera_ray,
     emission_found,
     emits,
@@ -23,7 +24,7 @@ from ..integrator import (
     surface,
 )
 from ..light_hits import next_light
-from ..lights import area_light_hit, area_light_pdf
+from ..lights import area_light_pdf
 from ..scene import EMISSION
 from ..textures import surface_emission
 from .layout import (
@@ -119,11 +120,7 @@ def area_lights_found(lights, light_samples, delta, bsdf_pdf_, qx, qy, qz, ox, o
                               lights.hit_light, k, ox, oy, oz, dx, dy, dz, t_max)
         if light < 0:
             break
-        if delta and lights.faced[light]:
-            continue
-        t_light = area_light_hit(lights.position, lights.direction, lights.edge_x,
-                                 lights.edge_y, light, ox, oy, oz, dx, dy, dz)
-        if not t_light * (1.0 - SHADOW_SHORTEN) < t:    # (also false when t_light is inf)
+        if not area_light_crossed(lights, delta, light, ox, oy, oz, dx, dy, dz, t):
             continue
         weight = 1.0
         if not delta:
