@@ -49,8 +49,8 @@ MUTANTS = {
         ["tests/accel/test_backends.py", "-k", "tie"]),
     "glass-leaves-with-entering-scale": (
         "light leaving glass is scaled by the entering radiance scale 1 / ior^2",
-        [("ptrace/bsdf.py", "radiance_scale = eta_ratio * eta_ratio",
-          "radiance_scale = 1.0 / (ior[m] * ior[m])")],
+        [("ptrace/bsdf.py", "-eta_ratio * woy, tz, eta_ratio * eta_ratio",
+          "-eta_ratio * woy, tz, 1.0 / (ior_m * ior_m)")],
         ["tests/ptrace/test_bsdf.py"]),
     "image-written-in-place": (
         "the output image is written straight to its target, not through a temporary file",
