@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit, prange, uint64
 from numba.cpython.unsafe.numbers import trailing_zeros  # numba's llvm.cttz
 
-from . import compiled
+from . import compiled, interpreted
 from .bvh_build import (  # noqa: F401 - the build's names, re-exported as before
     MEAN_SPLIT_DEPTH,
     SPLITS,
@@ -31,6 +31,7 @@ from .bvh_wide import (  # noqa: F401 - the rows' names, re-exported as before
     MAX_LEAF_SIZE,
     PAYLOAD,
     WIDTH,
+    _collapse,
     _fill_rows,
     _float32_down,
     _float32_exact,
@@ -98,7 +99,7 @@ def _nearer(ta, a, tb, b):
     return ta, a, tb, b
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _blocks_closest(record, first, n_blocks, shear, ray, lo, best_t, best_prim, best_u, best_v):
     """Fold the triangles of blocks first.. first + n_blocks into the closest hit so far."""
     for block in range(first, first + n_blocks):
@@ -113,7 +114,7 @@ def _blocks_closest(record, first, n_blocks, shear, ray, lo, best_t, best_prim, 
     return best_t, best_prim, best_u, best_v
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, best_v):
     """Fold a leaf's primitives into the closest hit so far."""
     prims, n_tri = record.prims, record.n_tri
@@ -131,7 +132,7 @@ def _leaf_closest(record, payload, shear, ray, lo, best_t, best_prim, best_u, be
     return best_t, best_prim, best_u, best_v
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _blocks_any(record, first, n_blocks, shear, ray, lo, hi):
     """True if a triangle of blocks first.. first + n_blocks is hit with lo <= t <= hi."""
     for block in range(first, first + n_blocks):
@@ -140,7 +141,7 @@ def _blocks_any(record, first, n_blocks, shear, ray, lo, hi):
     return False
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _leaf_any(record, payload, shear, ray, lo, hi):
     """True if any of a leaf's primitives is hit with lo <= t <= hi."""
     first = payload & 0xffffffff
@@ -248,9 +249,10 @@ def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
+def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Any-hit traversal of one ray: every child hit is pushed (in slot order, unsorted: entering
     the nearest first measured slower for shadow rays), and the first primitive hit ends it."""
+    lo, hi = tmin, tmax
     nodes, payloads = record.nodes, record.payloads
     stack = scratch[0]
     planes, slab_ray, lo32, hi32, _, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
@@ -315,13 +317,15 @@ class BVHAccelerator(compiled.CompiledFace):
         lower, upper, child_or_first, count, order, self.max_depth = self._binary_tree()
         self._tree_stats = (int(count.shape[0]), int((count > 0).sum()),
                             int(count.max(initial=0)))
-        self._nodes, payloads = _traversal_rows(lower, upper, child_or_first, count)
+        run = self._run
+        self._nodes, payloads = _traversal_rows(lower, upper, child_or_first, count,
+                                                run(_collapse))
         # the binary tree goes before the leaves' blocks are made (it is rebuilt if asked for:
         # __getattr__); only the order of its primitives is needed for them
         del lower, upper, child_or_first, count
-        blocks, blocks32, self._prims = _fill_rows(
+        blocks, blocks32, self._prims = run(_fill_rows)(
             self._nodes, payloads, order, geometry.triangle_count, geometry.vertices,
-            geometry.faces, _float32_exact(geometry.vertices))
+            geometry.faces, run(_float32_exact)(geometry.vertices))
         del order
         self._blocks = blocks32 if blocks32.shape[0] else blocks
         self._build_seconds = time.perf_counter() - start
@@ -345,10 +349,17 @@ class BVHAccelerator(compiled.CompiledFace):
         bounds = geometry.bounds()
         scale = 0.0 if bounds is None else float(max(np.abs(bounds[0]).max(),
                                                      np.abs(bounds[1]).max()))
-        prim_lower, prim_upper, centroid = _primitive_boxes(
+        run = self._run
+        prim_lower, prim_upper, centroid = run(_primitive_boxes)(
             geometry.vertices, geometry.faces, geometry.centers, geometry.radii, 1e-9 * scale)
-        return _build(prim_lower, prim_upper, centroid, self.max_leaf_size, MEAN_SPLIT_DEPTH,
-                      self.split == "sah")
+        return run(_build)(prim_lower, prim_upper, centroid, self.max_leaf_size,
+                           MEAN_SPLIT_DEPTH, self.split == "sah")
+
+    def _run(self, function):
+        """A build function as this geometry's build runs it: compiled, or for a scene of at
+        most accel.interpreted.SMALL primitives as Python, the same tree in well under a second
+        where compiling the build costs about a quarter of a small scene's first render."""
+        return interpreted.sized(function, self.geometry.primitive_count)
 
     def __getattr__(self, name):
         """The binary tree's arrays (lower, upper, child_or_first, count, order), for tests

@@ -48,7 +48,7 @@ def _origins32(o, d, shift, inverse):
     return np.float32(start - move), np.float32(start + move)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)   # not inline="always": numba copies its IR per call
 def _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi):
     """What slab_test needs of a ray: its near and far plane columns; its float32 near and far
     origins and inverses; its float32 lo and hi (rounded down and up); the t its slab t's are

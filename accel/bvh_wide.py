@@ -168,17 +168,17 @@ def _collapse(lower, upper, child_or_first, count, planes, links, link_column):
     return used
 
 
-def _traversal_rows(lower, upper, child_or_first, count):
+def _traversal_rows(lower, upper, child_or_first, count, collapse=_collapse):
     """(nodes, payloads) of _node_rows with the collapse written straight into them (a leaf's
     payload still first | count << 32, for _fill_rows). The rows are made for the worst case (a
     row per interior binary node; untouched pages cost nothing) and, where fewer are used, the
     used ones copied into rows of their own. The boxes must be float32 (the build's): the rows
-    hold them as they are."""
+    hold them as they are. `collapse` is _collapse, compiled or interpreted (accel.bvh)."""
     if lower.dtype != np.float32 or upper.dtype != np.float32:
         raise TypeError("the traversal rows take the build's float32 boxes")
     interior = max(1, int(np.count_nonzero(count == 0))) if count.shape[0] else 0
     nodes, payloads = _node_rows(interior)
-    used = _collapse(lower, upper, child_or_first, count, nodes, payloads, PAYLOAD)
+    used = collapse(lower, upper, child_or_first, count, nodes, payloads, PAYLOAD)
     if used == interior:
         return nodes, payloads
     kept, kept_payloads = _node_rows(used)

@@ -18,9 +18,13 @@ functions by the record's type, so a numba kernel written against them is compil
 (one specialisation each, each in numba's on-disk cache) and never names a backend; called from
 plain Python (a kernel's py_func, in tests) they dispatch the same way.
 """
+import inspect
+
 import numpy as np
 from numba import njit, prange, types
 from numba.extending import overload
+
+from .interpreted import interpreted
 
 RAY_BLOCK = 64   # rays per parallel work item of the batch kernels: scratch is made per block
 
@@ -28,7 +32,13 @@ _FACES = {}      # record class -> (new_scratch, closest_hit, any_hit), numba fu
 
 
 def register(record_class, new_scratch_fn, closest_hit_fn, any_hit_fn):
-    """Make record_class's compiled face known (each backend module does this on import)."""
+    """Make record_class's compiled face known (each backend module does this on import). The
+    query functions' sources become the overloads of closest_hit and any_hit (_ray_query), so
+    their parameters must be named as those are."""
+    for function, face in ((closest_hit_fn, closest_hit), (any_hit_fn, any_hit)):
+        if inspect.signature(function.py_func) != inspect.signature(face):
+            raise TypeError(f"{function.py_func.__qualname__} must take the parameters "
+                            f"{inspect.signature(face)}")
     _FACES[record_class] = (new_scratch_fn, closest_hit_fn, any_hit_fn)
 
 
@@ -40,8 +50,9 @@ def _face(record):
 
 
 def new_scratch(record):
-    """Per-block working memory of the backend (traversal stacks, a ray structure)."""
-    return _FACES[type(record)][0](record)
+    """Per-block working memory of the backend (traversal stacks, a ray structure). Called from
+    Python, the backend's function runs as Python: a few allocations, not worth a compile."""
+    return interpreted(_FACES[type(record)][0])(record)
 
 
 def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
@@ -65,12 +76,12 @@ def _new_scratch(record):
 
 def _ray_query(record, which):
     """The implementation of a one-ray query (which: 1 closest hit, 2 any hit) for `record`'s
-    type: a call of the function its backend registered, or None for an unregistered type."""
+    type: the Python source of the function its backend registered, compiled here as the
+    overload itself (not a call of it, which would compile the traversal once more: once in
+    the backend's function, once in a wrapper around it), or None for an unregistered type."""
     face = _face(record)
     if face is not None:
-        function = face[which]
-        return lambda record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax: function(
-            record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax)
+        return face[which].py_func
     return None
 
 

@@ -158,7 +158,7 @@ def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
                              shear_setup(ox, oy, oz, dx, dy, dz))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def sphere_hit(centers, radii, sphere, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Nearest root of the ray against `sphere` inside [tmin, tmax]; MISS (NaN) if none.
 
@@ -218,7 +218,7 @@ def better(t, prim, best_t, best_prim):
     return t < best_t or (t == best_t and (best_prim == NO_HIT or prim < best_prim))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def spheres_closest(centers, radii, first_id, ox, oy, oz, dx, dy, dz, tmin, best_t, best_prim,
                     best_u, best_v):
     """Fold every sphere into a closest hit found so far (best_t is the current tmax; sphere s
@@ -230,7 +230,7 @@ def spheres_closest(centers, radii, first_id, ox, oy, oz, dx, dy, dz, tmin, best
     return best_t, best_prim, best_u, best_v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)
 def spheres_any(centers, radii, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """True if any sphere is hit with tmin <= t <= tmax."""
     for s in range(centers.shape[0]):

@@ -17,6 +17,7 @@ from collections import namedtuple
 import numpy as np
 
 from accel.compiled import new_scratch
+from accel.interpreted import sized
 
 from .. import codes
 from ..scene import (
@@ -120,8 +121,8 @@ class Wavefront:
                                      lights.edge_x, lights.edge_y, lights.area, lights.faced,
                                      lights.hit_lower, lights.hit_upper, lights.hit_skip,
                                      lights.hit_light,
-                                     rectangle_axes_table(lights.position, lights.edge_x,
-                                                          lights.edge_y))
+                                     sized(rectangle_axes_table, lights.area.shape[0])(
+                                         lights.position, lights.edge_x, lights.edge_y))
             findable = lights.radiance.shape[0] > 0
         # the shading kernels of the kinds the scene has: no other is ever compiled (none at
         # all for the normals integrator)

@@ -329,3 +329,46 @@ def test_traversal_stops_at_the_nearest_hit(split):
     visits, tests = backend.traversal_work(rays)
     print(f"{split}: {tests:.2f} triangle tests and {visits:.2f} nodes per ray")
     assert tests <= backend.max_leaf_size
+
+
+def _random_scene(seed, triangles, spheres, exact):
+    """Random triangles (float32-exact coordinates or not) and spheres."""
+    rng = np.random.default_rng(seed)
+    vertices = rng.uniform(-1.0, 1.0, (3 * triangles, 3))
+    if exact:
+        vertices = vertices.astype(np.float32).astype(np.float64)
+    return accel.Geometry(vertices, np.arange(3 * triangles).reshape(triangles, 3),
+                          rng.uniform(-1.0, 1.0, (spheres, 3)), rng.uniform(0.01, 0.2, spheres))
+
+
+@pytest.mark.parametrize("split", ["mean", "sah"])
+def test_a_small_scene_is_built_as_python_into_the_compiled_build_s_tree(split, monkeypatch):
+    """A scene of at most accel.interpreted.SMALL primitives is built by the build's functions
+    run as Python (accel.interpreted), which compiles nothing; the tree, the rows the traversal
+    reads and the leaves' blocks are the compiled build's, bit for bit: with spheres, with
+    coordinates float32 holds exactly (float32 blocks) and not, with coincident centroids
+    (count splits) and with a tree deep enough for the depth limit."""
+    import accel.bvh as bvh_module
+    import accel.interpreted
+    one = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.0]])
+    scenes = [_random_scene(1, 300, 20, exact=False), _random_scene(2, 200, 0, exact=True),
+              accel.Geometry(np.tile(one, (60, 1)), np.arange(180).reshape(60, 3)),
+              geometric_series_geometry(150)]
+    for geometry in scenes:
+        built = {}
+        for limit in (geometry.primitive_count, geometry.primitive_count - 1):
+            monkeypatch.setattr(accel.interpreted, "SMALL", limit)
+            interpreted = limit >= geometry.primitive_count
+            bvh = accel.build("bvh", geometry, split=split)
+            assert (bvh._run(bvh_module._build) is bvh_module._build) is not interpreted
+            built[interpreted] = bvh
+        python, compiled = built[True], built[False]
+        assert python.max_depth == compiled.max_depth
+        for name in ("lower", "upper", "child_or_first", "count", "order"):
+            a, b = getattr(python, name), getattr(compiled, name)
+            assert a.dtype == b.dtype and np.array_equal(a, b), name
+        for a, b in zip(python.compiled, compiled.compiled):
+            if isinstance(a, np.ndarray):
+                assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
+            else:
+                assert a == b

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from accel.interpreted import interpreted
 from ptrace.solid_angle import (
     RECTANGLE_MAX_GRAZING,
     RECTANGLE_MIN_SOLID_ANGLE,
@@ -493,8 +494,9 @@ def test_sphere_fallbacks():
 
 def test_rectangle_sampler_from_a_table_of_axes_is_the_same_bit_for_bit():
     """rectangle_sample_row (the shading kernel's, with the light's axes computed once per render
-    by rectangle_axes_table) gives rectangle_sample's numbers exactly: near, far, grazing,
-    behind and on the plane, a parallelogram without a right angle and a degenerate one."""
+    by rectangle_axes_table, compiled or run as Python) gives rectangle_sample's numbers exactly:
+    near, far, grazing, behind and on the plane, a parallelogram without a right angle and a
+    degenerate one."""
     rng = np.random.default_rng(5)
     shapes = [(CENTRE, EX, EY), (CENTRE, EX, EY + 0.3 * EX), (CENTRE, EX, 2.0 * EX),
               (np.array([3.0, -2.0, 1.0]), np.array([0.0, 1e-4, 0.0]), np.array([0.0, 0.0, 2e-4]))]
@@ -503,6 +505,9 @@ def test_rectangle_sampler_from_a_table_of_axes_is_the_same_bit_for_bit():
                                                                 [1e4, 1.4899, 0.0]]])
     for centre, ex, ey in shapes:
         axes = rectangle_axes_table(centre[None], ex[None], ey[None])
+        # a render's few lights get the table from its function run as Python: the same bits
+        assert np.array_equal(interpreted(rectangle_axes_table)(centre[None], ex[None], ey[None]),
+                              axes)
         shape = tuple(float(a) for a in (*centre, *ex, *ey))
         for p in points.tolist():
             for u1, u2 in rng.uniform(0.0, 1.0, (4, 2)).tolist():
