@@ -268,7 +268,7 @@ def spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz):
     return px + e * gx, py + e * gy, pz + e * gz
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def sample_1d(options, pixel, sample, index, key, dim):
     """One number for (pixel, sample): the Sobol sampler's point `index` of dimension `key`, or
     the independent sampler's hash of dimension `dim` (its numbers, bit for bit, are those of
@@ -278,7 +278,7 @@ def sample_1d(options, pixel, sample, index, key, dim):
     return uniform(options.seed, pixel, sample, dim)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def sample_2d(options, pixel, sample, index, key, dim):
     """Two numbers for (pixel, sample), as sample_1d: a 2D Sobol point, or dims dim and dim + 1."""
     if options.sampler == SOBOL:

@@ -67,7 +67,7 @@ def sample_area_row(lights, i, px, py, pz, u1, u2):
     return _sample_area(lights, i, px, py, pz, u1, u2, lights.axes, True)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _sample_area(lights, i, px, py, pz, u1, u2, axes, ROW):
     position, direction = lights.position, lights.direction
     edge_x, edge_y, radiance = lights.edge_x, lights.edge_y, lights.radiance

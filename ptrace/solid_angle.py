@@ -95,7 +95,7 @@ def rectangle_axes_table(position, edge_x, edge_y):
     return out
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
+@njit(cache=True, inline="always")
 def _rectangle_frame(px, py, pz, cx, cy, cz, exx, exy, exz, eyx, eyy, eyz):
     """The parallelogram c + s e_x + t e_y (|s|, |t| <= 1/2) in a frame at p: unit axes x (along
     e_x), y (in the plane, normal to x) and z (normal to the plane, pointing from the plane's side
