@@ -10,6 +10,7 @@ Imported first by the ptrace package, before any kernel is decorated, so that:
   a cache file that cannot be saved (a full disk) leaves the compiled kernel in use.
 Each of these says so in one note (cache_notes(); render() warns with them once).
 """
+import hashlib
 import os
 import stat
 import tempfile
@@ -222,7 +223,6 @@ def _folders_digest(folders):
     """sha256 over the contents of every .py file under the folders (by path relative to its
     folder) but those in its KERNEL_FREE subfolders, so that any edit to any of them changes
     it."""
-    import hashlib
     digest = hashlib.sha256()
     for folder in folders:
         for root, dirs, files in os.walk(folder):
@@ -266,9 +266,52 @@ def depend_on_folders(folders):
     mixin._ptrace_stamp = stamp
 
 
+def _cell_key(value):
+    """What a closure's cell holds, as its cached kernels' key sees it: a numba function by what
+    it is (its module, name, bytecode, options and, for a closure, its own cells), anything else
+    as it is."""
+    from numba.core.dispatcher import Dispatcher
+    if not isinstance(value, Dispatcher):
+        return value
+    function = value.py_func
+    return ("numba function", function.__module__, function.__qualname__,
+            function.__code__.co_code, sorted(value.targetoptions.items()),
+            tuple(_cell_key(cell.cell_contents) for cell in function.__closure__ or ()))
+
+
+def _key_closures_by_their_functions():
+    """numba keys a cached closure by the pickled contents of its cells, and a numba function
+    pickles with an id drawn afresh in each process (numba issue 6264): a kernel made by a
+    factory that captures numba functions (ptrace's shading and hit stages capture their kind's
+    BSDF functions and their light sampler's) was never found in the cache, and compiled again
+    in every run. Such a closure's key hashes its cells by _cell_key instead (the sources those
+    functions come from are in the key already: depend_on_folders). Closures of other values
+    keep numba's own key."""
+    from numba.core import caching, serialize
+    from numba.core.dispatcher import Dispatcher
+    cache = caching.Cache
+    if getattr(cache, "_ptrace_keyed", False):
+        return
+    own_key = cache._index_key
+
+    def index_key(self, sig, codegen):
+        closure = self._py_func.__closure__
+        if not closure or not any(isinstance(cell.cell_contents, Dispatcher)
+                                  for cell in closure):
+            return own_key(self, sig, codegen)
+        cells = serialize.dumps(tuple(_cell_key(cell.cell_contents) for cell in closure))
+        return (sig, codegen.magic_tuple(),
+                (hashlib.sha256(self._py_func.__code__.co_code).hexdigest(),
+                 hashlib.sha256(cells).hexdigest()))
+
+    cache._index_key = index_key
+    cache._ptrace_keyed = True
+
+
 try:
     _guard_cache_files()
     depend_on_folders(_kernel_folders())
+    _key_closures_by_their_functions()
 except (ImportError, AttributeError):   # numba's internals moved: its own behaviour stays
     pass
 configure_cache()

@@ -221,11 +221,13 @@ def test_a_cold_cache_says_it_is_compiling_and_a_warm_one_does_not(tmp_path):
     compiles (the first run used to sit at 0% for half a minute without a word), then how long
     compiling took, left out of the summary's seconds; the next run loads the cache and says
     nothing. (The cache starts as the session's own without the render kernel, so the test
-    compiles one kernel, not all of them; with an empty session cache it compiles them all.)"""
+    compiles one kernel, not all of them; with an empty session cache it compiles them all.)
+    The render path-traces, so the warm run loads the shading and hit stages too, closures of
+    numba functions that numba alone never finds in its cache (ptrace.jit)."""
     cache = tmp_path / "cache"
     _cache_without_the_render_kernel(cache)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    args = [sys.executable, "-m", "ptrace", "--integrator", "normals", "-r", "8", "6", "-f",
+    args = [sys.executable, "-m", "ptrace", "-s", "1", "-m", "2", "-r", "8", "6", "-f",
             str(tmp_path / "x.png"), str(SHIPPED)]
     cold = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
     assert cold.returncode == 0, cold.stderr

@@ -181,3 +181,31 @@ def test_a_cache_entry_is_saved_whole_while_another_process_reads_the_index(tmp_
     thread.join(10)
     assert saved.is_set()
     assert cache_file.load(("signature",)) == ("compiled", 1)
+
+
+CLOSURES = ("from numba import njit\n\n\n@njit(cache=True)\ndef double(x):\n    return 2 * x\n\n\n"
+            "@njit(cache=True)\ndef triple(x):\n    return 3 * x\n\n\ndef applying(f):\n"
+            "    @njit(cache=True)\n    def apply(x):\n        return f(x) + 1\n    return apply\n")
+RUN_CLOSURES = ("{imports}; a, b = m.applying(m.double), m.applying(m.triple); "
+                "print(a(1), b(1), sum(a.stats.cache_hits.values()), "
+                "sum(b.stats.cache_hits.values()))")
+
+
+def test_a_closure_of_a_numba_function_is_found_in_the_cache_by_the_next_process(tmp_path):
+    """A kernel made by a factory that captures numba functions (as the shading and hit stages
+    capture their kind's BSDF and their light sampler's functions) is loaded from the cache by
+    the next process, not compiled again in every one (numba alone keys it by a per-process id:
+    issue 6264); closures of different functions stay different kernels."""
+    (tmp_path / "mod").mkdir()
+    (tmp_path / "mod" / "m.py").write_text(CLOSURES)
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path / "mod"), str(REPO)]))
+    plain = RUN_CLOSURES.format(imports="import m")
+    assert python(plain, env, tmp_path).stdout.split() == ["3", "4", "0", "0"]
+    numba_alone = python(plain, env, tmp_path)
+    assert numba_alone.stdout.split() == ["3", "4", "0", "0"], numba_alone.stderr  # compiled
+    with_ptrace = RUN_CLOSURES.format(imports="import ptrace, m")
+    first = python(with_ptrace, env, tmp_path)
+    assert first.stdout.split() == ["3", "4", "0", "0"], first.stderr
+    again = python(with_ptrace, env, tmp_path)
+    assert again.stdout.split() == ["3", "4", "1", "1"], again.stderr   # both from the cache
