@@ -21,6 +21,9 @@ KIND_NAMES = LIGHT_NAMES + ("environment",)
 # What a point or spot light's radiance means (Lights.model).
 COURSE, PHYSICAL = range(2)
 MODEL_NAMES = ("course", "physical")
+# how a PHYSICAL spot falls off between its cones (Lights.falloff): SMOOTH, glTF's (the square
+# of a ramp linear in the cosine); ANGULAR, Mitsuba's (linear in the angle)
+SMOOTH, ANGULAR = range(2)
 
 
 @dataclass(eq=False)
@@ -173,7 +176,9 @@ class Lights:
     course's stub), or PHYSICAL, what glTF means (radiance is the intensity, divided by the
     squared distance; a spot's direction is its axis, pointing away from the light, and it
     falls off from 1 inside cos_inner to 0 outside cos_outer, smoothly, as glTF's
-    KHR_lights_punctual suggests).
+    KHR_lights_punctual suggests, or, where its falloff is ANGULAR, linearly in the angle from
+    the axis, as Mitsuba's spot does). A scene's spots all fall off one way: the shading kernels
+    are made for one (ptrace.kernel.wavefront.angular_spots).
     """
     kind: np.ndarray        # (L,) int32
     radiance: np.ndarray    # (L, 3)
@@ -185,6 +190,7 @@ class Lights:
     model: np.ndarray = None       # (L,) int32: COURSE or PHYSICAL
     cos_inner: np.ndarray = None   # (L,) spot cone, PHYSICAL model
     cos_outer: np.ndarray = None   # (L,)
+    falloff: np.ndarray = None     # (L,) int32: SMOOTH or ANGULAR, a spot's between its cones
 
     def __post_init__(self):
         n = len(self.kind)
@@ -194,6 +200,12 @@ class Lights:
             self.cos_inner = np.ones(n)
         if self.cos_outer is None:
             self.cos_outer = np.ones(n)
+        if self.falloff is None:
+            self.falloff = np.full(n, SMOOTH, dtype=np.int32)
+        spots = np.asarray(self.falloff)[np.asarray(self.kind) == SPOT]
+        if spots.size and (spots != spots[0]).any():
+            raise ValueError("a scene's spot lights must all fall off one way (SMOOTH or "
+                             "ANGULAR)")
 
     def __len__(self):
         return self.kind.shape[0]
@@ -213,6 +225,8 @@ class Lights:
                                dtype=np.float64).reshape(n),
             cos_outer=np.array([r.get("cos_outer", 1.0) for r in records],
                                dtype=np.float64).reshape(n),
+            falloff=np.array([r.get("falloff", SMOOTH) for r in records],
+                             dtype=np.int32).reshape(n),
         )
 
     def counts(self):

@@ -20,6 +20,7 @@ from accel.compiled import new_scratch
 
 from .. import codes
 from ..scene import (
+    ANGULAR,
     AREA,
     DIFFUSE,
     GLASS,
@@ -28,6 +29,7 @@ from ..scene import (
     MICROFACET,
     MIRROR,
     REFRACTION,
+    SPOT,
 )
 from ..solid_angle import rectangle_axes_table
 from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
@@ -84,6 +86,14 @@ def simple(scene):
             and not np.any(np.asarray(m.cutoff) != 0.0))
 
 
+def angular_spots(scene):
+    """Whether the scene's spots fall off as Mitsuba's (ptrace.scene's ANGULAR, of a Mitsuba
+    XML file): its shading kernels are then made for that falloff."""
+    lights = scene.lights
+    return bool(np.any((np.asarray(lights.kind) == SPOT)
+                       & (np.asarray(lights.falloff) == ANGULAR)))
+
+
 def used_kinds(scene):
     """The material kinds of the scene's primitives, sorted."""
     used = np.unique(np.asarray(scene.material_index))
@@ -95,13 +105,14 @@ class Wavefront:
     from the job's kernel records) and each thread's wave buffers."""
 
     def __init__(self, records, options, camera, accel_record, kinds, area_only, mode,
-                 guided=False):
+                 guided=False, angular=False):
         """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
         primitives have; area_only: its lights are area lights alone and its surfaces
         untextured (simple); mode: its light sampler (Settings.light_mode); guided: the
         non-delta kinds' bounces mix the path guide (self.guide, a
         ptrace.kernel.guide.GuideArrays that ptrace.guiding sets between passes) with the
-        BSDF, and while self.trainer is set each block's records go to trainer.add."""
+        BSDF, and while self.trainer is set each block's records go to trainer.add; angular:
+        its spots fall off as Mitsuba's (angular_spots)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
         self.materials = materials     # the full record: the AOVs read it
@@ -129,7 +140,8 @@ class Wavefront:
         self.guided = bool(guided) and not self.normals and not self.hemisphere
         self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode,
                                                                    self.hemisphere,
-                                                                   self.guided))
+                                                                   self.guided,
+                                                                   general and angular))
                                                for kind in kinds if kind in SHADED]
         self.guide = uniform_guide()
         self.trainer = None
