@@ -361,6 +361,45 @@ def test_checkerboard_is_baked_with_mitsubas_quadrants(tmp_path):
     np.testing.assert_allclose(image[-1, 0], [0, 0, 1])
 
 
+@pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
+def test_a_nearest_bitmap_looks_up_what_mitsubas_looks_up(tmp_path, wrap):
+    """filter_type nearest: ptrace's lookup of the texture it stores against Mitsuba's own
+    bitmap texture, at 500 (u, v) over three repeats of an 8 x 8 image, all but those within
+    1/32 of a texel of a texel edge (where ptrace's ramps across it): the same texel's value,
+    where the bilinear lookup of the image (what the reader drew before) differs."""
+    from ptrace.textures import texture_lookup
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    image = np.random.default_rng(5).uniform(0.1, 0.9, (8, 8, 3)).astype(np.float32)
+    write_texture_exr(tmp_path / "tex.exr", image)
+    scene = ptrace.load(write(tmp_path, f'<shape type="rectangle"><bsdf type="diffuse"><texture '
+                                        f'type="bitmap" name="reflectance"><string name="filename"'
+                                        f' value="tex.exr"/><string name="filter_type" value='
+                                        f'"nearest"/><string name="wrap_mode" value="{wrap}"/>'
+                                        f'</texture></bsdf></shape>'))
+    textures = scene.textures
+    texels = np.ascontiguousarray(textures.texels, np.float32).reshape(-1, 3)
+    wraps = np.asarray(textures.wrap, np.int64).reshape(-1, 2)
+    theirs = mi.load_dict({"type": "bitmap", "filename": str(tmp_path / "tex.exr"),
+                           "filter_type": "nearest", "wrap_mode": wrap, "raw": True})
+    bilinear = mi.load_dict({"type": "bitmap", "filename": str(tmp_path / "tex.exr"),
+                             "filter_type": "bilinear", "wrap_mode": wrap, "raw": True})
+    compared = moved = 0
+    for u, v in np.random.default_rng(6).uniform(-1.0, 2.0, (500, 2)):
+        fractions = np.array([u, v]) * 8 % 1.0
+        if np.any(np.minimum(fractions, 1 - fractions) < 1 / 32):
+            continue
+        si = mi.SurfaceInteraction3f()
+        si.uv = mi.Point2f(u, v)
+        expected = np.array(theirs.eval(si))
+        ours = texture_lookup(texels, textures.offset, textures.width, textures.height, wraps,
+                              0, u, 1.0 - v)      # ptrace's v runs up the image
+        np.testing.assert_allclose(ours, expected, rtol=1e-5, atol=1e-6)
+        compared += 1
+        moved += np.abs(np.array(bilinear.eval(si)) - expected).max() > 1e-3
+    assert compared > 300 and moved > compared // 2
+
+
 def write_texture(path):
     """An 8 x 8 EXR: red grows to the right, green down the image."""
     import OpenImageIO as oiio
