@@ -250,6 +250,34 @@ def test_cube_faces_out_and_flip_normals_turns_them_in(tmp_path):
         assert (sign * np.einsum("ij,ij->i", normals, corners.mean(axis=1)) > 0).all()
 
 
+def test_cube_texture_coordinates_are_mitsubas(tmp_path):
+    """Each corner of each face of the cube has the (u, v) of Mitsuba's own cube mesh at that
+    corner of that face (ptrace's v = 1 - Mitsuba's), so a texture lies on each face as in
+    Mitsuba (a checkerboard showed the difference on a face seen edge-on)."""
+    mi = pytest.importorskip("mitsuba")
+    mi.set_variant("scalar_rgb")
+    mesh = mi.load_dict({"type": "cube"})
+    positions = np.array(mesh.vertex_positions_buffer()).reshape(-1, 3)
+    coordinates = np.array(mesh.vertex_texcoords_buffer()).reshape(-1, 2)
+    theirs = {}
+    for triangle in np.array(mesh.faces_buffer()).reshape(-1, 3):
+        corners = positions[triangle]
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        for index in triangle:
+            key = tuple(np.round(np.concatenate([positions[index], normal]), 3))
+            theirs[key] = (coordinates[index, 0], 1.0 - coordinates[index, 1])
+    scene = ptrace.load(write(tmp_path, '<shape type="cube"><bsdf type="diffuse"><texture '
+                                        'type="checkerboard" name="reflectance"/></bsdf>'
+                                        '</shape>'))
+    vertices, uv = scene.geometry.vertices, np.asarray(scene.uv).reshape(-1, 3, 2)
+    for face, corners_uv in zip(scene.geometry.faces, uv):
+        corners = vertices[face]
+        normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+        for corner, coordinate in zip(corners, corners_uv):
+            key = tuple(np.round(np.concatenate([corner, normal]), 3))
+            np.testing.assert_allclose(coordinate, theirs[key], atol=1e-6)
+
+
 def test_disk_keeps_its_area_and_sphere_its_placement(tmp_path):
     path = write(tmp_path, '<shape type="disk"><transform name="to_world"><scale value="0.5"/>'
                            '</transform></shape><shape type="sphere"><point name="center" '
