@@ -21,6 +21,9 @@ KIND_NAMES = LIGHT_NAMES + ("environment",)
 # What a point or spot light's radiance means (Lights.model).
 COURSE, PHYSICAL = range(2)
 MODEL_NAMES = ("course", "physical")
+# the Fresnel reflectance of glass (Materials.fresnel): SCHLICK, the course's approximation;
+# EXACT, a smooth dielectric's (Mitsuba's dielectric)
+SCHLICK, EXACT = 0.0, 1.0
 # how a PHYSICAL spot falls off between its cones (Lights.falloff): SMOOTH, glTF's (the square
 # of a ramp linear in the cosine); ANGULAR, Mitsuba's (linear in the angle)
 SMOOTH, ANGULAR = range(2)
@@ -50,6 +53,10 @@ class Materials:
     c in (0, 1] cuts the surface out where alpha < c (MASK), -1 makes it pass rays with
     probability 1 - alpha (BLEND). normal_texture (-1: none) is a tangent-space normal texture,
     its x and y scaled by normal_scale (ptrace.textures.mapped_normal).
+
+    fresnel says how a glass reflects: SCHLICK (the course's) or EXACT (a smooth dielectric's
+    Fresnel reflectance, as Mitsuba's dielectric). A scene's glass reflects one way: its glass
+    kernel is made for one (ptrace.kernel.wavefront.exact_glass).
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
@@ -71,6 +78,7 @@ class Materials:
     cutoff: np.ndarray = None              # (M,), 0 for opaque
     normal_texture: np.ndarray = None      # (M,) int32
     normal_scale: np.ndarray = None        # (M,)
+    fresnel: np.ndarray = None             # (M,), glass only: SCHLICK or EXACT
 
     def __post_init__(self):
         m = len(self.kind)
@@ -79,6 +87,10 @@ class Materials:
                 shape = (m, 3) if name in RGB_FIELDS else m
                 setattr(self, name, np.full(shape, default,
                                             dtype=np.int32 if name in TEXTURE_FIELDS else None))
+        glass = np.asarray(self.fresnel)[np.asarray(self.kind) == GLASS]
+        if glass.size and (glass != glass[0]).any():
+            raise ValueError("a scene's glass materials must all reflect one way (SCHLICK or "
+                             "EXACT)")
 
     def __len__(self):
         return self.kind.shape[0]
@@ -110,12 +122,12 @@ RGB_FIELDS = {"albedo": (0.5, 0.5, 0.5), "transmittance": (0.0, 0.0, 0.0),
               "emission": (0.0, 0.0, 0.0), "eta": (0.0, 0.0, 0.0), "k": (0.0, 0.0, 0.0),
               "specular": (0.0, 0.0, 0.0)}
 NUMBER_FIELDS = {"ior": 1.0, "roughness": 0.0, "alpha": 0.0, "metallic": 0.0, "opacity": 1.0,
-                 "cutoff": 0.0, "normal_scale": 1.0}
+                 "cutoff": 0.0, "normal_scale": 1.0, "fresnel": SCHLICK}
 TEXTURE_FIELDS = ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
                   "normal_texture")
 # the fields Materials may be built without, and what they then hold (per material)
 OPTIONAL_FIELDS = {"specular": 0.0, "metallic": 0.0, "opacity": 1.0, "cutoff": 0.0,
-                   "normal_scale": 1.0, **{key: -1 for key in TEXTURE_FIELDS}}
+                   "normal_scale": 1.0, "fresnel": SCHLICK, **{key: -1 for key in TEXTURE_FIELDS}}
 
 
 # Texture wrap modes (Textures.wrap), glTF's three: repeat, clamp to edge, mirrored repeat.

@@ -2,8 +2,8 @@
 scenes" says what each becomes).
 
 A BSDF ptrace renders as Mitsuba does becomes its kind with Mitsuba's values; one it renders
-with a different but close model (Schlick's Fresnel for glass, the Ashikhmin-Shirley glossy
-model for plastics, Beckmann for GGX) gets one note per kind; one that would give a wrong
+with a different but close model (the Ashikhmin-Shirley glossy model for plastics, Beckmann
+for GGX) gets one note per kind; one that would give a wrong
 image (blends, bump and normal maps, rough glass of visible roughness, media) is refused in
 one line naming the file and the element.
 """
@@ -17,6 +17,7 @@ from ..scene import (
     BLEND_CUT,
     CLAMP,
     DIFFUSE,
+    EXACT,
     GLASS,
     GLOSSY,
     GLTF_PBR,
@@ -242,8 +243,7 @@ class Materials:
                 bsdf.fail(f"rough glass (alpha {alpha:g}) is not supported by ptrace (its glass "
                           f"is smooth; up to alpha {ROUGH_GLASS_LIMIT} is drawn smooth)")
             self.note(bsdf, f"rough glass of alpha up to {ROUGH_GLASS_LIMIT} drawn smooth")
-        self.note(bsdf, "Schlick's approximation of the dielectric Fresnel (Mitsuba: exact)")
-        return {"kind": GLASS, "ior": ior,
+        return {"kind": GLASS, "ior": ior, "fresnel": EXACT,
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
                     "specular_reflectance", Colour((1.0,) * 3))),
                 "transmittance": self._bounded(bsdf, "specular_transmittance", bsdf.colour(

@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from ..bsdf import BSDFS, is_delta, uniform_hemisphere
+from ..bsdf import BSDFS, EXACT_GLASS, is_delta, uniform_hemisphere
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
@@ -181,7 +181,7 @@ _STAGES = {}
 
 
 def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided=False,
-                  angular=False):
+                  angular=False, exact=False):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
@@ -209,11 +209,14 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     the guide's records. Without it, guide, history and depth are not read.
 
     With `angular`, the scene's spots fall off as Mitsuba's
-    (ptrace.lights.sample_light_angular); without it, as glTF's."""
-    key = (kind, general, mode, hemisphere, guided, bool(angular))
+    (ptrace.lights.sample_light_angular); without it, as glTF's. With `exact`, a GLASS kind
+    reflects with the exact Fresnel reflectance (ptrace.bsdf.EXACT_GLASS), not Schlick's."""
+    exact = bool(exact) and kind == GLASS
+    key = (kind, general, mode, hemisphere, guided, bool(angular), exact)
     if key in _STAGES:
         return _STAGES[key]
-    BSDF_SAMPLE, BSDF_EVAL, BSDF_PDF = BSDFS[kind]    # this kind's alone: no other compiles
+    # this kind's alone: no other compiles
+    BSDF_SAMPLE, BSDF_EVAL, BSDF_PDF = EXACT_GLASS if exact else BSDFS[kind]
     GENERAL, MODE, HEMI = general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)

@@ -156,7 +156,8 @@ class RenderJob:
                                              wavefront.simple(scene),
                                              settings.light_mode(scene),
                                              settings.guiding != "off",
-                                             wavefront.angular_spots(scene))
+                                             wavefront.angular_spots(scene),
+                                             wavefront.exact_glass(scene))
         self._counting = threading.Lock()
 
     @classmethod

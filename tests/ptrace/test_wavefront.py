@@ -160,6 +160,21 @@ def test_a_shading_kernel_samples_lights_with_its_scenes_spot_falloff_alone(tmp_
         assert own.py_func in typed and other.py_func not in typed
 
 
+def test_a_glass_kernel_reflects_with_its_scenes_fresnel_alone(tmp_path):
+    """A Mitsuba dielectric's scene gets the glass kernel of the exact Fresnel reflectance, the
+    course's glass keeps Schlick's; other kinds' kernels are the same whatever the flag."""
+    path = tmp_path / "glass.xml"
+    path.write_text('<scene version="3.0.0"><shape type="sphere"><bsdf type="dielectric"/>'
+                    '</shape></scene>', encoding="utf-8")
+    assert wavefront.exact_glass(ptrace.load(str(path)))
+    assert not wavefront.exact_glass(ptrace.load(str(course_scene("sky/CBspheres.dae"))))
+    for exact, sample in ((False, bsdf.glass_sample), (True, bsdf.dielectric_sample)):
+        stage = shading.shading_stage(GLASS, False, codes.LIGHTS_ALL, False, False, False, exact)
+        assert constants(stage)["BSDF_SAMPLE"] is sample
+    assert shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False, False, True) \
+        is shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False)
+
+
 def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sampler(tmp_path):
     """A scene of a point light (the general stages, every light sampled) compiles nothing of
     the light BVH's or the power sampler's weights; the light BVH's variant, typed for the
