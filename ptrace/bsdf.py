@@ -312,6 +312,36 @@ def glass_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specul
         transmittance[m, 2] * s, 1.0 - reflect
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def dielectric_reflectance(cos_i, cos_t, eta_it):
+    """The unpolarised Fresnel reflectance of a smooth dielectric boundary, from the cosines of
+    the incident and the transmitted direction and eta_it, the index ratio transmitted over
+    incident (the mean of the s and p amplitudes squared)."""
+    a_s = (cos_i - eta_it * cos_t) / (cos_i + eta_it * cos_t)
+    a_p = (cos_t - eta_it * cos_i) / (cos_t + eta_it * cos_i)
+    return 0.5 * (a_s * a_s + a_p * a_p)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def dielectric_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
+                      wox, woy, woz, u1, u2, u3):
+    """glass_sample with the exact Fresnel reflectance (dielectric_reflectance) in place of
+    Schlick's: Mitsuba's smooth dielectric. The glass kernel of a scene whose glass is EXACT
+    (ptrace.scene) calls it."""
+    if woz == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    cos_o, sin2_t, cos_t, tx, ty, tz, radiance_scale = _refracted(ior[m], wox, woy, woz)
+    if sin2_t >= 1.0:   # total internal reflection
+        return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
+    reflect = dielectric_reflectance(cos_o, cos_t, ior[m] if woz > 0.0 else 1.0 / ior[m])
+    if u3 < reflect:
+        s = reflect / cos_o
+        return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
+    s = (1.0 - reflect) * radiance_scale / cos_t
+    return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+        transmittance[m, 2] * s, 1.0 - reflect
+
+
 @njit(cache=True, _nrt=False, forceinline=True)
 def refraction_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
                       woy, woz, u1, u2, u3):
@@ -336,6 +366,8 @@ BSDFS = {
     GLOSSY: (glossy_sample, glossy_eval, glossy_pdf),
     GLTF_PBR: (pbr_sample, pbr_eval, pbr_pdf),
 }
+# the glass of a scene whose glass reflects EXACT (ptrace.scene), in place of BSDFS[GLASS]
+EXACT_GLASS = (dielectric_sample, delta_eval, delta_pdf)
 
 
 # -- any kind, by its code -------------------------------------------------------------------------

@@ -51,6 +51,19 @@ def spot_falloff(cos_inner, cos_outer, cos_axis):
     return ramp * ramp
 
 
+@njit(cache=True, inline="always")
+def spot_angular_falloff(cos_inner, cos_outer, cos_axis):
+    """Mitsuba 3's spot falloff: 1 inside the beam (cos_inner, the cosine of beam_width), 0
+    outside the cutoff (cos_outer, of cutoff_angle), and between them linear in the angle
+    from the axis, (cutoff - theta) / (cutoff - beam)."""
+    if cos_axis >= cos_inner:
+        return 1.0
+    if cos_axis <= cos_outer:
+        return 0.0
+    cutoff = math.acos(cos_outer)
+    return (cutoff - math.acos(cos_axis)) / max(cutoff - math.acos(cos_inner), 1e-12)
+
+
 @njit(cache=True, _nrt=False, forceinline=True)
 def sample_area(lights, i, px, py, pz, u1, u2):
     """Area light i (of any record with the area lights' radiance, position, direction, edges
@@ -93,46 +106,62 @@ def _sample_area(lights, i, px, py, pz, u1, u2, axes, ROW):
     return radiance[i, 0], radiance[i, 1], radiance[i, 2], wx, wy, wz, dist, pdf
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def sample_light(lights, i, px, py, pz, u1, u2):
-    """Sample light i (of the integrator's LightArrays) as seen from point p.
+def _light_sampler(ANGULAR):
+    """sample_light of one spot falloff, Mitsuba's (ANGULAR) or glTF's: a constant of its code,
+    so numba prunes the other before typing it and a kernel compiles only its scene's. (The
+    constant is a bool, not the falloff's function: numba's cache keys a closure on its
+    constants pickled, and a function pickles differently in every process.)"""
+
+    @njit(cache=True, _nrt=False, forceinline=True)
+    def sample(lights, i, px, py, pz, u1, u2):
+        kind, radiance, position, direction = lights.kind[i], lights.radiance, \
+            lights.position, lights.direction
+        physical = lights.model[i] == PHYSICAL
+        if kind == POINT or (kind == SPOT and physical):
+            dx, dy, dz = position[i, 0] - px, position[i, 1] - py, position[i, 2] - pz
+            dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if dist == 0.0:
+                return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
+            wx, wy, wz = dx / dist, dy / dist, dz / dist
+            scale = 1.0 / (dist * dist) if physical else 1.0
+            if kind == SPOT:   # direction is the spot's axis, away from the light
+                cos_axis = -(wx * direction[i, 0] + wy * direction[i, 1] + wz * direction[i, 2])
+                if ANGULAR:
+                    scale *= spot_angular_falloff(lights.cos_inner[i], lights.cos_outer[i],
+                                                  cos_axis)
+                else:
+                    scale *= spot_falloff(lights.cos_inner[i], lights.cos_outer[i], cos_axis)
+                if scale == 0.0:
+                    return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
+            return radiance[i, 0] * scale, radiance[i, 1] * scale, radiance[i, 2] * scale, \
+                wx, wy, wz, dist, 1.0
+        if kind == DIRECTIONAL:
+            return radiance[i, 0], radiance[i, 1], radiance[i, 2], direction[i, 0], \
+                direction[i, 1], direction[i, 2], INF, 1.0
+        if kind == AREA:
+            return sample_area(lights, i, px, py, pz, u1, u2)
+        if kind == AMBIENT:
+            # uniform over the hemisphere about world +Y, pdf 1 / (2 pi)
+            y = u1
+            r = math.sqrt(max(0.0, 1.0 - y * y))
+            phi = 2.0 * math.pi * u2
+            return radiance[i, 0], radiance[i, 1], radiance[i, 2], r * math.cos(phi), y, \
+                r * math.sin(phi), INF, 1.0 / (2.0 * math.pi)
+        return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0   # spot: nothing, like the course
+
+    return sample
+
+
+sample_light = _light_sampler(False)
+sample_light.__doc__ = """Sample light i (of the integrator's LightArrays) as seen from point p.
 
     Returns (Lr, Lg, Lb, wix, wiy, wiz, distance, pdf): wi is the unit direction toward the
     light sample, distance is inf for lights at infinity, pdf is per unit solid angle (1 for
     delta lights), and pdf 0 means "no contribution" (the course's spot lights, the back of an
-    area light, a point outside a spot's cone).
-    """
-    kind, radiance, position, direction = lights.kind[i], lights.radiance, lights.position, \
-        lights.direction
-    physical = lights.model[i] == PHYSICAL
-    if kind == POINT or (kind == SPOT and physical):
-        dx, dy, dz = position[i, 0] - px, position[i, 1] - py, position[i, 2] - pz
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        if dist == 0.0:
-            return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0
-        wx, wy, wz = dx / dist, dy / dist, dz / dist
-        scale = 1.0 / (dist * dist) if physical else 1.0
-        if kind == SPOT:   # direction is the spot's axis, away from the light
-            scale *= spot_falloff(lights.cos_inner[i], lights.cos_outer[i],
-                                  -(wx * direction[i, 0] + wy * direction[i, 1]
-                                    + wz * direction[i, 2]))
-            if scale == 0.0:
-                return 0.0, 0.0, 0.0, wx, wy, wz, dist, 0.0
-        return radiance[i, 0] * scale, radiance[i, 1] * scale, radiance[i, 2] * scale, \
-            wx, wy, wz, dist, 1.0
-    if kind == DIRECTIONAL:
-        return radiance[i, 0], radiance[i, 1], radiance[i, 2], direction[i, 0], \
-            direction[i, 1], direction[i, 2], INF, 1.0
-    if kind == AREA:
-        return sample_area(lights, i, px, py, pz, u1, u2)
-    if kind == AMBIENT:
-        # uniform over the hemisphere about world +Y, pdf 1 / (2 pi)
-        y = u1
-        r = math.sqrt(max(0.0, 1.0 - y * y))
-        phi = 2.0 * math.pi * u2
-        return radiance[i, 0], radiance[i, 1], radiance[i, 2], r * math.cos(phi), y, \
-            r * math.sin(phi), INF, 1.0 / (2.0 * math.pi)
-    return 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0   # spot: nothing, like the course
+    area light, a point outside a spot's cone). A spot falls off as glTF's (spot_falloff)."""
+# the same, of a scene whose spots fall off as Mitsuba's (ptrace.scene's ANGULAR); only the
+# shading kernels of such a scene call it
+sample_light_angular = _light_sampler(True)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

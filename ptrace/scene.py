@@ -21,6 +21,12 @@ KIND_NAMES = LIGHT_NAMES + ("environment",)
 # What a point or spot light's radiance means (Lights.model).
 COURSE, PHYSICAL = range(2)
 MODEL_NAMES = ("course", "physical")
+# the Fresnel reflectance of glass (Materials.fresnel): SCHLICK, the course's approximation;
+# EXACT, a smooth dielectric's (Mitsuba's dielectric)
+SCHLICK, EXACT = 0.0, 1.0
+# how a PHYSICAL spot falls off between its cones (Lights.falloff): SMOOTH, glTF's (the square
+# of a ramp linear in the cosine); ANGULAR, Mitsuba's (linear in the angle)
+SMOOTH, ANGULAR = range(2)
 
 
 @dataclass(eq=False)
@@ -47,6 +53,10 @@ class Materials:
     c in (0, 1] cuts the surface out where alpha < c (MASK), -1 makes it pass rays with
     probability 1 - alpha (BLEND). normal_texture (-1: none) is a tangent-space normal texture,
     its x and y scaled by normal_scale (ptrace.textures.mapped_normal).
+
+    fresnel says how a glass reflects: SCHLICK (the course's) or EXACT (a smooth dielectric's
+    Fresnel reflectance, as Mitsuba's dielectric). A scene's glass reflects one way: its glass
+    kernel is made for one (ptrace.kernel.wavefront.exact_glass).
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
@@ -68,6 +78,7 @@ class Materials:
     cutoff: np.ndarray = None              # (M,), 0 for opaque
     normal_texture: np.ndarray = None      # (M,) int32
     normal_scale: np.ndarray = None        # (M,)
+    fresnel: np.ndarray = None             # (M,), glass only: SCHLICK or EXACT
 
     def __post_init__(self):
         m = len(self.kind)
@@ -76,6 +87,10 @@ class Materials:
                 shape = (m, 3) if name in RGB_FIELDS else m
                 setattr(self, name, np.full(shape, default,
                                             dtype=np.int32 if name in TEXTURE_FIELDS else None))
+        glass = np.asarray(self.fresnel)[np.asarray(self.kind) == GLASS]
+        if glass.size and (glass != glass[0]).any():
+            raise ValueError("a scene's glass materials must all reflect one way (SCHLICK or "
+                             "EXACT)")
 
     def __len__(self):
         return self.kind.shape[0]
@@ -107,12 +122,12 @@ RGB_FIELDS = {"albedo": (0.5, 0.5, 0.5), "transmittance": (0.0, 0.0, 0.0),
               "emission": (0.0, 0.0, 0.0), "eta": (0.0, 0.0, 0.0), "k": (0.0, 0.0, 0.0),
               "specular": (0.0, 0.0, 0.0)}
 NUMBER_FIELDS = {"ior": 1.0, "roughness": 0.0, "alpha": 0.0, "metallic": 0.0, "opacity": 1.0,
-                 "cutoff": 0.0, "normal_scale": 1.0}
+                 "cutoff": 0.0, "normal_scale": 1.0, "fresnel": SCHLICK}
 TEXTURE_FIELDS = ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
                   "normal_texture")
 # the fields Materials may be built without, and what they then hold (per material)
 OPTIONAL_FIELDS = {"specular": 0.0, "metallic": 0.0, "opacity": 1.0, "cutoff": 0.0,
-                   "normal_scale": 1.0, **{key: -1 for key in TEXTURE_FIELDS}}
+                   "normal_scale": 1.0, "fresnel": SCHLICK, **{key: -1 for key in TEXTURE_FIELDS}}
 
 
 # Texture wrap modes (Textures.wrap), glTF's three: repeat, clamp to edge, mirrored repeat.
@@ -173,7 +188,9 @@ class Lights:
     course's stub), or PHYSICAL, what glTF means (radiance is the intensity, divided by the
     squared distance; a spot's direction is its axis, pointing away from the light, and it
     falls off from 1 inside cos_inner to 0 outside cos_outer, smoothly, as glTF's
-    KHR_lights_punctual suggests).
+    KHR_lights_punctual suggests, or, where its falloff is ANGULAR, linearly in the angle from
+    the axis, as Mitsuba's spot does). A scene's spots all fall off one way: the shading kernels
+    are made for one (ptrace.kernel.wavefront.angular_spots).
     """
     kind: np.ndarray        # (L,) int32
     radiance: np.ndarray    # (L, 3)
@@ -185,6 +202,7 @@ class Lights:
     model: np.ndarray = None       # (L,) int32: COURSE or PHYSICAL
     cos_inner: np.ndarray = None   # (L,) spot cone, PHYSICAL model
     cos_outer: np.ndarray = None   # (L,)
+    falloff: np.ndarray = None     # (L,) int32: SMOOTH or ANGULAR, a spot's between its cones
 
     def __post_init__(self):
         n = len(self.kind)
@@ -194,6 +212,12 @@ class Lights:
             self.cos_inner = np.ones(n)
         if self.cos_outer is None:
             self.cos_outer = np.ones(n)
+        if self.falloff is None:
+            self.falloff = np.full(n, SMOOTH, dtype=np.int32)
+        spots = np.asarray(self.falloff)[np.asarray(self.kind) == SPOT]
+        if spots.size and (spots != spots[0]).any():
+            raise ValueError("a scene's spot lights must all fall off one way (SMOOTH or "
+                             "ANGULAR)")
 
     def __len__(self):
         return self.kind.shape[0]
@@ -213,6 +237,8 @@ class Lights:
                                dtype=np.float64).reshape(n),
             cos_outer=np.array([r.get("cos_outer", 1.0) for r in records],
                                dtype=np.float64).reshape(n),
+            falloff=np.array([r.get("falloff", SMOOTH) for r in records],
+                             dtype=np.int32).reshape(n),
         )
 
     def counts(self):

@@ -249,7 +249,7 @@ def test_error_vs_time_targets_and_report_follow_the_numbers(tmp_path, monkeypat
 
 def test_mitsuba_scenes_z_test_tells_agreeing_images_from_differing_ones():
     """Batches drawn from one distribution agree; a 5 % brighter one in a quarter of the
-    pixels differs; a pixel with no spread agrees only with an equal mean."""
+    pixels differs; a pixel with no spread agrees only with a mean within float32 rounding."""
     pytest.importorskip("scipy")
     import numpy as np
 
@@ -266,6 +266,11 @@ def test_mitsuba_scenes_z_test_tells_agreeing_images_from_differing_ones():
     flat = np.ones((4, 1, 1, 3))
     assert z_test(flat, flat.copy()) == (0.0, True)
     assert z_test(flat, 2 * flat) == (1.0, False)
+    assert z_test(0 * flat, 0 * flat) == (0.0, True)
+    # float32 sums a few ulps apart with no spread (Mitsuba's film) agree; 0.1 % apart differ
+    ulps = np.float32(0.12) * (1 + 4e-7 * np.arange(4))[:, None, None, None] * flat
+    assert z_test(0.12 * flat, ulps) == (0.0, True)
+    assert z_test(0.12 * flat, 0.12012 * flat) == (1.0, False)
 
 
 def test_mitsuba_scenes_quick(tmp_path):

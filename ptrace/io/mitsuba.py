@@ -19,6 +19,7 @@ from ..environment import Environment
 from ..errors import SceneError
 from ..rendering.settings import RANGES
 from ..scene import (
+    ANGULAR,
     DIRECTIONAL,
     EMISSION,
     PHYSICAL,
@@ -210,12 +211,10 @@ class Builder:
             self.lights.append({"kind": SPOT, "model": PHYSICAL,
                                 "position": transform.apply([0.0, 0.0, 0.0])[0],
                                 "direction": axis / np.linalg.norm(axis),
-                                "cos_inner": spot_inner(beam, cutoff),
+                                "cos_inner": math.cos(math.radians(beam)),
                                 "cos_outer": math.cos(math.radians(cutoff)),
+                                "falloff": ANGULAR,     # Mitsuba's: linear in the angle
                                 "radiance": self._radiance(emitter, "intensity")})
-            self.notes.append("<emitter type=\"spot\">: its edge falls off as ptrace's spot "
-                              "does (quadratic in the cosine; Mitsuba's: linear in the angle), "
-                              "over a ramp that sends out the same power")
         elif kind == "directional":
             direction = emitter.point("direction")
             if direction is None:
@@ -471,24 +470,3 @@ def latlong_from_mitsuba(image, inverse):
     top = image[y0, x0] * (1 - tx) + image[y0, x1] * tx
     bottom = image[y1, x0] * (1 - tx) + image[y1, x1] * tx
     return top * (1 - ty) + bottom * ty
-
-
-def spot_inner(beam, cutoff):
-    """The cosine where ptrace's spot starts to fall off (it falls to 0 at cos(cutoff) as
-    ((cos - cos_cutoff) / (cos_inner - cos_cutoff))^2) such that it sends out the power of
-    Mitsuba's spot, which falls linearly in the angle from beam to cutoff (degrees): both
-    powers are 2 pi times the integral of the falloff over the cosine, solved by bisection."""
-    b, c = math.radians(beam), math.radians(cutoff)
-    if c - b < 1e-9:
-        return math.cos(c)
-    # Mitsuba's: 1 - cos b, plus the linear ramp's integral of (c - t) / (c - b) sin t dt,
-    # which is cos b - (sin c - sin b) / (c - b)
-    target = 1 - (math.sin(c) - math.sin(b)) / (c - b)
-    low, high = math.cos(c), 1.0        # ptrace's: (1 - x) + (x - cos c) / 3 falls with x
-    for _ in range(100):
-        x = 0.5 * (low + high)
-        if (1 - x) + (x - math.cos(c)) / 3 > target:
-            low = x
-        else:
-            high = x
-    return 0.5 * (low + high)

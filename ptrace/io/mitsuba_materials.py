@@ -2,8 +2,8 @@
 scenes" says what each becomes).
 
 A BSDF ptrace renders as Mitsuba does becomes its kind with Mitsuba's values; one it renders
-with a different but close model (Schlick's Fresnel for glass, the Ashikhmin-Shirley glossy
-model for plastics, Beckmann for GGX) gets one note per kind; one that would give a wrong
+with a different but close model (the Ashikhmin-Shirley glossy model for plastics, Beckmann
+for GGX) gets one note per kind; one that would give a wrong
 image (blends, bump and normal maps, rough glass of visible roughness, media) is refused in
 one line naming the file and the element.
 """
@@ -17,6 +17,7 @@ from ..scene import (
     BLEND_CUT,
     CLAMP,
     DIFFUSE,
+    EXACT,
     GLASS,
     GLOSSY,
     GLTF_PBR,
@@ -35,6 +36,9 @@ REFUSED = {"blendbsdf": "a blend of two BSDFs", "bumpmap": "a bump map",
            "pplastic": "polarised plastic", "polarizer": "a polariser", "retarder": "a retarder",
            "circular": "a polariser", "null": "a null BSDF (for media)"}
 CHECKER = 256             # texels a side of a baked checkerboard
+# a filter_type nearest bitmap is stored with each texel repeated up to NEAREST_REPEAT times a
+# side (nearest_texels), as long as the copy has at most NEAREST_TEXELS texels
+NEAREST_REPEAT, NEAREST_TEXELS = 16, 1 << 20
 ROUGH_GLASS_LIMIT = 0.1     # a roughdielectric up to this alpha is drawn smooth (noted)
 # principled's parameters that ptrace's glTF BRDF lacks, and their Mitsuba defaults
 PRINCIPLED_EXTRAS = {"anisotropic": 0.0, "sheen": 0.0, "sheen_tint": 0.0, "clearcoat": 0.0,
@@ -239,8 +243,7 @@ class Materials:
                 bsdf.fail(f"rough glass (alpha {alpha:g}) is not supported by ptrace (its glass "
                           f"is smooth; up to alpha {ROUGH_GLASS_LIMIT} is drawn smooth)")
             self.note(bsdf, f"rough glass of alpha up to {ROUGH_GLASS_LIMIT} drawn smooth")
-        self.note(bsdf, "Schlick's approximation of the dielectric Fresnel (Mitsuba: exact)")
-        return {"kind": GLASS, "ior": ior,
+        return {"kind": GLASS, "ior": ior, "fresnel": EXACT,
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
                     "specular_reflectance", Colour((1.0,) * 3))),
                 "transmittance": self._bounded(bsdf, "specular_transmittance", bsdf.colour(
@@ -326,14 +329,22 @@ class Materials:
         if filtering not in ("bilinear", "nearest", "ewa", "trilinear"):      # 0.6: ewa, ...
             texture.fail(f"filter_type {filtering!r} is none of bilinear, nearest, ewa and "
                          f"trilinear")
-        if filtering != "bilinear":
+        if filtering not in ("bilinear", "nearest"):
             self.notes.append(f"<texture type=\"bitmap\">: filter_type {filtering} drawn "
                               f"bilinear")
         raw = texture.boolean("raw", raw_default)
         try:
             pixels, encoded = read_image_file(path, f"the texture {name!r}", texture.path)
+            repeat = 1
+            if filtering == "nearest":
+                pixels, repeat = nearest_texels(pixels)
+                self.notes.append(
+                    f"<texture type=\"bitmap\">: filter_type nearest drawn as the bilinear "
+                    f"lookup of its texels repeated {repeat} times a side" + (
+                        " (the same but within 1/%d of a texel of their edges)" % (2 * repeat)
+                        if repeat > 1 else " (too large to repeat: bilinear)"))
             index = self.pool.add(pixels, srgb=not raw, wrap=(WRAP[wrap],) * 2, name=name,
-                                  key=(path, raw), encoded=encoded)
+                                  key=(path, raw, repeat), encoded=encoded)
         except (BudgetError, SceneError):
             raise
         except Exception as error:      # noqa: BLE001 - OpenImageIO's many failures
@@ -361,6 +372,19 @@ class Materials:
             self.notes.append(f"{texture.where}: parameter {unread!r} ignored")
         return self.pool.add(image, srgb=False, wrap=(REPEAT, REPEAT), name="checkerboard",
                              key=("checkerboard",) + tuple(np.concatenate(colours).tolist()))
+
+
+def nearest_texels(pixels):
+    """(pixels with each texel repeated k times along each axis, k) for a filter_type nearest
+    bitmap: ptrace's bilinear lookup of the copy returns Mitsuba's nearest texel everywhere but
+    within 1 / (2 k) of a texel of the texel edges, where it ramps across the edge over 1 / k of
+    a texel, the same mean over any footprint that covers the ramp. k is the largest up to
+    NEAREST_REPEAT whose copy has at most NEAREST_TEXELS texels (1: the image as it is)."""
+    rows, columns = pixels.shape[:2]
+    k = max(1, min(NEAREST_REPEAT, math.isqrt(NEAREST_TEXELS // max(rows * columns, 1))))
+    if k == 1:
+        return pixels, 1
+    return np.repeat(np.repeat(np.asarray(pixels), k, axis=0), k, axis=1), k
 
 
 def uv_transform(texture):

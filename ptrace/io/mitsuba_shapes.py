@@ -32,8 +32,15 @@ def rectangle():
     return _SQUARE.copy(), _QUADS.copy(), uv
 
 
+# Mitsuba's cube's (u, v) on each face (axis, sign of its normal): u = (su p[iu] + 1) / 2 and
+# v = (sv p[iv] + 1) / 2 as (iu, su, iv, sv), read off Mitsuba 3's cube mesh
+_CUBE_UV = {(0, -1.0): (1, 1, 2, 1), (0, 1.0): (1, 1, 2, -1), (1, -1.0): (2, 1, 0, 1),
+            (1, 1.0): (0, -1, 2, -1), (2, -1.0): (1, -1, 0, 1), (2, 1.0): (1, 1, 0, 1)}
+
+
 def cube():
-    """Mitsuba's cube: [-1, 1]^3, 24 vertices (flat faces), normals outward."""
+    """Mitsuba's cube: [-1, 1]^3, 24 vertices (flat faces), normals outward, each face's
+    (u, v) laid out as Mitsuba's (_CUBE_UV)."""
     vertices, faces, uvs = [], [], []
     for axis in range(3):
         for sign in (-1.0, 1.0):
@@ -44,7 +51,9 @@ def cube():
             face[:, axis] = sign
             faces.append(_QUADS + len(vertices) * 4)
             vertices.append(face)
-            uvs.append(_SQUARE_UV[_QUADS])
+            iu, su, iv, sv = _CUBE_UV[axis, sign]
+            uv = np.stack([(su * face[:, iu] + 1) / 2, (sv * face[:, iv] + 1) / 2], axis=1)
+            uvs.append(uv[_QUADS])
     return np.concatenate(vertices), np.concatenate(faces), np.concatenate(uvs)
 
 

@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from ..bsdf import BSDFS, is_delta, uniform_hemisphere
+from ..bsdf import BSDFS, EXACT_GLASS, is_delta, uniform_hemisphere
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
@@ -38,6 +38,7 @@ from ..lights import (
     sample_area_row,
     sample_emitter,
     sample_light,
+    sample_light_angular,
     sample_primitive,
 )
 from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
@@ -95,50 +96,65 @@ from .layout import (
 )
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def any_light(shapes, materials, lights, options, pixel, sample, index, base, light, j, px, py,
-              pz):
-    """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from p, the
-    j-th light sample of the vertex: (radiance, unit direction, distance (inf at infinity),
-    pdf), with the light sampler `all`'s keys."""
-    light_kind = lights.kind[light]
-    u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
-                       base + DIM_LIGHT + 2 * j)
-    if light_kind == EMITTER:
-        u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
-                       base + DIM_SELECT + j)
-        return sample_emitter(shapes, materials, lights.emitter_prims, lights.emitter_cdf,
-                              lights.prim_pdf, px, py, pz, u0, u1, u2)
-    if light_kind == ENVIRONMENT:
-        wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
-                                             lights.env_table, u1, u2)
-        lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
-        return lr, lg, lb, wx, wy, wz, math.inf, pdf
-    return sample_light(lights, light, px, py, pz, u1, u2)
+def _light_samplers(ANGULAR):
+    """(any_light, chosen_light) of one spot falloff: with ANGULAR (a constant of their code,
+    a bool as ptrace.lights._light_sampler explains) Mitsuba's, ptrace.lights.
+    sample_light_angular; without it glTF's, sample_light. Only one is typed into each."""
+
+    @njit(cache=True, _nrt=False, forceinline=True)
+    def any_light(shapes, materials, lights, options, pixel, sample, index, base, light, j,
+                  px, py, pz):
+        """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from
+        p, the j-th light sample of the vertex: (radiance, unit direction, distance (inf at
+        infinity), pdf), with the light sampler `all`'s keys."""
+        light_kind = lights.kind[light]
+        u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
+                           base + DIM_LIGHT + 2 * j)
+        if light_kind == EMITTER:
+            u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
+                           base + DIM_SELECT + j)
+            return sample_emitter(shapes, materials, lights.emitter_prims,
+                                  lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
+        if light_kind == ENVIRONMENT:
+            wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
+                                                 lights.env_table, u1, u2)
+            lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
+            return lr, lg, lb, wx, wy, wz, math.inf, pdf
+        if ANGULAR:
+            return sample_light_angular(lights, light, px, py, pz, u1, u2)
+        return sample_light(lights, light, px, py, pz, u1, u2)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def chosen_light(shapes, materials, lights, options, pixel, sample, index, base, light, prim,
-                 outer, px, py, pz):
-    """Light sample `outer` of -l at p, of the light (or, with prim >= 0, the emissive
-    primitive) that the power or bvh light sampler chose for it: (radiance, unit direction,
-    distance, pdf), with those samplers' keys."""
-    u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
-                       base + DIM_LIGHT + 4 * outer)
-    light_kind = lights.kind[light]
-    if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
-        return sample_primitive(shapes, materials, prim, px, py, pz, u1, u2)
-    if light_kind == EMITTER:
-        u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + DIM_CHOOSE_PRIM,
-                       base + DIM_LIGHT + 4 * outer + 3)
-        return sample_emitter(shapes, materials, lights.emitter_prims, lights.emitter_cdf,
-                              lights.prim_pdf, px, py, pz, u0, u1, u2)
-    if light_kind == ENVIRONMENT:
-        wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
-                                             lights.env_table, u1, u2)
-        lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
-        return lr, lg, lb, wx, wy, wz, math.inf, pdf
-    return sample_light(lights, light, px, py, pz, u1, u2)
+    @njit(cache=True, _nrt=False, forceinline=True)
+    def chosen_light(shapes, materials, lights, options, pixel, sample, index, base, light,
+                     prim, outer, px, py, pz):
+        """Light sample `outer` of -l at p, of the light (or, with prim >= 0, the emissive
+        primitive) that the power or bvh light sampler chose for it: (radiance, unit
+        direction, distance, pdf), with those samplers' keys."""
+        u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
+                           base + DIM_LIGHT + 4 * outer)
+        light_kind = lights.kind[light]
+        if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
+            return sample_primitive(shapes, materials, prim, px, py, pz, u1, u2)
+        if light_kind == EMITTER:
+            u0 = sample_1d(options, pixel, sample, index,
+                           base + DIM_LIGHT + DIM_CHOOSE_PRIM, base + DIM_LIGHT + 4 * outer + 3)
+            return sample_emitter(shapes, materials, lights.emitter_prims,
+                                  lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
+        if light_kind == ENVIRONMENT:
+            wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
+                                                 lights.env_table, u1, u2)
+            lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
+            return lr, lg, lb, wx, wy, wz, math.inf, pdf
+        if ANGULAR:
+            return sample_light_angular(lights, light, px, py, pz, u1, u2)
+        return sample_light(lights, light, px, py, pz, u1, u2)
+
+    return any_light, chosen_light
+
+
+any_light, chosen_light = _light_samplers(False)
+any_light_angular, chosen_light_angular = _light_samplers(True)
 
 
 @njit(cache=True, _nrt=False, inline="always")
@@ -164,7 +180,8 @@ def queue_ray(shadow, shadow_path, shadow_key, s, ox, oy, oz, dx, dy, dz, tmax, 
 _STAGES = {}
 
 
-def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided=False):
+def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided=False,
+                  angular=False, exact=False):
     """The shading kernel of material kind `kind` (one of ptrace.scene's BSDF codes but
     EMISSION), made once per process and cached on disk per kind:
 
@@ -189,16 +206,23 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     reflects), with probability guide.alpha and from the BSDF otherwise,
     and weighted by the mixture's pdf, which the light samples' MIS weights use too; with
     guide.record set, each bounce is remembered in `history` (its first `depth` vertices) for
-    the guide's records. Without it, guide, history and depth are not read."""
-    key = (kind, general, mode, hemisphere, guided)
+    the guide's records. Without it, guide, history and depth are not read.
+
+    With `angular`, the scene's spots fall off as Mitsuba's
+    (ptrace.lights.sample_light_angular); without it, as glTF's. With `exact`, a GLASS kind
+    reflects with the exact Fresnel reflectance (ptrace.bsdf.EXACT_GLASS), not Schlick's."""
+    exact = bool(exact) and kind == GLASS
+    key = (kind, general, mode, hemisphere, guided, bool(angular), exact)
     if key in _STAGES:
         return _STAGES[key]
-    BSDF_SAMPLE, BSDF_EVAL, BSDF_PDF = BSDFS[kind]    # this kind's alone: no other compiles
+    # this kind's alone: no other compiles
+    BSDF_SAMPLE, BSDF_EVAL, BSDF_PDF = EXACT_GLASS if exact else BSDFS[kind]
     GENERAL, MODE, HEMI = general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
     LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
     GUIDED = guided and not DELTA_KIND and not hemisphere
+    ANGULAR = bool(angular)   # its light samplers: Mitsuba's spot falloff (_light_samplers)
     LIT = not DELTA_KIND     # light samples (a constant: a delta kind's code has none)
 
     @njit(cache=True, nogil=True, _nrt=False)
@@ -292,15 +316,25 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                     for s in range(count):
                         if CHOOSE:   # weight: the light's expected samples at this vertex
                             weight = samples * chosen
-                            lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light(
-                                shapes, materials, lights, options, pixel, sample, index, base,
-                                light, light_prim, outer, px, py, pz)
+                            if ANGULAR:
+                                lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light_angular(
+                                    shapes, materials, lights, options, pixel, sample, index,
+                                    base, light, light_prim, outer, px, py, pz)
+                            else:
+                                lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light(
+                                    shapes, materials, lights, options, pixel, sample, index,
+                                    base, light, light_prim, outer, px, py, pz)
                         elif GENERAL:
                             weight = count
                             index = sample * count + s
-                            lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
-                                shapes, materials, lights, options, pixel, sample, index, base,
-                                light, j, px, py, pz)
+                            if ANGULAR:
+                                lr, lg, lb, wx, wy, wz, dist, pdf = any_light_angular(
+                                    shapes, materials, lights, options, pixel, sample, index,
+                                    base, light, j, px, py, pz)
+                            else:
+                                lr, lg, lb, wx, wy, wz, dist, pdf = any_light(
+                                    shapes, materials, lights, options, pixel, sample, index,
+                                    base, light, j, px, py, pz)
                         else:
                             weight = count
                             index = sample * count + s

@@ -21,14 +21,17 @@ from accel.interpreted import sized
 
 from .. import codes
 from ..scene import (
+    ANGULAR,
     AREA,
     DIFFUSE,
+    EXACT,
     GLASS,
     GLOSSY,
     GLTF_PBR,
     MICROFACET,
     MIRROR,
     REFRACTION,
+    SPOT,
 )
 from ..solid_angle import rectangle_axes_table
 from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
@@ -85,6 +88,21 @@ def simple(scene):
             and not np.any(np.asarray(m.cutoff) != 0.0))
 
 
+def angular_spots(scene):
+    """Whether the scene's spots fall off as Mitsuba's (ptrace.scene's ANGULAR, of a Mitsuba
+    XML file): its shading kernels are then made for that falloff."""
+    lights = scene.lights
+    return bool(np.any((np.asarray(lights.kind) == SPOT)
+                       & (np.asarray(lights.falloff) == ANGULAR)))
+
+
+def exact_glass(scene):
+    """Whether the scene's glass reflects with the exact Fresnel reflectance (ptrace.scene's
+    EXACT, of a Mitsuba dielectric): its glass kernel is then made for it."""
+    m = scene.materials
+    return bool(np.any((np.asarray(m.kind) == GLASS) & (np.asarray(m.fresnel) == EXACT)))
+
+
 def used_kinds(scene):
     """The material kinds of the scene's primitives, sorted."""
     used = np.unique(np.asarray(scene.material_index))
@@ -96,13 +114,15 @@ class Wavefront:
     from the job's kernel records) and each thread's wave buffers."""
 
     def __init__(self, records, options, camera, accel_record, kinds, area_only, mode,
-                 guided=False):
+                 guided=False, angular=False, exact=False):
         """records: the job's (shapes, materials, lights); kinds: the material kinds the scene's
         primitives have; area_only: its lights are area lights alone and its surfaces
         untextured (simple); mode: its light sampler (Settings.light_mode); guided: the
         non-delta kinds' bounces mix the path guide (self.guide, a
         ptrace.kernel.guide.GuideArrays that ptrace.guiding sets between passes) with the
-        BSDF, and while self.trainer is set each block's records go to trainer.add."""
+        BSDF, and while self.trainer is set each block's records go to trainer.add; angular:
+        its spots fall off as Mitsuba's (angular_spots); exact: its glass reflects with the exact
+        Fresnel reflectance (exact_glass)."""
         shapes, materials, lights = records
         self.shapes, self.options, self.camera, self.accel = shapes, options, camera, accel_record
         self.materials = materials     # the full record: the AOVs read it
@@ -130,7 +150,8 @@ class Wavefront:
         self.guided = bool(guided) and not self.normals and not self.hemisphere
         self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode,
                                                                    self.hemisphere,
-                                                                   self.guided))
+                                                                   self.guided,
+                                                                   general and angular, exact))
                                                for kind in kinds if kind in SHADED]
         self.guide = uniform_guide()
         self.trainer = None

@@ -155,7 +155,9 @@ class RenderJob:
                                              wavefront.used_kinds(scene),
                                              wavefront.simple(scene),
                                              settings.light_mode(scene),
-                                             settings.guiding != "off")
+                                             settings.guiding != "off",
+                                             wavefront.angular_spots(scene),
+                                             wavefront.exact_glass(scene))
         self._counting = threading.Lock()
 
     @classmethod

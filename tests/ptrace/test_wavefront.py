@@ -109,12 +109,70 @@ def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for
     every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS)) | {
         f.py_func for f in (bsdf.bsdf_sample, bsdf.bsdf_eval, bsdf.bsdf_pdf)}
     light_sampling = {f.py_func for f in (lights.sample_area, lights.sample_area_row,
-                                          shading.any_light, shading.chosen_light)}
+                                          shading.any_light, shading.chosen_light,
+                                          shading.any_light_angular,
+                                          shading.chosen_light_angular)}
     # what the probe sees: the diffuse kernel's BSDF and its light samples
     assert own(DIFFUSE) <= diffuse and lights.sample_area_row.py_func in diffuse
     assert diffuse & every_kind == own(DIFFUSE)
     assert bsdf.mirror_sample.py_func in mirror
     assert mirror & every_kind <= own(MIRROR) and not mirror & light_sampling
+
+
+def constants(dispatcher):
+    """The closure constants of a kernel made by a factory, by name."""
+    function = dispatcher.py_func
+    return dict(zip(function.__code__.co_freevars,
+                    (cell.cell_contents for cell in function.__closure__ or ())))
+
+
+def test_a_shading_kernel_samples_lights_with_its_scenes_spot_falloff_alone(tmp_path):
+    """A scene without Mitsuba's spots (a point light) gets the general kernel, whose light
+    samplers reach glTF's spot falloff and nothing of Mitsuba's; a scene of Mitsuba's spots
+    gets the kernel whose samplers reach Mitsuba's alone."""
+    path = tmp_path / "lit.xml"
+    path.write_text('<scene version="3.0.0"><shape type="rectangle"><bsdf type="diffuse"/>'
+                    '</shape><emitter type="point"><point name="position" x="0" y="0" z="1"/>'
+                    '</emitter></scene>', encoding="utf-8")
+    point = ptrace.load(str(path))
+    path.write_text(path.read_text().replace(
+        '<emitter type="point"><point name="position" x="0" y="0" z="1"/></emitter>',
+        '<emitter type="spot"><transform name="to_world"><lookat origin="0 0 1" target="0 0 0"/>'
+        '</transform></emitter>'), encoding="utf-8")
+    assert not wavefront.angular_spots(point)
+    assert wavefront.angular_spots(ptrace.load(str(path)))
+    for angular in (False, True):
+        stage = shading.shading_stage(DIFFUSE, True, codes.LIGHTS_ALL, False, False, angular)
+        assert constants(stage)["ANGULAR"] is angular
+        samplers = (shading.any_light_angular, shading.chosen_light_angular) if angular else \
+            (shading.any_light, shading.chosen_light)
+        assert all(constants(sampler)["ANGULAR"] is angular for sampler in samplers)
+    assert constants(lights.sample_light)["ANGULAR"] is False
+    assert constants(lights.sample_light_angular)["ANGULAR"] is True
+    # each is typed with the other's falloff pruned away
+    light_record = integrator.scene_records(point)[2]
+    signature = (numba.typeof(light_record), types.int64) + (types.float64,) * 5
+    for sampler, own, other in ((lights.sample_light, lights.spot_falloff,
+                                 lights.spot_angular_falloff),
+                                (lights.sample_light_angular, lights.spot_angular_falloff,
+                                 lights.spot_falloff)):
+        typed = calls(sampler, signature)
+        assert own.py_func in typed and other.py_func not in typed
+
+
+def test_a_glass_kernel_reflects_with_its_scenes_fresnel_alone(tmp_path):
+    """A Mitsuba dielectric's scene gets the glass kernel of the exact Fresnel reflectance, the
+    course's glass keeps Schlick's; other kinds' kernels are the same whatever the flag."""
+    path = tmp_path / "glass.xml"
+    path.write_text('<scene version="3.0.0"><shape type="sphere"><bsdf type="dielectric"/>'
+                    '</shape></scene>', encoding="utf-8")
+    assert wavefront.exact_glass(ptrace.load(str(path)))
+    assert not wavefront.exact_glass(ptrace.load(str(course_scene("sky/CBspheres.dae"))))
+    for exact, sample in ((False, bsdf.glass_sample), (True, bsdf.dielectric_sample)):
+        stage = shading.shading_stage(GLASS, False, codes.LIGHTS_ALL, False, False, False, exact)
+        assert constants(stage)["BSDF_SAMPLE"] is sample
+    assert shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False, False, True) \
+        is shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False)
 
 
 def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sampler(tmp_path):
