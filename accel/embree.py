@@ -132,7 +132,7 @@ def _slab(lower, upper, p, d, enter, leave):
     return max(enter, a), min(leave, b)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False, forceinline=True)   # not inline="always": 50 blocks, 2 callers
 def _set_ray(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Write the ray, in the re-centred frame, into the scratch's RTCRay. Returns (usable, shift):
     shift is what to add to Embree's t. A negative tmin moves the origin back by tmin; an origin
