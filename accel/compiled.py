@@ -36,8 +36,9 @@ def register(record_class, new_scratch_fn, closest_hit_fn, any_hit_fn):
     query functions' sources become the overloads of closest_hit and any_hit (_ray_query), so
     their parameters must be named as those are."""
     for function, face in ((closest_hit_fn, closest_hit), (any_hit_fn, any_hit)):
-        if inspect.signature(function.py_func) != inspect.signature(face):
-            raise TypeError(f"{function.py_func.__qualname__} must take the parameters "
+        source = getattr(function, "py_func", function)   # a function (NUMBA_DISABLE_JIT)
+        if inspect.signature(source) != inspect.signature(face):
+            raise TypeError(f"{source.__qualname__} must take the parameters "
                             f"{inspect.signature(face)}")
     _FACES[record_class] = (new_scratch_fn, closest_hit_fn, any_hit_fn)
 

@@ -35,6 +35,8 @@ _MADE = {}   # dispatcher -> its interpreted function
 
 def interpreted(function):
     """The numba function `function` as a plain Python function (made once, then reused)."""
+    if not isinstance(function, Dispatcher):   # already Python (NUMBA_DISABLE_JIT)
+        return function
     made = _MADE.get(function)
     if made is None:
         source = function.py_func

@@ -18,7 +18,7 @@ import tempfile
 # The wait the first-run notice announces: a small render's compile time with an empty cache on
 # the 2-core development machine, rounded (the commit that last set it gives the command and
 # the runs; re-measure it when the kernels change much).
-COLD_COMPILE_SECONDS = 60
+COLD_COMPILE_SECONDS = 30
 
 _NOTES = {}   # kind -> (its first note, the files it concerned), in the order they happened
 

@@ -10,7 +10,7 @@ from numba.core import types
 
 import ptrace
 from ptrace import bsdf, codes, integrator, lights
-from ptrace.kernel import layout, shading, wavefront
+from ptrace.kernel import layout, shading, stages, wavefront
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import RenderJob
 from ptrace.scene import DIFFUSE, GLASS, MIRROR
@@ -96,6 +96,22 @@ def calls(dispatcher, signature=None):
     fresh.compile(signature)
     typemap = fresh.overloads[signature].fndesc.typemap
     return {ty.dispatcher.py_func for ty in typemap.values() if isinstance(ty, types.Dispatcher)}
+
+
+def called_with(dispatcher, callee):
+    """The argument types with which a kernel's own code calls the numba function `callee`
+    (the kernel typed afresh, as calls() does)."""
+    signature = dispatcher.signatures[0]
+    fresh = numba.njit(nogil=True, _nrt=False)(dispatcher.py_func)
+    fresh.compile(signature)
+    fndesc = fresh.overloads[signature].fndesc
+    for expr, called in fndesc.calltypes.items():
+        if getattr(expr, "op", None) != "call":
+            continue
+        kind = fndesc.typemap.get(expr.func.name)
+        if isinstance(kind, types.Dispatcher) and kind.dispatcher is callee:
+            return called.args
+    raise AssertionError(f"{dispatcher.py_func.__qualname__} does not call {callee}")
 
 
 def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for_lights():
@@ -186,9 +202,10 @@ def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sample
     ptrace.render(ptrace.load(str(path)), spp=1, resolution=(8, 6), max_depth=3,
                   light_sampler="all")
     found = integrator.emission_found(codes.LIGHTS_ALL)
-    signature = found.signatures[0]
+    # the arguments the hit stage passes it (loaded from the cache, found itself never compiles)
+    signature = called_with(stages.hit_stage(True, codes.LIGHTS_ALL), found)
     tree = {integrator.tree_samples.py_func, integrator.bvh_prim_pmf.py_func}
-    every = calls(found)
+    every = calls(found, signature)
     assert integrator.every_light_samples.py_func in every
     assert not every & (tree | {integrator.power_samples.py_func})
     assert tree <= calls(integrator.emission_found(codes.LIGHTS_BVH), signature)
