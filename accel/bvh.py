@@ -20,10 +20,10 @@ from numba.cpython.unsafe.numbers import trailing_zeros  # numba's llvm.cttz
 
 from . import compiled, interpreted
 from .bvh_build import (  # noqa: F401 - the build's names, re-exported as before
+    BUILDS,
     MEAN_SPLIT_DEPTH,
     SPLITS,
     STACK_SIZE,
-    _build,
     _primitive_boxes,
 )
 from .bvh_slab import _hi32, _ray_planes  # noqa: F401 - _ray_planes re-exported as before
@@ -352,8 +352,8 @@ class BVHAccelerator(compiled.CompiledFace):
         run = self._run
         prim_lower, prim_upper, centroid = run(_primitive_boxes)(
             geometry.vertices, geometry.faces, geometry.centers, geometry.radii, 1e-9 * scale)
-        return run(_build)(prim_lower, prim_upper, centroid, self.max_leaf_size,
-                           MEAN_SPLIT_DEPTH, self.split == "sah")
+        return run(BUILDS[self.split])(prim_lower, prim_upper, centroid, self.max_leaf_size,
+                                       MEAN_SPLIT_DEPTH)
 
     def _run(self, function):
         """A build function as this geometry's build runs it: compiled, or for a scene of at

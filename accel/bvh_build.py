@@ -101,108 +101,124 @@ def _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo, c_
     return left
 
 
-@njit(cache=True)
-def _build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth, use_sah):
-    n = prim_lower.shape[0]
-    max_nodes = max(2 * n - 1, 1)
-    # every node used gets all four written; np.empty leaves the pages of the rest untouched
-    lower = np.empty((max_nodes, 3), dtype=prim_lower.dtype)
-    upper = np.empty((max_nodes, 3), dtype=prim_upper.dtype)
-    child_or_first = np.empty(max_nodes, dtype=np.int64)
-    count = np.empty(max_nodes, dtype=np.int64)
-    order = np.arange(n)
-    if n == 0:
-        return lower[:0], upper[:0], child_or_first[:0], count[:0], order, 0
+def _make_build(sah):
+    """The build of one split, the SAH or the mean (a constant of its code, so that the mean
+    split's build never compiles the SAH's partition):
 
-    # explicit stack of (node, start, end, depth)
-    stack_node = np.empty(STACK_SIZE * 2, dtype=np.int64)
-    stack_start = np.empty(STACK_SIZE * 2, dtype=np.int64)
-    stack_end = np.empty(STACK_SIZE * 2, dtype=np.int64)
-    stack_depth = np.empty(STACK_SIZE * 2, dtype=np.int64)
-    top = 0
-    stack_node[0], stack_start[0], stack_end[0], stack_depth[0] = 0, 0, n, 0
-    top = 1
-    used = 1
-    max_depth = 0
-    keys = np.empty(n)
-    while top > 0:
-        top -= 1
-        node = stack_node[top]
-        start = stack_start[top]
-        end = stack_end[top]
-        depth = stack_depth[top]
-        if depth > max_depth:
-            max_depth = depth
-        # bounds of the primitives and of their centroids
-        c_lo = np.full(3, np.inf)
-        c_hi = np.full(3, -np.inf)
-        for a in range(3):
-            lower[node, a] = np.inf
-            upper[node, a] = -np.inf
-        for i in range(start, end):
-            p = order[i]
+        lower, upper, child_or_first, count, order, max_depth = build(
+            prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth)
+    """
+    SAH = sah
+
+    @njit(cache=True)
+    def build(prim_lower, prim_upper, centroid, max_leaf_size, mean_split_depth):
+        n = prim_lower.shape[0]
+        max_nodes = max(2 * n - 1, 1)
+        # every node used gets all four written; np.empty leaves the pages of the rest untouched
+        lower = np.empty((max_nodes, 3), dtype=prim_lower.dtype)
+        upper = np.empty((max_nodes, 3), dtype=prim_upper.dtype)
+        child_or_first = np.empty(max_nodes, dtype=np.int64)
+        count = np.empty(max_nodes, dtype=np.int64)
+        order = np.arange(n)
+        if n == 0:
+            return lower[:0], upper[:0], child_or_first[:0], count[:0], order, 0
+
+        # explicit stack of (node, start, end, depth)
+        stack_node = np.empty(STACK_SIZE * 2, dtype=np.int64)
+        stack_start = np.empty(STACK_SIZE * 2, dtype=np.int64)
+        stack_end = np.empty(STACK_SIZE * 2, dtype=np.int64)
+        stack_depth = np.empty(STACK_SIZE * 2, dtype=np.int64)
+        top = 0
+        stack_node[0], stack_start[0], stack_end[0], stack_depth[0] = 0, 0, n, 0
+        top = 1
+        used = 1
+        max_depth = 0
+        keys = np.empty(n)
+        while top > 0:
+            top -= 1
+            node = stack_node[top]
+            start = stack_start[top]
+            end = stack_end[top]
+            depth = stack_depth[top]
+            if depth > max_depth:
+                max_depth = depth
+            # bounds of the primitives and of their centroids
+            c_lo = np.full(3, np.inf)
+            c_hi = np.full(3, -np.inf)
             for a in range(3):
-                if prim_lower[p, a] < lower[node, a]:
-                    lower[node, a] = prim_lower[p, a]
-                if prim_upper[p, a] > upper[node, a]:
-                    upper[node, a] = prim_upper[p, a]
-                if centroid[p, a] < c_lo[a]:
-                    c_lo[a] = centroid[p, a]
-                if centroid[p, a] > c_hi[a]:
-                    c_hi[a] = centroid[p, a]
-        size = end - start
-        if size <= max_leaf_size:
-            child_or_first[node] = start
-            count[node] = size
-            continue
-        axis = 0
-        for a in range(1, 3):
-            if c_hi[a] - c_lo[a] >= c_hi[axis] - c_lo[axis]:   # ties go to the later axis
-                axis = a
-        mid = start
-        if use_sah and depth < mean_split_depth:
-            mid = _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo, c_hi)
-        elif depth < mean_split_depth and c_hi[axis] > c_lo[axis]:
-            mean = 0.0
+                lower[node, a] = np.inf
+                upper[node, a] = -np.inf
             for i in range(start, end):
-                mean += centroid[order[i], axis]
-            mean /= size
-            # partition: centroid < mean to the left
-            left = start
-            right = end - 1
-            while left <= right:
-                if centroid[order[left], axis] < mean:
-                    left += 1
-                else:
-                    order[left], order[right] = order[right], order[left]
-                    right -= 1
-            mid = left
-        if mid == start or mid == end:
-            # count split: the lower half along the axis goes left (stable in primitive id)
-            for i in range(start, end):
-                keys[i] = centroid[order[i], axis]
-            perm = np.argsort(keys[start:end], kind="mergesort")
-            segment = order[start:end].copy()
-            for i in range(size):
-                order[start + i] = segment[perm[i]]
-            mid = start + size // 2
-        left_child = used
-        used += 2
-        child_or_first[node] = left_child
-        count[node] = 0
-        # push right then left so the left subtree is built first
-        stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
-            left_child + 1, mid, end, depth + 1
-        top += 1
-        stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
-            left_child, start, mid, depth + 1
-        top += 1
-    return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
+                p = order[i]
+                for a in range(3):
+                    if prim_lower[p, a] < lower[node, a]:
+                        lower[node, a] = prim_lower[p, a]
+                    if prim_upper[p, a] > upper[node, a]:
+                        upper[node, a] = prim_upper[p, a]
+                    if centroid[p, a] < c_lo[a]:
+                        c_lo[a] = centroid[p, a]
+                    if centroid[p, a] > c_hi[a]:
+                        c_hi[a] = centroid[p, a]
+            size = end - start
+            if size <= max_leaf_size:
+                child_or_first[node] = start
+                count[node] = size
+                continue
+            axis = 0
+            for a in range(1, 3):
+                if c_hi[a] - c_lo[a] >= c_hi[axis] - c_lo[axis]:   # ties go to the later axis
+                    axis = a
+            mid = start
+            if SAH:
+                if depth < mean_split_depth:
+                    mid = _sah_partition(prim_lower, prim_upper, centroid, order, start, end, c_lo,
+                                         c_hi)
+            elif depth < mean_split_depth and c_hi[axis] > c_lo[axis]:
+                mean = 0.0
+                for i in range(start, end):
+                    mean += centroid[order[i], axis]
+                mean /= size
+                # partition: centroid < mean to the left
+                left = start
+                right = end - 1
+                while left <= right:
+                    if centroid[order[left], axis] < mean:
+                        left += 1
+                    else:
+                        order[left], order[right] = order[right], order[left]
+                        right -= 1
+                mid = left
+            if mid == start or mid == end:
+                # count split: the lower half along the axis goes left (stable in primitive id)
+                for i in range(start, end):
+                    keys[i] = centroid[order[i], axis]
+                perm = np.argsort(keys[start:end], kind="mergesort")
+                segment = order[start:end].copy()
+                for i in range(size):
+                    order[start + i] = segment[perm[i]]
+                mid = start + size // 2
+            left_child = used
+            used += 2
+            child_or_first[node] = left_child
+            count[node] = 0
+            # push right then left so the left subtree is built first
+            stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
+                left_child + 1, mid, end, depth + 1
+            top += 1
+            stack_node[top], stack_start[top], stack_end[top], stack_depth[top] = \
+                left_child, start, mid, depth + 1
+            top += 1
+        return lower[:used], upper[:used], child_or_first[:used], count[:used], order, max_depth
+    return build
+
+
+# the build of each split (SPLITS)
+BUILDS = {"mean": _make_build(False), "sah": _make_build(True)}
 
 
 @njit(cache=True)
 def _primitive_boxes(vertices, faces, centers, radii, pad):
-    """(lower, upper, centroid) of every primitive for _build, in one pass without temporaries:
+    """(lower, upper, centroid) of every primitive for the build, in one pass without temporaries:
     the box of its corners (a sphere's centre -+ radius) widened by `pad`, rounded outward to
     float32, and the float64 centroid of the box before widening (as accel.Geometry's
     primitive_bounds computes them)."""

@@ -360,7 +360,8 @@ def test_a_small_scene_is_built_as_python_into_the_compiled_build_s_tree(split, 
             monkeypatch.setattr(accel.interpreted, "SMALL", limit)
             interpreted = limit >= geometry.primitive_count
             bvh = accel.build("bvh", geometry, split=split)
-            assert (bvh._run(bvh_module._build) is bvh_module._build) is not interpreted
+            build = bvh_module.BUILDS[split]
+            assert (bvh._run(build) is build) is not interpreted
             built[interpreted] = bvh
         python, compiled = built[True], built[False]
         assert python.max_depth == compiled.max_depth

@@ -203,7 +203,7 @@ def _cache_without_the_render_kernel(cache_dir):
     import ptrace.kernel.trace
     for module, dispatcher in ((ptrace.integrator, ptrace.integrator.surface),
                                (ptrace.kernel.trace, ptrace.kernel.trace.closest_stage),
-                               (accel.bvh, accel.bvh._build)):
+                               (accel.bvh, accel.bvh._primitive_boxes)):
         source = dispatcher._cache._cache_path
         target = cache_dir / UserProvidedCacheLocator.get_suitable_cache_subpath(module.__file__)
         target.mkdir(parents=True, exist_ok=True)
