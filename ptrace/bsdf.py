@@ -292,26 +292,6 @@ def _refracted(ior_m, wox, woy, woz):
     return cos_o, sin2_t, cos_t, -eta_ratio * wox, -eta_ratio * woy, tz, eta_ratio * eta_ratio
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def glass_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy,
-                 woz, u1, u2, u3):
-    """Reflection with Schlick's Fresnel R, else refraction (the course's glass)."""
-    if woz == 0.0:
-        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
-    cos_o, sin2_t, cos_t, tx, ty, tz, radiance_scale = _refracted(ior[m], wox, woy, woz)
-    if sin2_t >= 1.0:   # total internal reflection
-        return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
-    r0 = (1.0 - ior[m]) / (1.0 + ior[m])
-    r0 = r0 * r0
-    reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
-    if u3 < reflect:
-        s = reflect / cos_o
-        return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
-    s = (1.0 - reflect) * radiance_scale / cos_t
-    return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
-        transmittance[m, 2] * s, 1.0 - reflect
-
-
 @njit(cache=True, _nrt=False, inline="always")
 def dielectric_reflectance(cos_i, cos_t, eta_it):
     """The unpolarised Fresnel reflectance of a smooth dielectric boundary, from the cosines of
@@ -322,24 +302,43 @@ def dielectric_reflectance(cos_i, cos_t, eta_it):
     return 0.5 * (a_s * a_s + a_p * a_p)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def dielectric_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
-                      wox, woy, woz, u1, u2, u3):
-    """glass_sample with the exact Fresnel reflectance (dielectric_reflectance) in place of
-    Schlick's: Mitsuba's smooth dielectric. The glass kernel of a scene whose glass is EXACT
-    (ptrace.scene) calls it."""
+@njit(cache=True, _nrt=False, inline="always")
+def _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, exact):
+    """Reflection with probability R (the exact Fresnel reflectance if `exact`, else Schlick's),
+    else refraction: glass_sample's and dielectric_sample's values."""
     if woz == 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
     cos_o, sin2_t, cos_t, tx, ty, tz, radiance_scale = _refracted(ior[m], wox, woy, woz)
     if sin2_t >= 1.0:   # total internal reflection
         return -wox, -woy, woz, ar / cos_o, ag / cos_o, ab / cos_o, 1.0
-    reflect = dielectric_reflectance(cos_o, cos_t, ior[m] if woz > 0.0 else 1.0 / ior[m])
+    if exact:
+        reflect = dielectric_reflectance(cos_o, cos_t, ior[m] if woz > 0.0 else 1.0 / ior[m])
+    else:
+        r0 = (1.0 - ior[m]) / (1.0 + ior[m])
+        r0 = r0 * r0
+        reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
     if u3 < reflect:
         s = reflect / cos_o
         return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
     s = (1.0 - reflect) * radiance_scale / cos_t
     return tx, ty, tz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
         transmittance[m, 2] * s, 1.0 - reflect
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def glass_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy,
+                 woz, u1, u2, u3):
+    """Reflection with Schlick's Fresnel R, else refraction (the course's glass)."""
+    return _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, False)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def dielectric_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
+                      wox, woy, woz, u1, u2, u3):
+    """glass_sample with the exact Fresnel reflectance (dielectric_reflectance) in place of
+    Schlick's: Mitsuba's smooth dielectric. The glass kernel of a scene whose glass is EXACT
+    (ptrace.scene) calls it."""
+    return _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, True)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

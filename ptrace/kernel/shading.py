@@ -102,17 +102,14 @@ def _light_samplers(ANGULAR):
     sample_light_angular; without it glTF's, sample_light. Only one is typed into each."""
 
     @njit(cache=True, _nrt=False, forceinline=True)
-    def any_light(shapes, materials, lights, options, pixel, sample, index, base, light, j,
-                  px, py, pz):
-        """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from
-        p, the j-th light sample of the vertex: (radiance, unit direction, distance (inf at
-        infinity), pdf), with the light sampler `all`'s keys."""
+    def of_its_kind(shapes, materials, lights, options, pixel, sample, index, light, key, dim,
+                    px, py, pz, u1, u2):
+        """Light `light` (not a primitive the light BVH chose) sampled from p with (u1, u2),
+        by its kind: emissive geometry (its primitive chosen by the sampler's number (key,
+        dim): sample_1d's), the environment, or a lamp."""
         light_kind = lights.kind[light]
-        u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
-                           base + DIM_LIGHT + 2 * j)
         if light_kind == EMITTER:
-            u0 = sample_1d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light + 1,
-                           base + DIM_SELECT + j)
+            u0 = sample_1d(options, pixel, sample, index, key, dim)
             return sample_emitter(shapes, materials, lights.emitter_prims,
                                   lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
         if light_kind == ENVIRONMENT:
@@ -124,6 +121,17 @@ def _light_samplers(ANGULAR):
             return sample_light_angular(lights, light, px, py, pz, u1, u2)
         return sample_light(lights, light, px, py, pz, u1, u2)
 
+    @njit(cache=True, _nrt=False, forceinline=True)
+    def any_light(shapes, materials, lights, options, pixel, sample, index, base, light, j,
+                  px, py, pz):
+        """Sample `index` of light `light` (any kind, of ptrace.integrator's LightArrays) from
+        p, the j-th light sample of the vertex: (radiance, unit direction, distance (inf at
+        infinity), pdf), with the light sampler `all`'s keys."""
+        u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT + 2 * light,
+                           base + DIM_LIGHT + 2 * j)
+        return of_its_kind(shapes, materials, lights, options, pixel, sample, index, light,
+                           base + DIM_LIGHT + 2 * light + 1, base + DIM_SELECT + j, px, py, pz,
+                           u1, u2)
 
     @njit(cache=True, _nrt=False, forceinline=True)
     def chosen_light(shapes, materials, lights, options, pixel, sample, index, base, light,
@@ -133,22 +141,11 @@ def _light_samplers(ANGULAR):
         direction, distance, pdf), with those samplers' keys."""
         u1, u2 = sample_2d(options, pixel, sample, index, base + DIM_LIGHT,
                            base + DIM_LIGHT + 4 * outer)
-        light_kind = lights.kind[light]
         if prim >= 0:     # (bvh) one emissive primitive, chosen by the tree
             return sample_primitive(shapes, materials, prim, px, py, pz, u1, u2)
-        if light_kind == EMITTER:
-            u0 = sample_1d(options, pixel, sample, index,
-                           base + DIM_LIGHT + DIM_CHOOSE_PRIM, base + DIM_LIGHT + 4 * outer + 3)
-            return sample_emitter(shapes, materials, lights.emitter_prims,
-                                  lights.emitter_cdf, lights.prim_pdf, px, py, pz, u0, u1, u2)
-        if light_kind == ENVIRONMENT:
-            wx, wy, wz, pdf = environment_sample(lights.env_marginal, lights.env_conditional,
-                                                 lights.env_table, u1, u2)
-            lr, lg, lb = environment_radiance(lights.env_image, wx, wy, wz)
-            return lr, lg, lb, wx, wy, wz, math.inf, pdf
-        if ANGULAR:
-            return sample_light_angular(lights, light, px, py, pz, u1, u2)
-        return sample_light(lights, light, px, py, pz, u1, u2)
+        return of_its_kind(shapes, materials, lights, options, pixel, sample, index, light,
+                           base + DIM_LIGHT + DIM_CHOOSE_PRIM, base + DIM_LIGHT + 4 * outer + 3,
+                           px, py, pz, u1, u2)
 
     return any_light, chosen_light
 

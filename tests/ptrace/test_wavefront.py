@@ -162,7 +162,9 @@ def test_a_shading_kernel_samples_lights_with_its_scenes_spot_falloff_alone(tmp_
         assert constants(stage)["ANGULAR"] is angular
         samplers = (shading.any_light_angular, shading.chosen_light_angular) if angular else \
             (shading.any_light, shading.chosen_light)
-        assert all(constants(sampler)["ANGULAR"] is angular for sampler in samplers)
+        # both sample a light of its kind through their factory's of_its_kind
+        assert all(constants(constants(sampler)["of_its_kind"])["ANGULAR"] is angular
+                   for sampler in samplers)
     assert constants(lights.sample_light)["ANGULAR"] is False
     assert constants(lights.sample_light_angular)["ANGULAR"] is True
     # each is typed with the other's falloff pruned away
