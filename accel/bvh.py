@@ -42,8 +42,9 @@ from .bvh_wide import (  # noqa: F401 - the rows' names, re-exported as before
 )
 from .kernels import (
     NO_HIT,
-    WATERTIGHT,
+    MollerTrumbore,
     better,
+    by_triangle_test,
     shear_setup,
     sphere_hit,
     spheres_any,
@@ -61,10 +62,19 @@ ROOT, MISS = np.int64(0), np.int64(NO_HIT)
 BINARY_FIELDS = ("lower", "upper", "child_or_first", "count", "order")
 
 
-# blocks: the leaves' triangles as float64 coordinates, or (0, BLOCK_COLUMNS) where blocks32 holds
-# them as float32 (every coordinate a float32 value: _fill_rows); one record type either way
-BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "blocks32", "prims", "n_tri",
-                                     "centers", "radii", "triangle"])
+# blocks: the leaves' triangles, float32 where every coordinate is a float32 value (_fill_rows),
+# else float64; the record of the watertight test, and of Möller–Trumbore
+# (accel.kernels.MollerTrumbore). The blocks' dtype and the class are the record's numba type:
+# a traversal compiles for the one leaf test its record has.
+BVHRecord = namedtuple("BVHRecord", ["nodes", "payloads", "blocks", "prims", "n_tri", "centers",
+                                     "radii"])
+
+
+class BVHRecordMT(BVHRecord, MollerTrumbore):
+    __slots__ = ()
+
+
+RECORDS = (BVHRecord, BVHRecordMT)   # by accel.kernels.triangle_test
 
 
 @njit(cache=True)
@@ -74,21 +84,17 @@ def new_scratch(record):
 
 
 @njit(cache=True, inline="always")
-def _block_test(record, block, shear, ray, lo, hi):
-    """The record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes, from
-    its float32 blocks where it has them (the same float64 values), else its float64 ones."""
-    if record.blocks32.shape[0] != 0:
-        if record.triangle == WATERTIGHT:
-            return watertight_block(record.blocks32, block, shear, lo, hi)
-        return moller_trumbore_block(record.blocks32, block, ray, lo, hi)
-    if record.triangle == WATERTIGHT:
-        return watertight_block(record.blocks, block, shear, lo, hi)
-    return moller_trumbore_block(record.blocks, block, ray, lo, hi)
+def _watertight_block(record, block, shear, ray, lo, hi):
+    return watertight_block(record.blocks, block, shear, lo, hi)
 
 
 @njit(cache=True, inline="always")
-def _block_count(record):
-    return record.blocks.shape[0] + record.blocks32.shape[0]   # one of them is empty
+def _moller_trumbore_block(record, block, shear, ray, lo, hi):
+    return moller_trumbore_block(record.blocks, block, ray, lo, hi)
+
+
+# the record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes
+_block_test = by_triangle_test(_watertight_block, _moller_trumbore_block)
 
 
 @njit(cache=True, inline="always")
@@ -162,7 +168,7 @@ def _every_closest(record, shear, ray, lo, hi):
     """The closest hit by testing every primitive, for a ray with a direction component float32
     cannot invert (_ray_planes): (t, prim, u, v, 0, tests)."""
     best_t, best_prim, best_u, best_v = _blocks_closest(
-        record, ROOT, _block_count(record), shear, ray, lo, hi, MISS, 0.0, 0.0)
+        record, ROOT, record.blocks.shape[0], shear, ray, lo, hi, MISS, 0.0, 0.0)
     ox, oy, oz, dx, dy, dz = ray
     best_t, best_prim, best_u, best_v = spheres_closest(
         record.centers, record.radii, record.n_tri, ox, oy, oz, dx, dy, dz, lo, best_t,
@@ -259,7 +265,7 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
     if wild:   # a direction float32 cannot invert: every primitive
-        return (_blocks_any(record, ROOT, _block_count(record), shear, ray, lo, hi)
+        return (_blocks_any(record, ROOT, record.blocks.shape[0], shear, ray, lo, hi)
                 or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
     top = 0
     payload = ROOT
@@ -279,7 +285,8 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return False
 
 
-compiled.register(BVHRecord, new_scratch, closest_hit, any_hit)
+for _record in RECORDS:
+    compiled.register(_record, new_scratch, closest_hit, any_hit)
 
 
 @njit(cache=True, parallel=True)
@@ -303,7 +310,7 @@ class BVHAccelerator(compiled.CompiledFace):
     record_class = BVHRecord
 
     def __init__(self, geometry, max_leaf_size=4, split="mean", triangle="watertight"):
-        test = triangle_test(triangle)
+        record = RECORDS[triangle_test(triangle)]
         if split not in SPLITS:
             raise ValueError(f"unknown BVH split {split!r}; choose one of {', '.join(SPLITS)}")
         max_leaf_size = int(max_leaf_size)
@@ -334,8 +341,8 @@ class BVHAccelerator(compiled.CompiledFace):
         # keeps that within WIDE_STACK.
         if self.max_depth >= STACK_SIZE - 1:   # not an assert: it must hold under python -O
             raise RuntimeError("BVH deeper than the traversal stack")
-        self.compiled = BVHRecord(self._nodes, payloads, blocks, blocks32, self._prims,
-                                  geometry.triangle_count, geometry.centers, geometry.radii, test)
+        self.compiled = record(self._nodes, payloads, self._blocks, self._prims,
+                               geometry.triangle_count, geometry.centers, geometry.radii)
 
     def _binary_tree(self):
         """(lower, upper, child_or_first, count, order, max_depth) of the binary tree that the

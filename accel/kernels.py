@@ -6,8 +6,11 @@ A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course).
 hits at exactly the same t the lower primitive id wins, so the answer does not depend on the
 order primitives are visited in.
 """
+import inspect
+
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 NO_HIT = -1
 # A primitive test returns NaN for "no hit": every comparison with NaN is false, so a miss can
@@ -15,12 +18,49 @@ NO_HIT = -1
 MISS = np.nan
 
 
-# The triangle tests (accel.build(kind, geometry, triangle=...) for naive and bvh). A record
-# carries the chosen test as an int, so one compiled traversal serves both (the branch goes the
-# same way for every triangle of a render, which a branch predictor does not pay for).
+# The triangle tests (accel.build(kind, geometry, triangle=...) for naive and bvh). A backend
+# has one record class per test: the watertight test's, and a subclass of it that also derives
+# from MollerTrumbore. The class is part of the record's numba type, so a traversal compiled for
+# a record compiles the one test its class names (uses_moller_trumbore, in the backends'
+# overloads) and never the other.
 TRIANGLE_TESTS = ("watertight", "moller-trumbore")
 WATERTIGHT = 0
 MOLLER_TRUMBORE = 1
+
+
+class MollerTrumbore:
+    """A backend record class that also derives from this one has its triangles tested by
+    Möller–Trumbore; one that does not, by the watertight test."""
+    __slots__ = ()
+
+
+def uses_moller_trumbore(record):
+    """True if `record` (a record, or a record's numba type while a kernel compiles) has its
+    triangles tested by Möller–Trumbore."""
+    cls = getattr(record, "instance_class", type(record))
+    return isinstance(cls, type) and issubclass(cls, MollerTrumbore)
+
+
+def _python(function):
+    return getattr(function, "py_func", function)   # (a function under NUMBA_DISABLE_JIT)
+
+
+def by_triangle_test(watertight_fn, moller_trumbore_fn):
+    """A function of (record, ...) that runs watertight_fn or moller_trumbore_fn (numba
+    functions of the same parameters) as the record's class says. In numba code it is an
+    overload that picks one of them by the record's type, so only that one compiles."""
+    def of_its_record(record, *args):
+        if uses_moller_trumbore(record):
+            return moller_trumbore_fn(record, *args)
+        return watertight_fn(record, *args)
+
+    def choose(record, *args):
+        return _python(moller_trumbore_fn if uses_moller_trumbore(record) else watertight_fn)
+
+    # numba matches an overload's parameters with its implementation's, by name
+    of_its_record.__signature__ = choose.__signature__ = inspect.signature(_python(watertight_fn))
+    overload(of_its_record, inline="always", jit_options={"cache": True})(choose)
+    return of_its_record
 
 
 def triangle_test(name):
@@ -131,19 +171,26 @@ def watertight(ax, ay, az, bx, by, bz, cx, cy, cz, sx, sy, sz):
 
 
 @njit(cache=True, inline="always")
-def mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear):
-    """The chosen test on triangle `tri` of a mesh (shear is shear_setup() of the ray). The BVH
-    runs the same arithmetic four triangles at a time on its copy of the coordinates
+def mesh_watertight(vertices, faces, tri, shear):
+    """The watertight test on triangle `tri` of a mesh (shear is shear_setup() of the ray). The
+    BVH runs the same arithmetic four triangles at a time on its copy of the coordinates
     (accel.simd's block tests), so every backend computes bit-identical t, u, v."""
     i0 = faces[tri, 0]
     i1 = faces[tri, 1]
     i2 = faces[tri, 2]
-    if test == WATERTIGHT:
-        kx, ky, kz, px, py, pz, sx, sy, sz = shear
-        return watertight(vertices[i0, kx] - px, vertices[i0, ky] - py, vertices[i0, kz] - pz,
-                          vertices[i1, kx] - px, vertices[i1, ky] - py, vertices[i1, kz] - pz,
-                          vertices[i2, kx] - px, vertices[i2, ky] - py, vertices[i2, kz] - pz,
-                          sx, sy, sz)
+    kx, ky, kz, px, py, pz, sx, sy, sz = shear
+    return watertight(vertices[i0, kx] - px, vertices[i0, ky] - py, vertices[i0, kz] - pz,
+                      vertices[i1, kx] - px, vertices[i1, ky] - py, vertices[i1, kz] - pz,
+                      vertices[i2, kx] - px, vertices[i2, ky] - py, vertices[i2, kz] - pz,
+                      sx, sy, sz)
+
+
+@njit(cache=True, inline="always")
+def mesh_moller_trumbore(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
+    """Möller–Trumbore on triangle `tri` of a mesh, as mesh_watertight."""
+    i0 = faces[tri, 0]
+    i1 = faces[tri, 1]
+    i2 = faces[tri, 2]
     return moller_trumbore(vertices[i0, 0], vertices[i0, 1], vertices[i0, 2],
                            vertices[i1, 0], vertices[i1, 1], vertices[i1, 2],
                            vertices[i2, 0], vertices[i2, 1], vertices[i2, 2],
@@ -153,9 +200,8 @@ def mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear)
 @njit(cache=True, inline="always")
 def triangle_hit(vertices, faces, tri, ox, oy, oz, dx, dy, dz):
     """The default (watertight) test of the ray against triangle `tri`, for a single query (a
-    traversal calls shear_setup once per ray and mesh_triangle_hit per triangle instead)."""
-    return mesh_triangle_hit(vertices, faces, tri, WATERTIGHT, ox, oy, oz, dx, dy, dz,
-                             shear_setup(ox, oy, oz, dx, dy, dz))
+    traversal calls shear_setup once per ray and mesh_watertight per triangle instead)."""
+    return mesh_watertight(vertices, faces, tri, shear_setup(ox, oy, oz, dx, dy, dz))
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

@@ -12,15 +12,40 @@ from numba import njit
 from . import compiled
 from .kernels import (
     NO_HIT,
+    MollerTrumbore,
     better,
-    mesh_triangle_hit,
+    by_triangle_test,
+    mesh_moller_trumbore,
+    mesh_watertight,
     shear_setup,
     spheres_any,
     spheres_closest,
     triangle_test,
 )
 
-NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii", "triangle"])
+# the record of the watertight test, and of Möller–Trumbore (accel.kernels.MollerTrumbore)
+NaiveRecord = namedtuple("NaiveRecord", ["vertices", "faces", "centers", "radii"])
+
+
+class NaiveRecordMT(NaiveRecord, MollerTrumbore):
+    __slots__ = ()
+
+
+RECORDS = (NaiveRecord, NaiveRecordMT)   # by accel.kernels.triangle_test
+
+
+@njit(cache=True, inline="always")
+def _watertight(record, tri, shear, ox, oy, oz, dx, dy, dz):
+    return mesh_watertight(record.vertices, record.faces, tri, shear)
+
+
+@njit(cache=True, inline="always")
+def _moller_trumbore(record, tri, shear, ox, oy, oz, dx, dy, dz):
+    return mesh_moller_trumbore(record.vertices, record.faces, tri, ox, oy, oz, dx, dy, dz)
+
+
+# the record's triangle test on its triangle `tri`: (t, u, v)
+_triangle = by_triangle_test(_watertight, _moller_trumbore)
 
 
 @njit(cache=True)
@@ -30,15 +55,14 @@ def new_scratch(record):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    vertices, faces, test = record.vertices, record.faces, record.triangle
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
-    n_tri = faces.shape[0]
+    n_tri = record.faces.shape[0]
     best_t = tmax
     best_prim = NO_HIT
     best_u = 0.0
     best_v = 0.0
     for tri in range(n_tri):
-        t, u, v = mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear)
+        t, u, v = _triangle(record, tri, shear, ox, oy, oz, dx, dy, dz)
         if t >= tmin and t <= best_t and better(t, tri, best_t, best_prim):
             best_t, best_prim, best_u, best_v = t, tri, u, v
     best_t, best_prim, best_u, best_v = spheres_closest(
@@ -51,16 +75,16 @@ def closest_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    vertices, faces, test = record.vertices, record.faces, record.triangle
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
-    for tri in range(faces.shape[0]):
-        t, u, v = mesh_triangle_hit(vertices, faces, tri, test, ox, oy, oz, dx, dy, dz, shear)
+    for tri in range(record.faces.shape[0]):
+        t, u, v = _triangle(record, tri, shear, ox, oy, oz, dx, dy, dz)
         if t >= tmin and t <= tmax:
             return True
     return spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
-compiled.register(NaiveRecord, new_scratch, closest_hit, any_hit)
+for _record in RECORDS:
+    compiled.register(_record, new_scratch, closest_hit, any_hit)
 
 
 class NaiveAccelerator(compiled.CompiledFace):
@@ -71,8 +95,8 @@ class NaiveAccelerator(compiled.CompiledFace):
         start = time.perf_counter()
         self.geometry = geometry
         self.triangle = triangle
-        self.compiled = NaiveRecord(geometry.vertices, geometry.faces, geometry.centers,
-                                    geometry.radii, triangle_test(triangle))
+        record = RECORDS[triangle_test(triangle)]
+        self.compiled = record(geometry.vertices, geometry.faces, geometry.centers, geometry.radii)
         self._build_seconds = time.perf_counter() - start
 
     def stats(self):
