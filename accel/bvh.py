@@ -47,8 +47,6 @@ from .kernels import (
     by_triangle_test,
     shear_setup,
     sphere_hit,
-    spheres_any,
-    spheres_closest,
     triangle_test,
 )
 from .simd import BLOCK, make_slab_test, moller_trumbore_block, watertight_block
@@ -163,19 +161,15 @@ def _leaf_any(record, payload, shear, ray, lo, hi):
     return False
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
-def _every_closest(record, shear, ray, lo, hi):
-    """The closest hit by testing every primitive, for a ray with a direction component float32
-    cannot invert (_ray_planes): (t, prim, u, v, 0, tests)."""
-    best_t, best_prim, best_u, best_v = _blocks_closest(
-        record, ROOT, record.blocks.shape[0], shear, ray, lo, hi, MISS, 0.0, 0.0)
-    ox, oy, oz, dx, dy, dz = ray
-    best_t, best_prim, best_u, best_v = spheres_closest(
-        record.centers, record.radii, record.n_tri, ox, oy, oz, dx, dy, dz, lo, best_t,
-        best_prim, best_u, best_v)
-    if best_prim == NO_HIT:
-        best_t = np.inf
-    return best_t, best_prim, best_u, best_v, 0, record.n_tri + record.centers.shape[0]
+@njit(cache=True, inline="always")
+def _every_child(payloads, row):
+    """The mask of a wide node's children (an unused slot's link is 0, the root's row): the
+    traversal's for a ray with a direction component float32 cannot invert (_ray_planes), which
+    visits every node and leaf instead of slab testing them."""
+    mask = 0
+    for c in range(WIDTH):
+        mask |= (payloads[uint64(row), uint64(PAYLOAD + c)] != 0) << c
+    return mask
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -193,8 +187,6 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
     planes, slab_ray, lo32, hi32, shift, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
-    if wild:
-        return _every_closest(record, shear, ray, lo, hi)
     best_t = hi
     best_prim = MISS
     best_u = 0.0
@@ -209,6 +201,13 @@ def _closest(record, scratch, ox, oy, oz, dx, dy, dz, lo, hi):
             visits += 1
             row = payload
             mask, ts = slab_test(nodes, row, planes, slab_ray, lo32, hi32)
+            if wild:   # no slab test for this ray: every child, pushed to be entered in turn
+                every = _every_child(payloads, row)
+                for c in range(WIDTH):
+                    stack[uint64(top)] = payloads[uint64(row), uint64(PAYLOAD + c)]
+                    entry[uint64(top)] = -np.inf
+                    top += (every >> c) & 1
+                mask = 0
             if mask != 0 and mask & (mask - 1) == 0:   # one child hit: enter it, push nothing
                 payload = payloads[uint64(row), uint64(PAYLOAD + trailing_zeros(mask))]
                 continue
@@ -264,15 +263,14 @@ def any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     planes, slab_ray, lo32, hi32, _, wild = _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi)
     shear = shear_setup(ox, oy, oz, dx, dy, dz)
     ray = (ox, oy, oz, dx, dy, dz)
-    if wild:   # a direction float32 cannot invert: every primitive
-        return (_blocks_any(record, ROOT, record.blocks.shape[0], shear, ray, lo, hi)
-                or spheres_any(record.centers, record.radii, ox, oy, oz, dx, dy, dz, lo, hi))
     top = 0
     payload = ROOT
     while nodes.shape[0] > 0:
         if payload >> 32 == 0:
             row = payload
             mask = slab_test(nodes, row, planes, slab_ray, lo32, hi32)[0]
+            if wild:   # no slab test for this ray: every child
+                mask = _every_child(payloads, row)
             for c in range(WIDTH):
                 stack[uint64(top)] = payloads[uint64(row), uint64(PAYLOAD + c)]
                 top += (mask >> c) & 1

@@ -55,7 +55,7 @@ def _ray_planes(ox, oy, oz, dx, dy, dz, lo, hi):
     counted from (0, or lo if lo < 0: the slab test's origin is then o + lo d, so that only t's
     >= 0 matter to it); and whether float32
     cannot invert one of the direction's components (0 < |d| < 2^-100 or |d| > 2^100, which no
-    renderer makes: the ray is then answered by testing every primitive).
+    renderer makes: the traversal then visits every node and leaf, bvh._every_child).
 
     Why the slab test never misses a box the ray meets within [lo, hi] (tests/accel/test_simd.py
     checks it against exact arithmetic): with lo32 <= the slab's lo (0 or lo) and hi32 >= its hi,
