@@ -44,7 +44,6 @@ from .kernels import (
     NO_HIT,
     MollerTrumbore,
     better,
-    by_triangle_test,
     shear_setup,
     sphere_hit,
     triangle_test,
@@ -92,7 +91,7 @@ def _moller_trumbore_block(record, block, shear, ray, lo, hi):
 
 
 # the record's triangle test on one block: (mask, t's, u's, v's) of its BLOCK lanes
-_block_test = by_triangle_test(_watertight_block, _moller_trumbore_block)
+_block_test = compiled.by_class(MollerTrumbore, _moller_trumbore_block, _watertight_block)
 
 
 @njit(cache=True, inline="always")

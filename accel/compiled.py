@@ -96,6 +96,36 @@ def _any_hit(record, scratch, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return _ray_query(record, 2)
 
 
+# -- a variant chosen by a record's class, where a kernel compiles
+
+def derives(value, cls):
+    """True if `value` (a value, or a namedtuple's numba type while a kernel compiles) is of a
+    class that derives from `cls`."""
+    own = getattr(value, "instance_class", type(value))
+    return isinstance(own, type) and issubclass(own, cls)
+
+
+def _python(function):
+    return getattr(function, "py_func", function)   # (a function under NUMBA_DISABLE_JIT)
+
+
+def by_class(cls, its_fn, other_fn):
+    """A function of (first, ...) that runs its_fn where `first` derives from `cls`, other_fn
+    otherwise (numba functions of the same parameters). In numba code it is an overload that
+    picks one of them by the first argument's type, so only that one compiles: a namedtuple
+    class per variant makes the variant a compile-time choice."""
+    def by_its_class(first, *args):
+        return (its_fn if derives(first, cls) else other_fn)(first, *args)
+
+    def choose(first, *args):
+        return _python(its_fn if derives(first, cls) else other_fn)
+
+    # numba matches an overload's parameters with its implementation's, by name
+    by_its_class.__signature__ = choose.__signature__ = inspect.signature(_python(other_fn))
+    overload(by_its_class, inline="always", jit_options={"cache": True})(choose)
+    return by_its_class
+
+
 # -- the batch face on top of the compiled one (for backends without a batch kernel of their own)
 
 @njit(cache=True, parallel=True)

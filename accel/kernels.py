@@ -6,11 +6,8 @@ A hit is accepted when tmin <= t <= tmax (both ends inclusive, like the course).
 hits at exactly the same t the lower primitive id wins, so the answer does not depend on the
 order primitives are visited in.
 """
-import inspect
-
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
 NO_HIT = -1
 # A primitive test returns NaN for "no hit": every comparison with NaN is false, so a miss can
@@ -21,8 +18,7 @@ MISS = np.nan
 # The triangle tests (accel.build(kind, geometry, triangle=...) for naive and bvh). A backend
 # has one record class per test: the watertight test's, and a subclass of it that also derives
 # from MollerTrumbore. The class is part of the record's numba type, so a traversal compiled for
-# a record compiles the one test its class names (uses_moller_trumbore, in the backends'
-# overloads) and never the other.
+# a record compiles the one test its class names (accel.compiled.by_class) and never the other.
 TRIANGLE_TESTS = ("watertight", "moller-trumbore")
 WATERTIGHT = 0
 MOLLER_TRUMBORE = 1
@@ -30,37 +26,8 @@ MOLLER_TRUMBORE = 1
 
 class MollerTrumbore:
     """A backend record class that also derives from this one has its triangles tested by
-    Möller–Trumbore; one that does not, by the watertight test."""
+    Möller–Trumbore; one that does not, by the watertight test (accel.compiled.by_class)."""
     __slots__ = ()
-
-
-def uses_moller_trumbore(record):
-    """True if `record` (a record, or a record's numba type while a kernel compiles) has its
-    triangles tested by Möller–Trumbore."""
-    cls = getattr(record, "instance_class", type(record))
-    return isinstance(cls, type) and issubclass(cls, MollerTrumbore)
-
-
-def _python(function):
-    return getattr(function, "py_func", function)   # (a function under NUMBA_DISABLE_JIT)
-
-
-def by_triangle_test(watertight_fn, moller_trumbore_fn):
-    """A function of (record, ...) that runs watertight_fn or moller_trumbore_fn (numba
-    functions of the same parameters) as the record's class says. In numba code it is an
-    overload that picks one of them by the record's type, so only that one compiles."""
-    def of_its_record(record, *args):
-        if uses_moller_trumbore(record):
-            return moller_trumbore_fn(record, *args)
-        return watertight_fn(record, *args)
-
-    def choose(record, *args):
-        return _python(moller_trumbore_fn if uses_moller_trumbore(record) else watertight_fn)
-
-    # numba matches an overload's parameters with its implementation's, by name
-    of_its_record.__signature__ = choose.__signature__ = inspect.signature(_python(watertight_fn))
-    overload(of_its_record, inline="always", jit_options={"cache": True})(choose)
-    return of_its_record
 
 
 def triangle_test(name):

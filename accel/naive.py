@@ -14,7 +14,6 @@ from .kernels import (
     NO_HIT,
     MollerTrumbore,
     better,
-    by_triangle_test,
     mesh_moller_trumbore,
     mesh_watertight,
     shear_setup,
@@ -45,7 +44,7 @@ def _moller_trumbore(record, tri, shear, ox, oy, oz, dx, dy, dz):
 
 
 # the record's triangle test on its triangle `tri`: (t, u, v)
-_triangle = by_triangle_test(_watertight, _moller_trumbore)
+_triangle = compiled.by_class(MollerTrumbore, _moller_trumbore, _watertight)
 
 
 @njit(cache=True)

@@ -13,7 +13,6 @@ RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, m
 # tests/ptrace/test_per_pixel.py)
 RR_DEPTH = 5
 PATH, NORMALS = 0, 1    # what the path loop computes per sample
-INDEPENDENT, SOBOL = 0, 1   # Options.sampler
 # Options.light_sampler: every light at every vertex (-l samples of each: the course's), or -l
 # samples at a vertex each of one light chosen by power (ptrace.lights.light_selection) or by
 # the light BVH at the vertex (ptrace.light_bvh), or AUTO: every light while a scene has at most
@@ -24,6 +23,13 @@ AUTO_EVERY_LIGHT = 4
 AUTO_MANY = LIGHTS_BVH
 
 # The integrator's options record (ptrace.rendering.settings.Settings.kernel_options builds it).
+# Its class names the sampler: Options the Sobol' sampler, IndependentOptions the independent
+# one. The class is the record's numba type, so a kernel compiles the one sampler a render uses
+# (ptrace.integrator.sample_1d and sample_2d).
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
                                  "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
-                                 "sampler", "light_sampler"], defaults=[LIGHTS_AUTO])
+                                 "light_sampler"], defaults=[LIGHTS_AUTO])
+
+
+class IndependentOptions(Options):
+    __slots__ = ()

@@ -23,11 +23,12 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from accel.compiled import by_class
+
 from .bsdf import conductor_fresnel
 from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
     AUTO_EVERY_LIGHT,
     AUTO_MANY,
-    INDEPENDENT,
     LIGHTS_ALL,
     LIGHTS_AUTO,
     LIGHTS_BVH,
@@ -36,7 +37,7 @@ from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here
     PATH,
     RR_CAP,
     RR_DEPTH,
-    SOBOL,
+    IndependentOptions,
     Options,
 )
 from .environment import (
@@ -269,21 +270,32 @@ def spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz):
 
 
 @njit(cache=True, inline="always")
-def sample_1d(options, pixel, sample, index, key, dim):
-    """One number for (pixel, sample): the Sobol sampler's point `index` of dimension `key`, or
-    the independent sampler's hash of dimension `dim` (its numbers, bit for bit, are those of
-    the releases before the Sobol sampler)."""
-    if options.sampler == SOBOL:
-        return sobol_1d(options.seed, pixel, index, key)
+def _sobol_1d(options, pixel, sample, index, key, dim):
+    return sobol_1d(options.seed, pixel, index, key)
+
+
+@njit(cache=True, inline="always")
+def _independent_1d(options, pixel, sample, index, key, dim):
     return uniform(options.seed, pixel, sample, dim)
 
 
 @njit(cache=True, inline="always")
-def sample_2d(options, pixel, sample, index, key, dim):
-    """Two numbers for (pixel, sample), as sample_1d: a 2D Sobol point, or dims dim and dim + 1."""
-    if options.sampler == SOBOL:
-        return sobol_2d(options.seed, pixel, index, key)
+def _sobol_2d(options, pixel, sample, index, key, dim):
+    return sobol_2d(options.seed, pixel, index, key)
+
+
+@njit(cache=True, inline="always")
+def _independent_2d(options, pixel, sample, index, key, dim):
     return uniform(options.seed, pixel, sample, dim), uniform(options.seed, pixel, sample, dim + 1)
+
+
+# sample_1d(options, pixel, sample, index, key, dim): one number for (pixel, sample), by the
+# sampler the options' class names (ptrace.codes.Options): the Sobol' sampler's point `index`
+# of dimension `key`, or the independent sampler's hash of dimension `dim` (its numbers, bit for
+# bit, are those of the releases before the Sobol' sampler). sample_2d: two numbers, a 2D Sobol'
+# point or the independent dimensions dim and dim + 1. Only the options' sampler compiles.
+sample_1d = by_class(IndependentOptions, _independent_1d, _sobol_1d)
+sample_2d = by_class(IndependentOptions, _independent_2d, _sobol_2d)
 
 
 @njit(cache=True, inline="always")

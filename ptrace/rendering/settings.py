@@ -154,12 +154,13 @@ class Settings:
         return {"split": self.bvh_split} if self.accel == "bvh" else {}
 
     def kernel_options(self):
-        """The integrator's Options record (ptrace.codes.Options)."""
+        """The integrator's Options record (ptrace.codes.Options, or IndependentOptions for the
+        independent sampler)."""
         mode = codes.NORMALS if self.integrator == "normals" else codes.PATH
-        sampler = codes.SOBOL if self.sampler == "sobol" else codes.INDEPENDENT
-        return codes.Options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
-                             self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
-                             self.direct == "mis", sampler, LIGHT_SAMPLER_CODES[self.light_sampler])
+        options = codes.Options if self.sampler == "sobol" else codes.IndependentOptions
+        return options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
+                       self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
+                       self.direct == "mis", LIGHT_SAMPLER_CODES[self.light_sampler])
 
     def rays_per_path(self, scene):
         """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import ptrace
+from ptrace.codes import IndependentOptions, Options
 from ptrace.integrator import scene_records
 from ptrace.lights import EMITTER, emitter_arrays
 from ptrace.scene import DIFFUSE, EMISSION, Lights
@@ -167,8 +168,9 @@ def test_estimator_and_sampler_settings_are_checked():
     with pytest.raises(ptrace.PtraceError, match="roulette depth"):
         ptrace.Settings(rr_depth=0)
     options = ptrace.Settings(direct="light", sampler="independent", rr_depth=5).kernel_options()
-    assert (options.mis, options.sampler, options.rr_depth) == (False, 0, 5)
+    assert (options.mis, type(options), options.rr_depth) == (False, IndependentOptions, 5)
     assert ptrace.Settings().kernel_options().mis
+    assert type(ptrace.Settings().kernel_options()) is Options   # the Sobol' sampler
 
 
 def test_bvh_split_setting():
