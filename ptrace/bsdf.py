@@ -3,7 +3,9 @@
 Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine term;
 pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`) return from
 bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf the discrete
-probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow
+probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. A kind with a delta lobe beside a
+non-delta one (MIXED: PLASTIC, Mitsuba's smooth plastic) returns from a delta lobe's sample the
+negated probability of that lobe; its eval and pdf are its non-delta lobe's. Semantics follow
 docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi), where the course's
 starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF (ptrace.gltf_brdf), the only kind the
 metallic argument matters to.
@@ -13,7 +15,7 @@ import math
 from numba import njit
 
 from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
-from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, REFRACTION
+from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, PLASTIC, REFRACTION
 from .trig import sincos_2pi
 
 SQRT_PI = math.sqrt(math.pi)
@@ -182,7 +184,8 @@ def diffuse_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def diffuse_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                wiz):
     return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
 
 
@@ -193,7 +196,8 @@ def delta_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, 
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def delta_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def delta_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+              wiz):
     return 0.0
 
 
@@ -229,7 +233,8 @@ def microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def microfacet_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                   wiz):
     return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -256,7 +261,8 @@ def glossy_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def glossy_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+               wiz):
     return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -272,7 +278,8 @@ def pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wi
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def pbr_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+            wiz):
     return gltf_pdf(metallic, alpha, ar, ag, ab, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -355,6 +362,91 @@ def refraction_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
         transmittance[m, 2] * s, 1.0
 
 
+# -- plastic: Mitsuba's smooth plastic, a smooth dielectric coat over a diffuse base -------------
+# Material m's eta row holds (eta, fdr_int, specular weight) and k[m, 0] its `nonlinear`
+# (ptrace.scene.Materials; ptrace.io.mitsuba_materials computes them). Light reaching the base
+# passes the coat twice, (1 - F(cos_i)) (1 - F(cos_o)) / eta^2, and the light the coat
+# reflects back down, a fraction fdr_int of what leaves the base, scatters again: the base's
+# albedo d becomes d / (1 - fdr_int), or with `nonlinear` d / (1 - d fdr_int) (the series of
+# bounces between base and coat, each coloured by d). The coat's mirror lobe is delta and
+# is sampled with probability F(cos_o) w / (F(cos_o) w + (1 - F(cos_o))(1 - w)), w the
+# specular weight (the mean specular reflectance over its sum with the mean diffuse one).
+
+@njit(cache=True, _nrt=False, inline="always")
+def fresnel_dielectric(cos_i, eta):
+    """The exact unpolarised reflectance of a smooth boundary met at cos_i > 0 from the side
+    whose index is 1 / eta times the other's; 1 past total internal reflection."""
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0
+    return dielectric_reflectance(cos_i, math.sqrt(1.0 - sin2_t), eta)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _plastic_diffuse_probability(eta, m, fresnel_o):
+    """The probability that plastic m samples its diffuse lobe, Fresnel reflectance fresnel_o
+    at wo."""
+    weight = eta[m, 2]
+    specular = fresnel_o * weight
+    diffuse = (1.0 - fresnel_o) * (1.0 - weight)
+    if not specular + diffuse > 0.0:
+        return 0.5
+    return diffuse / (specular + diffuse)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _plastic_base(d, fdr, nonlinear):
+    """The base's albedo d with the coat's internal reflections (the header above)."""
+    return d / (1.0 - (d * fdr if nonlinear else fdr))
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _plastic_f(ar, ag, ab, eta, k, m, fresnel_o, woz, wiz):
+    """The diffuse lobe's f (the mirror lobe is delta), fresnel_o the coat's reflectance at wo."""
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    e, fdr, nonlinear = eta[m, 0], eta[m, 1], k[m, 0] != 0.0
+    scale = (1.0 - fresnel_o) * (1.0 - fresnel_dielectric(wiz, e)) / (e * e) * INV_PI
+    return (_plastic_base(ar, fdr, nonlinear) * scale, _plastic_base(ag, fdr, nonlinear) * scale,
+            _plastic_base(ab, fdr, nonlinear) * scale)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                   woy, woz, u1, u2, u3):
+    """The coat's mirror reflection with its probability (its pdf negated: a delta lobe of a
+    MIXED kind), else the base's cosine-weighted lobe."""
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fresnel_o = fresnel_dielectric(woz, eta[m, 0])
+    diffuse = _plastic_diffuse_probability(eta, m, fresnel_o)
+    if u3 < 1.0 - diffuse:
+        s = fresnel_o / woz
+        return -wox, -woy, woz, specular[m, 0] * s, specular[m, 1] * s, specular[m, 2] * s, \
+            -(1.0 - diffuse)
+    x, y, z = cosine_hemisphere(u1, u2)
+    if z <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fr, fg, fb = _plastic_f(ar, ag, ab, eta, k, m, fresnel_o, woz, z)
+    return x, y, z, fr, fg, fb, diffuse * z * INV_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    return _plastic_f(ar, ag, ab, eta, k, m, fresnel_dielectric(woz, eta[m, 0]), woz, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0
+    fresnel_o = fresnel_dielectric(woz, eta[m, 0])
+    return _plastic_diffuse_probability(eta, m, fresnel_o) * wiz * INV_PI
+
+
 # each kind's (sample, eval, pdf)
 BSDFS = {
     DIFFUSE: (diffuse_sample, diffuse_eval, diffuse_pdf),
@@ -364,7 +456,11 @@ BSDFS = {
     MICROFACET: (microfacet_sample, microfacet_eval, microfacet_pdf),
     GLOSSY: (glossy_sample, glossy_eval, glossy_pdf),
     GLTF_PBR: (pbr_sample, pbr_eval, pbr_pdf),
+    PLASTIC: (plastic_sample, plastic_eval, plastic_pdf),
 }
+# the kinds with a delta lobe beside a non-delta one: their sample returns a delta lobe's
+# branch probability negated, so that the caller knows the bounce was delta
+MIXED = (PLASTIC,)
 # the glass of a scene whose glass reflects EXACT (ptrace.scene), in place of BSDFS[GLASS]
 EXACT_GLASS = (dielectric_sample, delta_eval, delta_pdf)
 
@@ -389,21 +485,32 @@ def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
     if kind == GLTF_PBR:
         return pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
                         wiy, wiz)
+    if kind == PLASTIC:
+        return plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                            wix, wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+             wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise. The albedo
     and metallic matter only to GLTF_PBR, whose choice of lobe depends on them."""
     if kind == DIFFUSE:
-        return diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return diffuse_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                           wix, wiy, wiz)
     if kind == MICROFACET:
-        return microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return microfacet_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                              wix, wiy, wiz)
     if kind == GLOSSY:
-        return glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return glossy_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                          wix, wiy, wiz)
     if kind == GLTF_PBR:
-        return pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return pbr_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                       wix, wiy, wiz)
+    if kind == PLASTIC:
+        return plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                           wix, wiy, wiz)
     return 0.0
 
 
@@ -428,4 +535,6 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
         return glass_sample(*args)
     if kind == REFRACTION:
         return refraction_sample(*args)
+    if kind == PLASTIC:
+        return plastic_sample(*args)
     return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering

@@ -6,9 +6,9 @@ import numpy as np
 import accel
 
 # BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
-DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR = range(8)
+DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR, PLASTIC = range(9)
 BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy",
-              "gltf_pbr")
+              "gltf_pbr", "plastic")
 
 # Materials.cutoff of a glTF BLEND material (ptrace.cutouts): rays pass with probability 1 - alpha
 BLEND_CUT = -1.0
@@ -40,7 +40,12 @@ class Materials:
     reflectance at normal incidence), alpha; gltf_pbr (glTF's metallic-roughness BRDF,
     ptrace.gltf_brdf, for glTF files): albedo (the base colour), metallic, alpha (roughness^2),
     and emission, which it adds to what it reflects (a gltf_pbr of non-zero emission is an
-    emitter too: emits()).
+    emitter too: emits()); plastic (Mitsuba's smooth plastic, ptrace.plastic: a smooth
+    dielectric coat over a diffuse base): albedo (the base's diffuse_reflectance), specular
+    (the coat's specular_reflectance), ior (the coat's index over the outside's, eta), and in
+    eta the three numbers its functions read without ior: (eta, the coat's diffuse Fresnel
+    reflectance from inside fdr_int, the probability weight of its specular lobe), in k[:, 0]
+    1 for Mitsuba's `nonlinear` (else 0).
 
     albedo_texture, emission_texture and roughness_texture index Scene.textures (-1: none):
     a texture multiplies albedo or emission by its colour at the hit's UV, and a roughness
