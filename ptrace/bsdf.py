@@ -3,9 +3,10 @@
 Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine term;
 pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`) return from
 bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf the discrete
-probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. A kind with a delta lobe beside a
-non-delta one (MIXED: PLASTIC, Mitsuba's smooth plastic) returns from a delta lobe's sample the
-negated probability of that lobe; its eval and pdf are its non-delta lobe's. Semantics follow
+probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. A kind with
+a delta lobe beside a non-delta one (MIXED: PLASTIC, Mitsuba's smooth plastic) returns from a
+delta lobe's sample the negated probability of that lobe; its eval and pdf are its non-delta
+lobe's. Semantics follow
 docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi), where the course's
 starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF (ptrace.gltf_brdf), the only kind the
 metallic argument matters to.
