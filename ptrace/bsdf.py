@@ -16,7 +16,17 @@ import math
 from numba import njit
 
 from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
-from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, PLASTIC, REFRACTION
+from .scene import (
+    DIFFUSE,
+    GLASS,
+    GLOSSY,
+    GLTF_PBR,
+    MICROFACET,
+    MIRROR,
+    PLASTIC,
+    REFRACTION,
+    ROUGH_PLASTIC,
+)
 from .trig import sincos_2pi
 
 SQRT_PI = math.sqrt(math.pi)
@@ -448,6 +458,135 @@ def plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
     return _plastic_diffuse_probability(eta, m, fresnel_o) * wiz * INV_PI
 
 
+# -- roughplastic: Mitsuba's, a microfacet dielectric coat over a diffuse base -----------------
+# As plastic, with the coat rough: its lobe is Beckmann's or GGX's (k[m, 1]: 0 or 1) of alpha,
+# with Smith's separable shadowing (for Beckmann, Walter et al.'s rational G1, as Mitsuba), and
+# the base's light passes it with the coat's transmittance t(cos) from outside (a table of TABLE
+# values in specular[m, 3:], linear in cos; ptrace.io.mitsuba_materials computes it at load
+# time), d / (1 - eta[m, 1] [d]) t(cos_i) t(cos_o) / (pi eta^2). The lobes are chosen with
+# probability (1 - t(cos_o)) w against t(cos_o)(1 - w), the coat's half vectors drawn from
+# D(h) cos theta_h.
+
+TABLE = 64      # the coat's transmittance table: cos theta = j / (TABLE - 1), j = 0 .. TABLE-1
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _table(specular, m, cos):
+    """Material m's coat transmittance at cos, linear between the table's values."""
+    x = min(max(cos, 0.0), 1.0) * (TABLE - 1)
+    j = min(int(x), TABLE - 2)
+    t = x - j
+    return specular[m, 3 + j] * (1.0 - t) + specular[m, 4 + j] * t
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_d(ggx, alpha, cos_h):
+    """Beckmann's (ggx False) or GGX's distribution of normals at cos theta_h."""
+    if cos_h <= 0.0:
+        return 0.0
+    if not ggx:
+        return beckmann_d(alpha, cos_h)
+    cos2 = cos_h * cos_h
+    a2 = alpha * alpha
+    denominator = cos2 * (a2 - 1.0) + 1.0
+    return a2 / (math.pi * denominator * denominator)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_g1(ggx, alpha, vx, vy, vz, hx, hy, hz):
+    """Smith's G1 of direction v and half vector h (0 where v sees h's back): for Beckmann
+    Walter et al.'s (2007) rational approximation, for GGX the exact form."""
+    if (vx * hx + vy * hy + vz * hz) * vz <= 0.0:
+        return 0.0
+    xy2 = alpha * alpha * (vx * vx + vy * vy)
+    if xy2 == 0.0:
+        return 1.0
+    tan2 = xy2 / (vz * vz)
+    if ggx:
+        return 2.0 / (1.0 + math.sqrt(1.0 + tan2))
+    a = 1.0 / math.sqrt(tan2)
+    if a >= 1.6:
+        return 1.0
+    return (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_plastic_diffuse_probability(eta, specular, m, woz):
+    t = _table(specular, m, woz)
+    weight = eta[m, 2]
+    coat = (1.0 - t) * weight
+    base = t * (1.0 - weight)
+    if not coat + base > 0.0:
+        return 0.5
+    return base / (coat + base)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
+        return 0.0, 0.0, 0.0
+    ggx = k[m, 1] != 0.0
+    e = eta[m, 0]
+    coat = _rough_d(ggx, alpha, hz) * _rough_g1(ggx, alpha, wox, woy, woz, hx, hy, hz) * \
+        _rough_g1(ggx, alpha, wix, wiy, wiz, hx, hy, hz) * \
+        fresnel_dielectric(wox * hx + woy * hy + woz * hz, e) / (4.0 * woz * wiz)
+    fdr, nonlinear = eta[m, 1], k[m, 0] != 0.0
+    base = _table(specular, m, woz) * _table(specular, m, wiz) / (e * e) * INV_PI
+    return (coat * specular[m, 0] + _plastic_base(ar, fdr, nonlinear) * base,
+            coat * specular[m, 1] + _plastic_base(ag, fdr, nonlinear) * base,
+            coat * specular[m, 2] + _plastic_base(ab, fdr, nonlinear) * base)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
+        return 0.0
+    diffuse = _rough_plastic_diffuse_probability(eta, specular, m, woz)
+    coat = _rough_d(k[m, 1] != 0.0, alpha, hz) * hz / (4.0 * (wox * hx + woy * hy + woz * hz))
+    return (1.0 - diffuse) * coat + diffuse * wiz * INV_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
+                         wox, woy, woz, u1, u2, u3):
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    if u3 < 1.0 - _rough_plastic_diffuse_probability(eta, specular, m, woz):   # the coat's
+        if k[m, 1] != 0.0:    # GGX: tan^2 theta_h = alpha^2 u1 / (1 - u1)
+            tan2 = alpha * alpha * u1 / max(1.0 - u1, 1e-300)
+            cos_h = 1.0 / math.sqrt(1.0 + tan2)
+            sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
+            c, s = sincos_2pi(u2)
+            hx, hy, hz = sin_h * c, sin_h * s, cos_h
+        else:
+            hx, hy, hz = beckmann_half_vector(alpha, u1, u2)
+        d = wox * hx + woy * hy + woz * hz
+        wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+    else:                 # the base's
+        wix, wiy, wiz = cosine_hemisphere(u1, u2)
+    if wiz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fr, fg, fb = _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix,
+                                  wiy, wiz)
+    return wix, wiy, wiz, fr, fg, fb, _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy,
+                                                         woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                       wiy, wiz):
+    return _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                            wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                      wiy, wiz):
+    return _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz)
+
+
 # each kind's (sample, eval, pdf)
 BSDFS = {
     DIFFUSE: (diffuse_sample, diffuse_eval, diffuse_pdf),
@@ -458,6 +597,7 @@ BSDFS = {
     GLOSSY: (glossy_sample, glossy_eval, glossy_pdf),
     GLTF_PBR: (pbr_sample, pbr_eval, pbr_pdf),
     PLASTIC: (plastic_sample, plastic_eval, plastic_pdf),
+    ROUGH_PLASTIC: (rough_plastic_sample, rough_plastic_eval, rough_plastic_pdf),
 }
 # the kinds with a delta lobe beside a non-delta one: their sample returns a delta lobe's
 # branch probability negated, so that the caller knows the bounce was delta
@@ -489,6 +629,9 @@ def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
     if kind == PLASTIC:
         return plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
                             wix, wiy, wiz)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
+                                  woz, wix, wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
@@ -512,6 +655,9 @@ def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, w
     if kind == PLASTIC:
         return plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
                            wix, wiy, wiz)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
+                                 woz, wix, wiy, wiz)
     return 0.0
 
 
@@ -538,4 +684,6 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
         return refraction_sample(*args)
     if kind == PLASTIC:
         return plastic_sample(*args)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_sample(*args)
     return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering

@@ -26,6 +26,7 @@ from ..scene import (
     MIRROR_REPEAT,
     PLASTIC,
     REPEAT,
+    ROUGH_PLASTIC,
 )
 from .materials import MIN_ALPHA, conductor_from_colour, read_image_file
 from .mitsuba_spectra import CONDUCTORS, IOR
@@ -58,6 +59,7 @@ class Materials:
         self.textured = False
         self.uv_transforms = {}     # material index -> 3 x 3 transform of Mitsuba's (u, v)
         self.sided = False      # reading the BSDF inside a twosided
+        self._tables = {}       # (alpha, eta, ggx) -> a roughplastic's rough_coat_tables
 
     def index(self, bsdf):
         key = id(bsdf) if bsdf is not None else None
@@ -304,17 +306,35 @@ class Materials:
         return float(np.mean(mean))
 
     def _roughplastic(self, bsdf):
-        ior = self._ior(bsdf, "int_ior", "polypropylene") / self._ior(bsdf, "ext_ior", "air")
-        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        specular = self._bounded(bsdf, "specular_reflectance",
-                                 bsdf.colour("specular_reflectance", Colour((1.0,) * 3)))
-        if bsdf.boolean("nonlinear", False):
-            self.note(bsdf, "nonlinear ignored (ptrace's glossy base is linear in its colour)")
-        record = {"kind": GLOSSY, "alpha": self._alpha(bsdf),
-                  "specular": tuple(min(r0 * s, 1.0) for s in specular)}
-        self._albedo(bsdf, "diffuse_reflectance", record, (0.5, 0.5, 0.5))
-        self.note(bsdf, "ptrace's glossy model (Ashikhmin-Shirley's diffuse under a Beckmann "
-                        "coat) in place of Mitsuba's layered rough plastic")
+        """Mitsuba's roughplastic as ptrace's ROUGH_PLASTIC (ptrace.bsdf's rough_plastic_*):
+        the plastic's record, the coat's roughness and distribution, and its tables (once per
+        distinct alpha, eta and distribution of the scene)."""
+        distribution = bsdf.string("distribution", "beckmann")
+        if distribution not in ("beckmann", "ggx"):
+            bsdf.fail(f"distribution {distribution!r} is neither beckmann nor ggx")
+        bsdf.boolean("sample_visible", True)
+        if bsdf.has("alpha_u") or bsdf.has("alpha_v"):
+            alpha = bsdf.float("alpha_u", 0.1)
+            if bsdf.float("alpha_v", 0.1) != alpha:
+                bsdf.fail("anisotropic roughness (alpha_u != alpha_v) is not supported on a "
+                          "roughplastic (nor by Mitsuba's)")
+        else:
+            alpha = bsdf.float("alpha", 0.1)
+        if not alpha >= 0:
+            bsdf.fail(f"alpha {alpha:g} is negative")
+        alpha = max(alpha, MIN_ALPHA)
+        record = self._plastic(bsdf)
+        eta = record["ior"]
+        if eta == 1.0:
+            bsdf.fail("int_ior and ext_ior must differ (as Mitsuba requires)")
+        ggx = distribution == "ggx"
+        key = (alpha, eta, ggx)
+        if key not in self._tables:
+            self._tables[key] = rough_coat_tables(alpha, eta, ggx)
+        table, internal = self._tables[key]
+        weight = record["eta"][2]
+        record.update(kind=ROUGH_PLASTIC, alpha=alpha, eta=(eta, internal, weight),
+                      k=(record["k"][0], 1.0 if ggx else 0.0, 0.0), table=tuple(table))
         return record
 
     def _principled(self, bsdf):
@@ -417,6 +437,76 @@ def fresnel_diffuse_reflectance(eta):
     x = 1.0 / eta
     return 0.919317 + x * (-3.4793 + x * (6.75335 + x * (-7.80989 + x * (4.98554
                                                                         - 1.36881 * x))))
+
+
+def _smith_g1(ggx, alpha, v, m, exact=False):
+    """Smith's G1 of directions v and normals m ((..., 3) arrays), as ptrace.bsdf's _rough_g1
+    (Walter et al.'s rational Beckmann G1), or with `exact` Beckmann's own 1 / (1 + Lambda)."""
+    xy2 = alpha * alpha * (v[..., 0] ** 2 + v[..., 1] ** 2)
+    tan2 = xy2 / np.maximum(v[..., 2] ** 2, 1e-300)
+    if ggx:
+        g = 2.0 / (1.0 + np.sqrt(1.0 + tan2))
+    else:
+        with np.errstate(divide="ignore"):
+            a = 1.0 / np.sqrt(tan2)
+        if exact:
+            from scipy.special import erf
+            finite = np.minimum(a, 30.0)
+            lam = 0.5 * (erf(finite) - 1.0) + np.exp(-finite * finite) / (2.0 * finite *
+                                                                        math.sqrt(math.pi))
+            g = 1.0 / (1.0 + lam)
+        else:
+            g = np.where(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a)
+                         / (1.0 + 2.276 * a + 2.577 * a * a))
+    g = np.where(xy2 == 0.0, 1.0, g)
+    return np.where(np.sum(v * m, axis=-1) * v[..., 2] <= 0.0, 0.0, g)
+
+
+def _fresnel(cos_i, eta):
+    """Exact unpolarised Fresnel reflectance at cos_i > 0 onto relative index eta, and the
+    transmitted cosine (0 past total internal reflection, where the reflectance is 1)."""
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    cos_t = np.sqrt(np.maximum(0.0, 1.0 - sin2_t))
+    a_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
+    a_p = (cos_t - eta * cos_i) / (cos_t + eta * cos_i)
+    return np.where(sin2_t >= 1.0, 1.0, 0.5 * (a_s * a_s + a_p * a_p)), cos_t
+
+
+def rough_coat_tables(alpha, eta, ggx, n=None, nodes=96):
+    """A roughplastic coat's (transmittance from outside at cos theta = j / (n - 1), j = 0 ..
+    n-1, and its internal reflectance), as Mitsuba defines them: the transmittance at wi is the
+    mean over the normals visible from wi (density G1(wi, m) max(0, wi.m) D(m) / cos theta_i)
+    of G1(t, m) (1 - F(wi.m)), t wi refracted through m, where it goes down; the internal
+    reflectance is 2 mean_j(cos_j R(cos_j)) over the same cosines, R the same mean of
+    G1(r, m) F(wi.m, 1 / eta) for the reflection r, from inside. The means are integrals over
+    normals drawn from D(m) cos theta_m ((u1, u2) by its inverse), by Gauss-Legendre in u1 and
+    u2, nodes x nodes points (Mitsuba integrates the visible normals' own parameters)."""
+    from ..bsdf import TABLE
+    n = TABLE if n is None else n
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x, w = 0.5 * (x + 1.0), 0.25 * np.outer(w, w).ravel()
+    u1, u2 = (a.ravel() for a in np.meshgrid(x, x, indexing="ij"))
+    tan2 = alpha * alpha * (u1 / (1.0 - u1) if ggx else -np.log1p(-u1))
+    cos_m = 1.0 / np.sqrt(1.0 + tan2)
+    sin_m = np.sqrt(np.maximum(0.0, 1.0 - cos_m * cos_m))
+    m = np.stack([sin_m * np.cos(2 * np.pi * u2), sin_m * np.sin(2 * np.pi * u2), cos_m], -1)
+    mu = np.maximum(1e-6, np.linspace(0.0, 1.0, n))
+    wi = np.stack([np.sqrt(1.0 - mu * mu), np.zeros(n), mu], -1)[:, None, :]   # (n, 1, 3)
+    c = np.sum(wi * m[None], axis=-1)                                         # (n, N)
+    visible = _smith_g1(ggx, alpha, wi, m[None], exact=True) * np.maximum(c, 0.0) / (
+        mu[:, None] * cos_m[None])
+    lit = c > 0.0
+    cp = np.where(lit, c, 1.0)
+    f, cos_t = _fresnel(cp, eta)
+    t = m[None] * (cp / eta - cos_t)[..., None] - wi / eta                 # refracted, down
+    through = np.where(lit & (t[..., 2] < 0.0) & (f < 1.0),
+                       _smith_g1(ggx, alpha, t, m[None]) * (1.0 - f), 0.0)
+    transmittance = np.sum(visible * through * w, axis=-1)
+    f_in, _ = _fresnel(cp, 1.0 / eta)
+    r = 2.0 * cp[..., None] * m[None] - wi
+    back = np.where(lit & (r[..., 2] > 0.0), _smith_g1(ggx, alpha, r, m[None]) * f_in, 0.0)
+    reflectance = np.sum(visible * back * w, axis=-1)
+    return transmittance, float(2.0 * np.mean(reflectance * mu))
 
 
 def nearest_texels(pixels):

@@ -41,7 +41,7 @@ from ..lights import (
     sample_light_angular,
     sample_primitive,
 )
-from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
+from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC
 from ..textures import mapped_normal, surface_albedo
 from .guide import folded_pdf, folded_sample, guide_leaf, remember
 from .layout import (
@@ -218,7 +218,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
     MIXED_KIND = kind in MIXED    # a delta lobe beside a non-delta one (ptrace.bsdf.MIXED)
-    LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR or MIXED_KIND   # one more number
+    LOBES = kind in (GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC) or MIXED_KIND   # one more number
     GUIDED = guided and not DELTA_KIND and not MIXED_KIND and not hemisphere
     ANGULAR = bool(angular)   # its light samplers: Mitsuba's spot falloff (_light_samplers)
     LIT = not DELTA_KIND     # light samples (a constant: a delta kind's code has none)

@@ -20,8 +20,10 @@ from ptrace.scene import (
     MIRROR,
     PLASTIC,
     REFRACTION,
+    ROUGH_PLASTIC,
     Materials,
 )
+from ptrace.io.mitsuba_materials import rough_coat_tables
 
 MATERIALS = Materials.from_records([
     dict(kind=DIFFUSE, albedo=(0.8, 0.5, 0.2)),
@@ -44,6 +46,13 @@ MATERIALS = Materials.from_records([
          eta=(1.9, 0.7216, 0.6 / 1.1), k=(1.0, 0.0, 0.0)),
     dict(kind=PLASTIC, albedo=(1.0, 1.0, 1.0), specular=(1.0, 1.0, 1.0), ior=1.5,
          eta=(1.5, 0.5956, 0.5), k=(0.0, 0.0, 0.0)),
+    # Mitsuba's roughplastic (14: Beckmann, 15: GGX), its tables after the specular colour
+    dict(kind=ROUGH_PLASTIC, albedo=(0.2, 0.3, 0.6), specular=(1.0, 1.0, 1.0), ior=1.49,
+         alpha=0.2, eta=(1.49, 0.5552, 1.0 / 1.3667), k=(0.0, 0.0, 0.0),
+         table=rough_coat_tables(0.2, 1.49, False)[0]),
+    dict(kind=ROUGH_PLASTIC, albedo=(0.9, 0.5, 0.1), specular=(0.5, 0.6, 0.7), ior=1.6,
+         alpha=0.4, eta=(1.6, 0.45, 0.6 / 1.1), k=(1.0, 1.0, 0.0),
+         table=rough_coat_tables(0.4, 1.6, True)[0]),
 ])
 M = MATERIALS
 
@@ -114,7 +123,7 @@ def chi_square_p(m, wo, n=60000, n_cos=10, n_phi=16, seed=0):
 
 @pytest.mark.parametrize("m, theta", [(0, 10), (0, 70), (1, 20), (1, 60), (2, 45), (6, 15),
                                       (6, 60), (7, 40), (9, 30), (10, 60), (11, 5), (11, 75),
-                                      (12, 40)])
+                                      (12, 40), (14, 20), (14, 70), (15, 45)])
 def test_sampler_matches_its_pdf(m, theta):
     p = chi_square_p(m, direction(theta))
     print(f"material {m} theta {theta}: p = {p:.3g}")
@@ -133,7 +142,7 @@ def test_diffuse_pdf_integrates_to_one_and_eval_is_albedo_over_pi():
         pytest.approx(tuple(M.albedo[0] / math.pi))
 
 
-@pytest.mark.parametrize("m", [1, 2, 6, 7, 8, 9])
+@pytest.mark.parametrize("m", [1, 2, 6, 7, 8, 9, 14, 15])
 def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
     """One microfacet (or glossy) bounce's directional albedo (red): the mean of the sampled
     weights f cos / pdf equals the integral of eval's f cos over the hemisphere (a midpoint rule,
@@ -165,7 +174,7 @@ def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
         assert sampled <= 1.0
 
 
-@pytest.mark.parametrize("m", [0, 6, 7, 8, 9, 10, 11, 12])
+@pytest.mark.parametrize("m", [0, 6, 7, 8, 9, 10, 11, 12, 14, 15])
 def test_diffuse_and_glossy_are_reciprocal(m):
     """f(wo, wi) = f(wi, wo) for random pairs of directions above the surface. (Not the course's
     microfacet: its Fresnel term takes cos theta_i, docs/course.md#bsdfs, so it is not.)"""

@@ -657,14 +657,14 @@ def test_a_dielectric_reflects_as_mitsubas(ior):
 
 
 def test_one_note_per_kind_through_the_cli(tmp_path, capsys):
-    plastic = '<bsdf type="roughplastic"/>'
+    plastic = '<bsdf type="roughdielectric"><float name="alpha" value="0.05"/></bsdf>'
     path = write(tmp_path, f'<shape type="sphere">{plastic}</shape><shape type="sphere">'
                            f'<point name="center" x="3" y="0" z="0"/>{plastic}</shape>'
                            '<shape type="sphere"><bsdf type="diffuse"><float name="bogus" '
                            'value="1"/></bsdf></shape>')
     assert main(["--info", str(path)]) == 0
     notes = "\n".join(json.loads(capsys.readouterr().out)["notes"])
-    assert notes.count("layered rough plastic") == 1
+    assert notes.count("drawn smooth") == 1
     assert "'bogus' ignored" in notes
     assert notes.count("outside a twosided") == 1
 
