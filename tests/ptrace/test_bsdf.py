@@ -8,6 +8,7 @@ from scipy import stats
 from ptrace.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample
 from ptrace.environment import environment_arrays
 from ptrace.integrator import LightArrays
+from ptrace.io.mitsuba_materials import rough_coat_tables
 from ptrace.lights import sample_light
 from ptrace.scene import (
     AREA,
@@ -23,7 +24,6 @@ from ptrace.scene import (
     ROUGH_PLASTIC,
     Materials,
 )
-from ptrace.io.mitsuba_materials import rough_coat_tables
 
 MATERIALS = Materials.from_records([
     dict(kind=DIFFUSE, albedo=(0.8, 0.5, 0.2)),
