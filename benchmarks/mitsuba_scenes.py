@@ -251,6 +251,7 @@ def main(argv=None):
         lines.append(fill(text["loading"], repeats=args.load_repeats))
         lines += [fill(text["loading_row"], form=form, triangles=count, ptrace=ours,
                        mitsuba=theirs, ratio=ours / theirs) for form, count, ours, theirs in loads]
+    lines.append(text["history"])     # (a record of earlier runs: no fields)
     path = report.write(args.output, "\n".join(lines) + "\n")
     print(f"wrote {path}")
     return 0 if all(math.isfinite(r["ratio"]) for r in rows) else 1

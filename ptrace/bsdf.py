@@ -3,7 +3,10 @@
 Conventions: wo and wi are unit vectors pointing away from the surface; f excludes the cosine term;
 pdf is per unit solid angle. Delta BSDFs (mirror, glass, refraction; `is_delta(kind)`) return from
 bsdf_sample() an f that carries the whole weight divided by |cos theta_i| and as pdf the discrete
-probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. Semantics follow
+probability of the branch taken; bsdf_eval() and bsdf_pdf() of a delta BSDF are 0. A kind with
+a delta lobe beside a non-delta one (MIXED: PLASTIC, Mitsuba's smooth plastic) returns from a
+delta lobe's sample the negated probability of that lobe; its eval and pdf are its non-delta
+lobe's. Semantics follow
 docs/course.md#bsdfs, with the textbook Smith Lambda for Beckmann (sqrt(pi), where the course's
 starter has pi). GLTF_PBR is glTF's metallic-roughness BRDF (ptrace.gltf_brdf), the only kind the
 metallic argument matters to.
@@ -13,7 +16,17 @@ import math
 from numba import njit
 
 from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
-from .scene import DIFFUSE, GLASS, GLOSSY, GLTF_PBR, MICROFACET, MIRROR, REFRACTION
+from .scene import (
+    DIFFUSE,
+    GLASS,
+    GLOSSY,
+    GLTF_PBR,
+    MICROFACET,
+    MIRROR,
+    PLASTIC,
+    REFRACTION,
+    ROUGH_PLASTIC,
+)
 from .trig import sincos_2pi
 
 SQRT_PI = math.sqrt(math.pi)
@@ -182,7 +195,8 @@ def diffuse_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def diffuse_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                wiz):
     return wiz * INV_PI if (woz > 0.0 and wiz > 0.0) else 0.0
 
 
@@ -193,7 +207,8 @@ def delta_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, 
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def delta_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def delta_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+              wiz):
     return 0.0
 
 
@@ -229,7 +244,8 @@ def microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def microfacet_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                   wiz):
     return _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -256,7 +272,8 @@ def glossy_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def glossy_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+               wiz):
     return _glossy_pdf(alpha, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -272,7 +289,8 @@ def pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wi
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def pbr_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+            wiz):
     return gltf_pdf(metallic, alpha, ar, ag, ab, wox, woy, woz, wix, wiy, wiz)
 
 
@@ -355,6 +373,220 @@ def refraction_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
         transmittance[m, 2] * s, 1.0
 
 
+# -- plastic: Mitsuba's smooth plastic, a smooth dielectric coat over a diffuse base -------------
+# Material m's eta row holds (eta, fdr_int, specular weight) and k[m, 0] its `nonlinear`
+# (ptrace.scene.Materials; ptrace.io.mitsuba_materials computes them). Light reaching the base
+# passes the coat twice, (1 - F(cos_i)) (1 - F(cos_o)) / eta^2, and the light the coat
+# reflects back down, a fraction fdr_int of what leaves the base, scatters again: the base's
+# albedo d becomes d / (1 - fdr_int), or with `nonlinear` d / (1 - d fdr_int) (the series of
+# bounces between base and coat, each coloured by d). The coat's mirror lobe is delta and
+# is sampled with probability F(cos_o) w / (F(cos_o) w + (1 - F(cos_o))(1 - w)), w the
+# specular weight (the mean specular reflectance over its sum with the mean diffuse one).
+
+@njit(cache=True, _nrt=False, inline="always")
+def fresnel_dielectric(cos_i, eta):
+    """The exact unpolarised reflectance of a smooth boundary met at cos_i > 0 from the side
+    whose index is 1 / eta times the other's; 1 past total internal reflection."""
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0
+    return dielectric_reflectance(cos_i, math.sqrt(1.0 - sin2_t), eta)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _plastic_diffuse_probability(eta, m, fresnel_o):
+    """The probability that plastic m samples its diffuse lobe, Fresnel reflectance fresnel_o
+    at wo."""
+    weight = eta[m, 2]
+    specular = fresnel_o * weight
+    diffuse = (1.0 - fresnel_o) * (1.0 - weight)
+    if not specular + diffuse > 0.0:
+        return 0.5
+    return diffuse / (specular + diffuse)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _plastic_base(d, fdr, nonlinear):
+    """The base's albedo d with the coat's internal reflections (the header above)."""
+    return d / (1.0 - (d * fdr if nonlinear else fdr))
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _plastic_f(ar, ag, ab, eta, k, m, fresnel_o, woz, wiz):
+    """The diffuse lobe's f (the mirror lobe is delta), fresnel_o the coat's reflectance at wo."""
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    e, fdr, nonlinear = eta[m, 0], eta[m, 1], k[m, 0] != 0.0
+    scale = (1.0 - fresnel_o) * (1.0 - fresnel_dielectric(wiz, e)) / (e * e) * INV_PI
+    return (_plastic_base(ar, fdr, nonlinear) * scale, _plastic_base(ag, fdr, nonlinear) * scale,
+            _plastic_base(ab, fdr, nonlinear) * scale)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
+                   woy, woz, u1, u2, u3):
+    """The coat's mirror reflection with its probability (its pdf negated: a delta lobe of a
+    MIXED kind), else the base's cosine-weighted lobe."""
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fresnel_o = fresnel_dielectric(woz, eta[m, 0])
+    diffuse = _plastic_diffuse_probability(eta, m, fresnel_o)
+    if u3 < 1.0 - diffuse:
+        s = fresnel_o / woz
+        return -wox, -woy, woz, specular[m, 0] * s, specular[m, 1] * s, specular[m, 2] * s, \
+            -(1.0 - diffuse)
+    x, y, z = cosine_hemisphere(u1, u2)
+    if z <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fr, fg, fb = _plastic_f(ar, ag, ab, eta, k, m, fresnel_o, woz, z)
+    return x, y, z, fr, fg, fb, diffuse * z * INV_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0, 0.0, 0.0
+    return _plastic_f(ar, ag, ab, eta, k, m, fresnel_dielectric(woz, eta[m, 0]), woz, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                wiz):
+    if woz <= 0.0 or wiz <= 0.0:
+        return 0.0
+    fresnel_o = fresnel_dielectric(woz, eta[m, 0])
+    return _plastic_diffuse_probability(eta, m, fresnel_o) * wiz * INV_PI
+
+
+# -- roughplastic: Mitsuba's, a microfacet dielectric coat over a diffuse base -----------------
+# As plastic, with the coat rough: its lobe is Beckmann's or GGX's (k[m, 1]: 0 or 1) of alpha,
+# with Smith's separable shadowing (for Beckmann, Walter et al.'s rational G1, as Mitsuba), and
+# the base's light passes it with the coat's transmittance t(cos) from outside (a table of TABLE
+# values in specular[m, 3:], linear in cos; ptrace.io.mitsuba_materials computes it at load
+# time), d / (1 - eta[m, 1] [d]) t(cos_i) t(cos_o) / (pi eta^2). The lobes are chosen with
+# probability (1 - t(cos_o)) w against t(cos_o)(1 - w), the coat's half vectors drawn from
+# D(h) cos theta_h.
+
+TABLE = 64      # the coat's transmittance table: cos theta = j / (TABLE - 1), j = 0 .. TABLE-1
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _table(specular, m, cos):
+    """Material m's coat transmittance at cos, linear between the table's values."""
+    x = min(max(cos, 0.0), 1.0) * (TABLE - 1)
+    j = min(int(x), TABLE - 2)
+    t = x - j
+    return specular[m, 3 + j] * (1.0 - t) + specular[m, 4 + j] * t
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_d(ggx, alpha, cos_h):
+    """Beckmann's (ggx False) or GGX's distribution of normals at cos theta_h."""
+    if cos_h <= 0.0:
+        return 0.0
+    if not ggx:
+        return beckmann_d(alpha, cos_h)
+    cos2 = cos_h * cos_h
+    a2 = alpha * alpha
+    denominator = cos2 * (a2 - 1.0) + 1.0
+    return a2 / (math.pi * denominator * denominator)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_g1(ggx, alpha, vx, vy, vz, hx, hy, hz):
+    """Smith's G1 of direction v and half vector h (0 where v sees h's back): for Beckmann
+    Walter et al.'s (2007) rational approximation, for GGX the exact form."""
+    if (vx * hx + vy * hy + vz * hz) * vz <= 0.0:
+        return 0.0
+    xy2 = alpha * alpha * (vx * vx + vy * vy)
+    if xy2 == 0.0:
+        return 1.0
+    tan2 = xy2 / (vz * vz)
+    if ggx:
+        return 2.0 / (1.0 + math.sqrt(1.0 + tan2))
+    a = 1.0 / math.sqrt(tan2)
+    if a >= 1.6:
+        return 1.0
+    return (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _rough_plastic_diffuse_probability(eta, specular, m, woz):
+    t = _table(specular, m, woz)
+    weight = eta[m, 2]
+    coat = (1.0 - t) * weight
+    base = t * (1.0 - weight)
+    if not coat + base > 0.0:
+        return 0.5
+    return base / (coat + base)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
+        return 0.0, 0.0, 0.0
+    ggx = k[m, 1] != 0.0
+    e = eta[m, 0]
+    coat = _rough_d(ggx, alpha, hz) * _rough_g1(ggx, alpha, wox, woy, woz, hx, hy, hz) * \
+        _rough_g1(ggx, alpha, wix, wiy, wiz, hx, hy, hz) * \
+        fresnel_dielectric(wox * hx + woy * hy + woz * hz, e) / (4.0 * woz * wiz)
+    fdr, nonlinear = eta[m, 1], k[m, 0] != 0.0
+    base = _table(specular, m, woz) * _table(specular, m, wiz) / (e * e) * INV_PI
+    return (coat * specular[m, 0] + _plastic_base(ar, fdr, nonlinear) * base,
+            coat * specular[m, 1] + _plastic_base(ag, fdr, nonlinear) * base,
+            coat * specular[m, 2] + _plastic_base(ab, fdr, nonlinear) * base)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    if not defined:
+        return 0.0
+    diffuse = _rough_plastic_diffuse_probability(eta, specular, m, woz)
+    coat = _rough_d(k[m, 1] != 0.0, alpha, hz) * hz / (4.0 * (wox * hx + woy * hy + woz * hz))
+    return (1.0 - diffuse) * coat + diffuse * wiz * INV_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
+                         wox, woy, woz, u1, u2, u3):
+    if woz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    if u3 < 1.0 - _rough_plastic_diffuse_probability(eta, specular, m, woz):   # the coat's
+        if k[m, 1] != 0.0:    # GGX: tan^2 theta_h = alpha^2 u1 / (1 - u1)
+            tan2 = alpha * alpha * u1 / max(1.0 - u1, 1e-300)
+            cos_h = 1.0 / math.sqrt(1.0 + tan2)
+            sin_h = math.sqrt(max(0.0, 1.0 - cos_h * cos_h))
+            c, s = sincos_2pi(u2)
+            hx, hy, hz = sin_h * c, sin_h * s, cos_h
+        else:
+            hx, hy, hz = beckmann_half_vector(alpha, u1, u2)
+        d = wox * hx + woy * hy + woz * hz
+        wix, wiy, wiz = 2.0 * d * hx - wox, 2.0 * d * hy - woy, 2.0 * d * hz - woz
+    else:                 # the base's
+        wix, wiy, wiz = cosine_hemisphere(u1, u2)
+    if wiz <= 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    fr, fg, fb = _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix,
+                                  wiy, wiz)
+    return wix, wiy, wiz, fr, fg, fb, _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy,
+                                                         woz, wix, wiy, wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                       wiy, wiz):
+    return _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy,
+                            wiz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def rough_plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                      wiy, wiz):
+    return _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz)
+
+
 # each kind's (sample, eval, pdf)
 BSDFS = {
     DIFFUSE: (diffuse_sample, diffuse_eval, diffuse_pdf),
@@ -364,7 +596,12 @@ BSDFS = {
     MICROFACET: (microfacet_sample, microfacet_eval, microfacet_pdf),
     GLOSSY: (glossy_sample, glossy_eval, glossy_pdf),
     GLTF_PBR: (pbr_sample, pbr_eval, pbr_pdf),
+    PLASTIC: (plastic_sample, plastic_eval, plastic_pdf),
+    ROUGH_PLASTIC: (rough_plastic_sample, rough_plastic_eval, rough_plastic_pdf),
 }
+# the kinds with a delta lobe beside a non-delta one: their sample returns a delta lobe's
+# branch probability negated, so that the caller knows the bounce was delta
+MIXED = (PLASTIC,)
 # the glass of a scene whose glass reflects EXACT (ptrace.scene), in place of BSDFS[GLASS]
 EXACT_GLASS = (dielectric_sample, delta_eval, delta_pdf)
 
@@ -389,21 +626,38 @@ def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, 
     if kind == GLTF_PBR:
         return pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
                         wiy, wiz)
+    if kind == PLASTIC:
+        return plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                            wix, wiy, wiz)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
+                                  woz, wix, wiy, wiz)
     return 0.0, 0.0, 0.0
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz):
+def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
+             wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise. The albedo
     and metallic matter only to GLTF_PBR, whose choice of lobe depends on them."""
     if kind == DIFFUSE:
-        return diffuse_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return diffuse_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                           wix, wiy, wiz)
     if kind == MICROFACET:
-        return microfacet_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return microfacet_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                              wix, wiy, wiz)
     if kind == GLOSSY:
-        return glossy_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return glossy_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                          wix, wiy, wiz)
     if kind == GLTF_PBR:
-        return pbr_pdf(ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+        return pbr_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                       wix, wiy, wiz)
+    if kind == PLASTIC:
+        return plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
+                           wix, wiy, wiz)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
+                                 woz, wix, wiy, wiz)
     return 0.0
 
 
@@ -428,4 +682,8 @@ def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
         return glass_sample(*args)
     if kind == REFRACTION:
         return refraction_sample(*args)
+    if kind == PLASTIC:
+        return plastic_sample(*args)
+    if kind == ROUGH_PLASTIC:
+        return rough_plastic_sample(*args)
     return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering

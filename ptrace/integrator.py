@@ -142,7 +142,7 @@ def scene_records(scene, light_tree=False):
     materials = MaterialArrays(index(m.kind), _f64(m.albedo, (3,)),
                                _f64(m.transmittance, (3,)), _f64(m.emission, (3,)), _f64(m.ior),
                                _f64(m.alpha), _f64(m.eta, (3,)), _f64(m.k, (3,)),
-                               _f64(m.specular, (3,)),
+                               _f64(m.specular, np.shape(m.specular)[1:] or (3,)),
                                index(m.albedo_texture), index(m.emission_texture),
                                index(m.roughness_texture),
                                np.ascontiguousarray(tex.texels, dtype=np.float32).reshape(-1, 3),

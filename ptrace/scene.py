@@ -6,9 +6,10 @@ import numpy as np
 import accel
 
 # BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
-DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR = range(8)
+(DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR, PLASTIC,
+ ROUGH_PLASTIC) = range(10)
 BSDF_NAMES = ("diffuse", "emission", "mirror", "glass", "refraction", "microfacet", "glossy",
-              "gltf_pbr")
+              "gltf_pbr", "plastic", "roughplastic")
 
 # Materials.cutoff of a glTF BLEND material (ptrace.cutouts): rays pass with probability 1 - alpha
 BLEND_CUT = -1.0
@@ -40,7 +41,17 @@ class Materials:
     reflectance at normal incidence), alpha; gltf_pbr (glTF's metallic-roughness BRDF,
     ptrace.gltf_brdf, for glTF files): albedo (the base colour), metallic, alpha (roughness^2),
     and emission, which it adds to what it reflects (a gltf_pbr of non-zero emission is an
-    emitter too: emits()).
+    emitter too: emits()); plastic (Mitsuba's smooth plastic, ptrace.plastic: a smooth
+    dielectric coat over a diffuse base): albedo (the base's diffuse_reflectance), specular
+    (the coat's specular_reflectance), ior (the coat's index over the outside's, eta), and in
+    eta the three numbers its functions read without ior: (eta, the coat's diffuse Fresnel
+    reflectance from inside fdr_int, the probability weight of its specular lobe), in k[:, 0]
+    1 for Mitsuba's `nonlinear` (else 0); roughplastic (Mitsuba's roughplastic: a microfacet
+    dielectric coat over a diffuse base): as plastic, but with eta's second number the coat's
+    internal reflectance, alpha the coat's roughness, k[:, 1] its distribution (0 Beckmann,
+    1 GGX), and the coat's transmittance from outside at cos theta = j / (n - 1), j = 0 .. n-1,
+    in specular's columns 3 .. 3 + n - 1 (a record's `table`; Materials.from_records widens
+    every material's specular row when one has a table, to n = ptrace.bsdf.TABLE).
 
     albedo_texture, emission_texture and roughness_texture index Scene.textures (-1: none):
     a texture multiplies albedo or emission by its colour at the hit's UV, and a roughness
@@ -68,7 +79,7 @@ class Materials:
     eta: np.ndarray             # (M, 3)
     k: np.ndarray               # (M, 3)
     names: tuple = ()
-    specular: np.ndarray = None            # (M, 3), glossy only
+    specular: np.ndarray = None            # (M, 3) (or (M, 3 + n): roughplastic's table)
     albedo_texture: np.ndarray = None      # (M,) int32, -1 for none
     emission_texture: np.ndarray = None    # (M,) int32
     roughness_texture: np.ndarray = None   # (M,) int32
@@ -108,6 +119,20 @@ class Materials:
         m = len(records)
         column = lambda key, default, dtype, shape: np.array(
             [r.get(key, default) for r in records], dtype=dtype).reshape(shape)
+        tables = [r["table"] for r in records if "table" in r]
+        if tables:      # roughplastic's tables, after the specular colour
+            width = len(tables[0])
+            rows = [np.concatenate([r.get("specular", RGB_FIELDS["specular"]),
+                                    r.get("table", np.zeros(width))]) for r in records]
+            return cls(
+                kind=np.array([r["kind"] for r in records], dtype=np.int32).reshape(m),
+                names=tuple(r.get("name", "") for r in records),
+                **{key: column(key, value, np.float64, (m, 3))
+                   for key, value in RGB_FIELDS.items() if key != "specular"},
+                specular=np.array(rows, dtype=np.float64).reshape(m, 3 + width),
+                **{key: column(key, value, np.float64, m) for key, value in NUMBER_FIELDS.items()},
+                **{key: column(key, -1, np.int32, m) for key in TEXTURE_FIELDS},
+            )
         return cls(
             kind=np.array([r["kind"] for r in records], dtype=np.int32).reshape(m),
             names=tuple(r.get("name", "") for r in records),

@@ -286,6 +286,8 @@ def test_mitsuba_scenes_quick(tmp_path):
         numba.set_num_threads(threads)
     text = output.read_text()
     scenes, loading = text.split("## Loading a large mesh")
+    loading, history = loading.split("## Earlier changes measured")   # (a fixed record)
+    assert "| before (commit" in history
     rows = [line.split("|")[1:-1] for line in scenes.splitlines()
             if line.startswith("| ") and not line.startswith("| scene")]
     assert [r[0].strip() for r in rows] == list(mitsuba_scenes.QUICK_SCENES)

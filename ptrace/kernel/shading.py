@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from ..bsdf import BSDFS, EXACT_GLASS, is_delta, uniform_hemisphere
+from ..bsdf import BSDFS, EXACT_GLASS, MIXED, is_delta, uniform_hemisphere
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
@@ -41,7 +41,7 @@ from ..lights import (
     sample_light_angular,
     sample_primitive,
 )
-from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR
+from ..scene import ENVIRONMENT, GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC
 from ..textures import mapped_normal, surface_albedo
 from .guide import folded_pdf, folded_sample, guide_leaf, remember
 from .layout import (
@@ -217,8 +217,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     GENERAL, MODE, HEMI = general, mode, hemisphere
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     DELTA_KIND = bool(getattr(is_delta, "py_func", is_delta)(kind))   # (NUMBA_DISABLE_JIT)
-    LOBES = kind == GLASS or kind == GLOSSY or kind == GLTF_PBR   # a lobe choice: one more number
-    GUIDED = guided and not DELTA_KIND and not hemisphere
+    MIXED_KIND = kind in MIXED    # a delta lobe beside a non-delta one (ptrace.bsdf.MIXED)
+    LOBES = kind in (GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC) or MIXED_KIND   # one more number
+    GUIDED = guided and not DELTA_KIND and not MIXED_KIND and not hemisphere
     ANGULAR = bool(angular)   # its light samplers: Mitsuba's spot falloff (_light_samplers)
     LIT = not DELTA_KIND     # light samples (a constant: a delta kind's code has none)
 
@@ -359,8 +360,9 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                                                wix, wiy, wiz)
                         scale = wiz / (weight * pdf)
                         if options.mis and not delta_light:
-                            other = BSDF_PDF(ar, ag, ab, alpha, metallic, wox, woy, woz, wix,
-                                             wiy, wiz)
+                            other = BSDF_PDF(ar, ag, ab, alpha, metallic, materials.eta,
+                                             materials.k, materials.specular, m, wox, woy, woz,
+                                             wix, wiy, wiz)
                             if GUIDED:   # the bounce's pdf is the mixture's
                                 other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
                                                                                wz, nx, ny, nz)
@@ -382,7 +384,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                                   tb * (lb * fb * scale), i, base + RAY_KEYS * j)
                         shadows += 1
             ints[RAYS, i] += rays
-            if vertex == max_depth and not (DELTA_KIND or mis):
+            if vertex == max_depth and not (DELTA_KIND or MIXED_KIND or mis):
                 continue
             u1, u2 = sample_2d(options, pixel, sample, sample, base + DIM_BSDF, base + DIM_BSDF)
             u3 = 0.0
@@ -400,7 +402,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                                        materials.k, materials.specular, m, wox, woy, woz, wix,
                                        wiy, wiz)
                 pdf = mix * guided_pdf + (1.0 - mix) * BSDF_PDF(
-                    ar, ag, ab, alpha, metallic, wox, woy, woz, wix, wiy, wiz)
+                    ar, ag, ab, alpha, metallic, materials.eta, materials.k, materials.specular,
+                    m, wox, woy, woz, wix, wiy, wiz)
             else:
                 wix, wiy, wiz, fr, fg, fb, pdf = BSDF_SAMPLE(
                     ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
@@ -414,6 +417,10 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                     pdf = (1.0 - mix) * pdf + mix * folded_pdf(guide, leaf, wx / length,
                                                                wy / length, wz / length, nx, ny,
                                                                nz)
+            delta = DELTA_KIND
+            if MIXED_KIND:   # a delta lobe's sample: its probability negated
+                delta = pdf < 0.0
+                pdf = abs(pdf)
             if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
                 continue
             weight = abs(wiz) / pdf
@@ -443,7 +450,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             floats[PDF, i] = pdf
             if GUIDED and guide.record:
                 remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb)
-            ints[DELTA, i] = DELTA_KIND
+            ints[DELTA, i] = delta
             ints[KEY, i] = base
             ints[RAYS, i] += 1
             out[kept] = i

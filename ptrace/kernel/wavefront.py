@@ -30,7 +30,9 @@ from ..scene import (
     GLTF_PBR,
     MICROFACET,
     MIRROR,
+    PLASTIC,
     REFRACTION,
+    ROUGH_PLASTIC,
     SPOT,
 )
 from ..solid_angle import rectangle_axes_table
@@ -63,7 +65,8 @@ SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.8 MB)
 
 GUIDE_DEPTH = 8    # (--guiding) the vertices of a path that training records, at most
 
-SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR)   # all but EMISSION
+SHADED = (DIFFUSE, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR,
+          PLASTIC, ROUGH_PLASTIC)   # all but EMISSION
 
 AreaLights = namedtuple("AreaLights", ["radiance", "position", "direction", "edge_x", "edge_y",
                                        "area", "faced", "hit_lower", "hit_upper", "hit_skip",

@@ -8,6 +8,7 @@ from scipy import stats
 from ptrace.bsdf import bsdf_eval, bsdf_pdf, bsdf_sample
 from ptrace.environment import environment_arrays
 from ptrace.integrator import LightArrays
+from ptrace.io.mitsuba_materials import rough_coat_tables
 from ptrace.lights import sample_light
 from ptrace.scene import (
     AREA,
@@ -18,7 +19,9 @@ from ptrace.scene import (
     GLTF_PBR,
     MICROFACET,
     MIRROR,
+    PLASTIC,
     REFRACTION,
+    ROUGH_PLASTIC,
     Materials,
 )
 
@@ -36,6 +39,20 @@ MATERIALS = Materials.from_records([
     # glTF's material through the dispatch (ptrace.gltf_brdf has its own, finer tests)
     dict(kind=GLTF_PBR, albedo=(1.0, 1.0, 1.0), metallic=1.0, alpha=0.49),
     dict(kind=GLTF_PBR, albedo=(0.8, 0.5, 0.2), metallic=0.4, alpha=0.25),
+    # Mitsuba's smooth plastic (11-13): eta row (eta, fdr_int, specular weight), k[0] nonlinear
+    dict(kind=PLASTIC, albedo=(0.2, 0.3, 0.6), specular=(1.0, 1.0, 1.0), ior=1.49,
+         eta=(1.49, 0.5904, 1.0 / 1.3667), k=(0.0, 0.0, 0.0)),
+    dict(kind=PLASTIC, albedo=(0.9, 0.5, 0.1), specular=(0.5, 0.6, 0.7), ior=1.9,
+         eta=(1.9, 0.7216, 0.6 / 1.1), k=(1.0, 0.0, 0.0)),
+    dict(kind=PLASTIC, albedo=(1.0, 1.0, 1.0), specular=(1.0, 1.0, 1.0), ior=1.5,
+         eta=(1.5, 0.5956, 0.5), k=(0.0, 0.0, 0.0)),
+    # Mitsuba's roughplastic (14: Beckmann, 15: GGX), its tables after the specular colour
+    dict(kind=ROUGH_PLASTIC, albedo=(0.2, 0.3, 0.6), specular=(1.0, 1.0, 1.0), ior=1.49,
+         alpha=0.2, eta=(1.49, 0.5552, 1.0 / 1.3667), k=(0.0, 0.0, 0.0),
+         table=rough_coat_tables(0.2, 1.49, False)[0]),
+    dict(kind=ROUGH_PLASTIC, albedo=(0.9, 0.5, 0.1), specular=(0.5, 0.6, 0.7), ior=1.6,
+         alpha=0.4, eta=(1.6, 0.45, 0.6 / 1.1), k=(1.0, 1.0, 0.0),
+         table=rough_coat_tables(0.4, 1.6, True)[0]),
 ])
 M = MATERIALS
 
@@ -47,7 +64,8 @@ def sample(m, wo, u):
 
 
 def pdf_of(m, wo, x, y, z):
-    return bsdf_pdf(int(M.kind[m]), *M.albedo[m], M.alpha[m], M.metallic[m], *wo, x, y, z)
+    return bsdf_pdf(int(M.kind[m]), *M.albedo[m], M.alpha[m], M.metallic[m], M.eta, M.k,
+                    M.specular, m, *wo, x, y, z)
 
 
 def eval_of(m, wo, x, y, z):
@@ -104,7 +122,8 @@ def chi_square_p(m, wo, n=60000, n_cos=10, n_phi=16, seed=0):
 
 
 @pytest.mark.parametrize("m, theta", [(0, 10), (0, 70), (1, 20), (1, 60), (2, 45), (6, 15),
-                                      (6, 60), (7, 40), (9, 30), (10, 60)])
+                                      (6, 60), (7, 40), (9, 30), (10, 60), (11, 5), (11, 75),
+                                      (12, 40), (14, 20), (14, 70), (15, 45)])
 def test_sampler_matches_its_pdf(m, theta):
     p = chi_square_p(m, direction(theta))
     print(f"material {m} theta {theta}: p = {p:.3g}")
@@ -123,7 +142,7 @@ def test_diffuse_pdf_integrates_to_one_and_eval_is_albedo_over_pi():
         pytest.approx(tuple(M.albedo[0] / math.pi))
 
 
-@pytest.mark.parametrize("m", [1, 2, 6, 7, 8, 9])
+@pytest.mark.parametrize("m", [1, 2, 6, 7, 8, 9, 14, 15])
 def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
     """One microfacet (or glossy) bounce's directional albedo (red): the mean of the sampled
     weights f cos / pdf equals the integral of eval's f cos over the hemisphere (a midpoint rule,
@@ -155,7 +174,7 @@ def test_microfacet_sampling_carries_the_energy_eval_integrates_to(m):
         assert sampled <= 1.0
 
 
-@pytest.mark.parametrize("m", [0, 6, 7, 8, 9, 10])
+@pytest.mark.parametrize("m", [0, 6, 7, 8, 9, 10, 11, 12, 14, 15])
 def test_diffuse_and_glossy_are_reciprocal(m):
     """f(wo, wi) = f(wi, wo) for random pairs of directions above the surface. (Not the course's
     microfacet: its Fresnel term takes cos theta_i, docs/course.md#bsdfs, so it is not.)"""

@@ -12,6 +12,7 @@ import pytest
 
 import ptrace
 from ptrace.app.cli import main
+from ptrace.bsdf import TABLE
 from ptrace.image import read_image
 from ptrace.io.mitsuba_materials import CONDUCTORS, IOR
 from ptrace.io.mitsuba_xml import Reader
@@ -23,11 +24,12 @@ from ptrace.scene import (
     EMISSION,
     EXACT,
     GLASS,
-    GLOSSY,
     GLTF_PBR,
     MICROFACET,
     MIRROR,
+    PLASTIC,
     POINT,
+    ROUGH_PLASTIC,
     SPOT,
 )
 
@@ -614,9 +616,19 @@ def test_dielectrics_plastic_principled(tmp_path):
                                             'reflectance" value="0.4"/><float name="alpha" '
                                             'value="0.3"/><float name="int_ior" value="1.5"/>'
                                             '<float name="ext_ior" value="1"/></bsdf>')
-    assert materials.kind[i] == GLOSSY and materials.alpha[i] == 0.3
-    np.testing.assert_allclose(materials.specular[i], [0.04] * 3)
+    assert materials.kind[i] == ROUGH_PLASTIC and materials.alpha[i] == 0.3
+    assert materials.ior[i] == 1.5 and materials.eta[i, 0] == 1.5
+    assert materials.eta[i, 2] == pytest.approx(1.0 / 1.4)   # specular weight: 1 / (1 + 0.4)
+    assert materials.specular.shape == (len(materials), 3 + TABLE)
+    np.testing.assert_allclose(materials.specular[i, :3], [1.0] * 3)
+    table = materials.specular[i, 3:]      # the coat passes more light the steeper it arrives
+    assert np.all(np.diff(table) > 0) and 0.0 < table[0] and table[-1] < 1.0
     np.testing.assert_allclose(materials.albedo[i], [0.4] * 3)
+    materials, i, _ = material_of(tmp_path, '<bsdf type="plastic"><rgb name="diffuse_'
+                                            'reflectance" value="0.2 0.4 0.6"/><boolean name='
+                                            '"nonlinear" value="true"/></bsdf>')
+    assert materials.kind[i] == PLASTIC and materials.k[i, 0] == 1.0
+    assert materials.eta[i, 0] == pytest.approx(IOR["polypropylene"] / IOR["air"])
     materials, i, _ = material_of(tmp_path, '<bsdf type="principled"><rgb name="base_color" '
                                             'value="0.8 0.1 0.1"/><float name="roughness" '
                                             'value="0.5"/><float name="metallic" value="1"/>'
@@ -657,14 +669,14 @@ def test_a_dielectric_reflects_as_mitsubas(ior):
 
 
 def test_one_note_per_kind_through_the_cli(tmp_path, capsys):
-    plastic = '<bsdf type="plastic"/>'
+    plastic = '<bsdf type="roughdielectric"><float name="alpha" value="0.05"/></bsdf>'
     path = write(tmp_path, f'<shape type="sphere">{plastic}</shape><shape type="sphere">'
                            f'<point name="center" x="3" y="0" z="0"/>{plastic}</shape>'
                            '<shape type="sphere"><bsdf type="diffuse"><float name="bogus" '
                            'value="1"/></bsdf></shape>')
     assert main(["--info", str(path)]) == 0
     notes = "\n".join(json.loads(capsys.readouterr().out)["notes"])
-    assert notes.count("layered plastic") == 1
+    assert notes.count("drawn smooth") == 1
     assert "'bogus' ignored" in notes
     assert notes.count("outside a twosided") == 1
 
