@@ -11,14 +11,17 @@ Imported first by the ptrace package, before any kernel is decorated, so that:
 Each of these says so in one note (cache_notes(); render() warns with them once).
 """
 import hashlib
+import json
 import os
 import stat
 import tempfile
 
-# The wait the first-run notice announces: a small render's compile time with an empty cache on
-# the 2-core development machine, rounded (the commit that last set it gives the command and
-# the runs; re-measure it when the kernels change much).
-COLD_COMPILE_SECONDS = 30
+# The wait the cold notice announces until this machine has measured its own (remember_compile):
+# a small render's compile with an empty cache ("first"), and another backend's on the first
+# one's cache ("backend"), on the 2-core development machine, rounded (the commit that last set
+# them gives the command and the runs; re-measure them when the kernels change much).
+COLD_COMPILE_SECONDS = {"first": 30, "backend": 5}
+_MEASURED = "ptrace-compile-seconds.json"   # in the cache folder of the stage cold() reads
 
 _NOTES = {}   # kind -> (its first note, the files it concerned), in the order they happened
 
@@ -317,19 +320,62 @@ except (ImportError, AttributeError):   # numba's internals moved: its own behav
 configure_cache()
 
 
-def is_cold(record_class, dispatcher=None):
-    """True if numba's cache has no compiled render kernel for this backend's record type (the
-    kernel that dominates compile time; the others come and go with it). Reads only the cache's
-    index; any surprise in numba's internals counts as warm (no message rather than a wrong
-    one)."""
-    if dispatcher is None:   # the stage compiled once per backend (and first)
-        from .kernel.trace import closest_stage as dispatcher
+def _closest_stage():
+    """The stage compiled once per backend (and first): the one whose cache cold() reads."""
+    from .kernel.trace import closest_stage
+    return closest_stage
+
+
+def cold(record_class, dispatcher=None):
+    """What numba's cache lacks of this backend's render kernels: None (they are cached),
+    "backend" (another backend's are: the stages that every backend shares come from the cache)
+    or "first" (none are). Reads only the cache's index, of `dispatcher` (default the closest-hit
+    stage, which dominates the backend's compile); any surprise in numba's internals counts as
+    cached (no message rather than a wrong one)."""
+    dispatcher = _closest_stage() if dispatcher is None else dispatcher
     try:
         index = dispatcher._cache._cache_file._load_index()
     except Exception:   # noqa: BLE001 - numba internals: never let a notice break a render
-        return False
-    for key in index:
-        signature = key[0]
-        if any(getattr(t, "instance_class", None) is record_class for t in signature):
-            return False
-    return True
+        return None
+    classes = {getattr(t, "instance_class", None) for key in index for t in key[0]}
+    if record_class in classes:
+        return None
+    return "backend" if classes - {None} else "first"
+
+
+def _measured_path(dispatcher=None):
+    dispatcher = _closest_stage() if dispatcher is None else dispatcher
+    return os.path.join(dispatcher._cache._cache_path, _MEASURED)
+
+
+def compile_estimate(kind, dispatcher=None):
+    """The seconds a cold compile of `kind` (cold()'s "first" or "backend") takes here: the last
+    one measured on this cache (remember_compile), else COLD_COMPILE_SECONDS'."""
+    try:
+        with open(_measured_path(dispatcher)) as file:
+            seconds = float(json.load(file)[kind])
+        if 0.0 < seconds < 1e5:
+            return seconds
+    except Exception:   # noqa: BLE001 - none measured, or a file not ours: the default
+        pass
+    return float(COLD_COMPILE_SECONDS[kind])
+
+
+def remember_compile(kind, seconds, dispatcher=None):
+    """Keep a cold compile's measured seconds beside numba's cache, for the next cold notice of
+    the same kind (written whole or not at all; a read-only cache keeps nothing)."""
+    try:
+        path = _measured_path(dispatcher)
+        try:
+            with open(path) as file:
+                measured = {k: v for k, v in json.load(file).items()
+                            if k in COLD_COMPILE_SECONDS}
+        except Exception:   # noqa: BLE001 - none yet, or unreadable: start again
+            measured = {}
+        measured[kind] = round(float(seconds), 1)
+        temporary = f"{path}.{os.getpid()}.tmp"
+        with open(temporary, "w") as file:
+            json.dump(measured, file)
+        os.replace(temporary, path)
+    except Exception:   # noqa: BLE001 - a notice's estimate never breaks a render
+        pass

@@ -4,6 +4,7 @@ sends tiles of the same passes to workers that trace them through their own Rend
 import time
 
 from ..guiding import combine, train
+from ..jit import remember_compile
 from .tiles import RenderJob
 
 
@@ -41,6 +42,9 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
         interrupted = True
     # the records were the first part of the render's seconds
     render_seconds = job.records_seconds + time.perf_counter() - start
+    seconds, compiled = phases.compiled_so_far()
+    if job.cold is not None and compiled and not interrupted:   # for the next cold notice
+        remember_compile(job.cold, seconds)
     return dict(build_seconds=job.build_seconds, render_seconds=render_seconds,
                 rays=job.rays_traced, accel=job.backend.stats(), nonfinite=nonfinite,
                 interrupted=interrupted, **({} if guiding is None else {"guiding": guiding}))

@@ -17,7 +17,7 @@ import numpy as np
 import accel
 
 from ..integrator import camera_record, scene_records
-from ..jit import COLD_COMPILE_SECONDS, is_cold
+from ..jit import cold, compile_estimate
 from ..kernel import wavefront
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
@@ -140,6 +140,8 @@ class RenderJob:
     same; they differ only in where the blocks of pixels go. Never pickled: each process builds
     its own (RenderJob.build). rays_traced counts the rays of every trace() so far."""
 
+    cold = None   # what numba's cache lacked when RenderJob.build made it (ptrace.jit.cold)
+
     def __init__(self, scene, backend, settings, camera, records=None):
         """A job on a built backend; records: the scene's records (scene_records) for these
         settings' choice of light tree, or None to make them here."""
@@ -169,9 +171,12 @@ class RenderJob:
         records_seconds are the wall time of the build and of the records."""
         lap = lap if lap is not None else (lambda phase: None)
         lap("compile")
-        if notice is not None:
-            if is_cold(accel.record_class(settings.accel)):
-                notice(f"compiling kernels (first run only, about {COLD_COMPILE_SECONDS} s)")
+        cold_kernels = cold(accel.record_class(settings.accel))
+        if notice is not None and cold_kernels is not None:
+            estimate = f"about {compile_estimate(cold_kernels):.0f} s"
+            notice(f"compiling kernels (first run only, {estimate})" if cold_kernels == "first"
+                   else f"compiling the {settings.accel} backend's kernels (first run with it "
+                        f"only, {estimate})")
         lap("build")
         start = time.perf_counter()
         backend = accel.build(settings.accel, scene.geometry, **settings.accel_options())
@@ -180,6 +185,7 @@ class RenderJob:
         start = time.perf_counter()
         job = cls(scene, backend, settings, camera)
         job.build_seconds, job.records_seconds = build_seconds, time.perf_counter() - start
+        job.cold = cold_kernels   # what the cache lacked: ptrace.jit.cold
         return job
 
     def reused(self, settings, camera):

@@ -105,5 +105,11 @@ class Phases:
                 event.unregister(kind, self._clock)
             self.counts["compiled"] = self._clock.compiled
 
+    def compiled_so_far(self):
+        """(seconds, functions) of numba's compiling from the first enter until now."""
+        if self._running is not None:
+            self._close()
+        return self.seconds.get("compile", 0.0), self._clock.compiled if self._clock else 0
+
     def count(self, name, n=1):
         self.counts[name] = self.counts.get(name, 0) + n

@@ -193,7 +193,7 @@ def _cache_without_the_render_kernel(cache_dir):
     cached kernels of ptrace and accel except the wavefront's closest-hit stage: that stage is
     what ptrace's cold check looks for (the default loop's kernel compiled once per backend), so
     a render without it prints the cold notice and compiles only that stage (its callees load
-    from the cache), not every kernel again."""
+    from the cache), not every kernel again. Returns that stage's folder in the cache."""
     import shutil
 
     from numba.core.caching import UserProvidedCacheLocator
@@ -212,6 +212,9 @@ def _cache_without_the_render_kernel(cache_dir):
                 if name.endswith((".nbi", ".nbc")) and not name.startswith(
                         "trace.closest_stage-"):
                     shutil.copy2(os.path.join(source, name), target / name)
+        if module is ptrace.kernel.trace:
+            stage_folder = target
+    return stage_folder
 
 
 @pytest.mark.slow
@@ -225,16 +228,21 @@ def test_a_cold_cache_says_it_is_compiling_and_a_warm_one_does_not(tmp_path):
     The render path-traces, so the warm run loads the shading and hit stages too, closures of
     numba functions that numba alone never finds in its cache (ptrace.jit)."""
     cache = tmp_path / "cache"
-    _cache_without_the_render_kernel(cache)
+    # a cold compile measured here before: the notice quotes it, and this one replaces it
+    measured = _cache_without_the_render_kernel(cache) / "ptrace-compile-seconds.json"
+    measured.write_text('{"first": 12.3, "backend": 4.5}')
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
     args = [sys.executable, "-m", "ptrace", "-s", "1", "-m", "2", "-r", "8", "6", "-f",
             str(tmp_path / "x.png"), str(SHIPPED)]
     cold = subprocess.run(args, env=env, capture_output=True, text=True, timeout=600)
     assert cold.returncode == 0, cold.stderr
-    assert cold.stderr.count("ptrace: compiling kernels (first run only") == 1, cold.stderr
+    assert cold.stderr.count("ptrace: compiling kernels (first run only, about 12 s)") == 1, \
+        cold.stderr
     # and then how long it took, on a line of its own, left out of the summary's seconds
     compiled = re.search(r"^ptrace: compiled kernels in ([0-9.]+) s", cold.stderr, re.M)
     assert compiled, cold.stderr
+    kept = json.loads(measured.read_text())
+    assert kept["backend"] == 4.5 and abs(kept["first"] - float(compiled.group(1))) <= 0.1
     render = re.search(r" render ([0-9.]+) s rays", cold.stdout)
     build = re.search(r" build ([0-9.]+) s", cold.stdout)
     assert render and build, cold.stdout

@@ -209,3 +209,48 @@ def test_a_closure_of_a_numba_function_is_found_in_the_cache_by_the_next_process
     assert first.stdout.split() == ["3", "4", "0", "0"], first.stderr
     again = python(with_ptrace, env, tmp_path)
     assert again.stdout.split() == ["3", "4", "1", "1"], again.stderr   # both from the cache
+
+
+class _Index:
+    """A stand-in for a numba dispatcher, as ptrace.jit reads one: its cache's index (keys whose
+    first item is a signature) and its cache folder."""
+
+    def __init__(self, signatures, folder=".", broken=False):
+        self._cache = self
+        self._cache_file = self
+        self._cache_path = str(folder)
+        self.signatures, self.broken = signatures, broken
+
+    def _load_index(self):
+        if self.broken:
+            raise OSError("unreadable")
+        return {(signature, "target", "key"): "entry" for signature in self.signatures}
+
+
+def test_cold_tells_a_first_compile_from_another_backends():
+    from collections import namedtuple
+
+    from numba import typeof
+
+    from ptrace.jit import cold
+    first, other = namedtuple("First", ["a"]), namedtuple("Other", ["a"])
+    cached = _Index([(typeof(first(1.0)), typeof(1.0))])
+    assert cold(first, cached) is None                   # this backend's kernel is cached
+    assert cold(other, cached) == "backend"              # another backend's is
+    assert cold(other, _Index([])) == "first"            # none is
+    assert cold(other, _Index([], broken=True)) is None  # no message rather than a wrong one
+
+
+def test_the_cold_notice_quotes_the_compile_measured_here(tmp_path):
+    from ptrace.jit import COLD_COMPILE_SECONDS, compile_estimate, remember_compile
+    stage = _Index([], tmp_path)
+    assert compile_estimate("first", stage) == COLD_COMPILE_SECONDS["first"]   # none measured
+    remember_compile("backend", 4.26, stage)
+    remember_compile("first", 17.04, stage)
+    assert (compile_estimate("backend", stage), compile_estimate("first", stage)) == (4.3, 17.0)
+    (tmp_path / "ptrace-compile-seconds.json").write_text("{not json")
+    assert compile_estimate("backend", stage) == COLD_COMPILE_SECONDS["backend"]
+    remember_compile("first", 9.5, stage)   # an unreadable file is started again
+    assert compile_estimate("first", stage) == 9.5
+    assert [p.name for p in tmp_path.iterdir()] == ["ptrace-compile-seconds.json"]
+    remember_compile("first", 1.0, _Index([], tmp_path / "missing"))   # nowhere to keep it
