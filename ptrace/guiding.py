@@ -344,8 +344,10 @@ def relative_variance(sum_l, sum_l2, count):
 
 def auto_schedule(spp):
     """--guiding auto's iterations: PROBE unguided passes, then guided ones of PROBE, 2 PROBE,
-    ... while the total stays within TRAIN_SHARE of spp (none if the probe does not fit)."""
-    if PROBE > TRAIN_SHARE * spp:
+    ... while the total stays within TRAIN_SHARE of spp (none, auto off, below 32 spp: the
+    probe's records and the trial cost about as much as 2 unguided samples, too much of
+    fewer)."""
+    if 2 * PROBE > TRAIN_SHARE * spp:
         return []
     out, total, n = [PROBE], PROBE, PROBE
     while total + n <= TRAIN_SHARE * spp and total + n < spp:
