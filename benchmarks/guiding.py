@@ -1,16 +1,23 @@
 """Path guiding: relative MSE against wall time (training included) for unguided ptrace, guided
-ptrace (--guiding on) and Mitsuba 3's `path` (llvm_ad_rgb, its independent sampler) on the
-project's indirectly lit scenes (scenes/guiding_*.xml), with one chart per scene.
+ptrace (--guiding on), --guiding auto and Mitsuba 3's `path` (llvm_ad_rgb, its independent
+sampler) on the project's indirectly lit scenes (scenes/guiding_*.xml), with one chart per
+scene, and unguided against auto on two course Cornell boxes (where next-event estimation does
+the work, so auto must not lose: at most 1.05x the unguided relative MSE x time).
 
     python -m benchmarks.guiding [--quick] [--size N] [--spp 16,32,64] [--reference-spp N]
+                                 [--repeats R]
 
 The reference is ptrace's unguided render at --reference-spp (Mitsuba and ptrace agree on these
-scenes' means: their lamps reflect nothing). Each point is one render on 2 threads after a
-warm-up render (compiled kernels); relative MSE is the mean over pixels of the squared error
-over (reference^2 + 1e-3), averaged over R, G, B. Writes benchmarks/results/guiding.md and
-guiding_<scene>.png.
+scenes' means: their lamps reflect nothing). Each point is rendered R times on 2 threads after
+warm-up renders (compiled kernels), the modes in turns within each repeat, and its seconds are
+the median (the machine may be shared: the relative MSE at equal samples is the firmer figure;
+the images do not change between repeats); relative MSE is the mean over pixels of the squared
+error over (reference^2 + 1e-3), averaged over R, G, B. Writes benchmarks/results/guiding.md
+and guiding_<scene>.png.
 """
 import argparse
+import os
+import statistics
 import time
 from pathlib import Path
 
@@ -21,21 +28,23 @@ from . import report
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 # (file, ptrace's -m; Mitsuba's max_depth is one more)
 CASES = (("guiding_ceiling.xml", 5), ("guiding_door.xml", 7))
+# course boxes: (path under PTRACE_SCENES, -m, resolution)
+COURSE = (("sky/CBspheres_lambertian.dae", 5, (100, 75)), ("sky/CBbunny.dae", 5, (100, 75)))
+MODES = ("off", "on", "auto")
 
 
 def relative_mse(image, reference):
     return float(np.mean((image - reference) ** 2 / (reference ** 2 + 1e-3)))
 
 
-def ptrace_point(scene, spp, depth, size, guiding, reference):
+def ptrace_point(scene, spp, depth, resolution, guiding, reference):
     import ptrace
     stats = {}
     start = time.perf_counter()
-    image = ptrace.render(scene, spp=spp, max_depth=depth, resolution=(size, size), threads=2,
+    image = ptrace.render(scene, spp=spp, max_depth=depth, resolution=resolution, threads=2,
                           guiding=guiding, stats=stats, seed=1)
     seconds = time.perf_counter() - start
-    train = stats.get("guiding", {}).get("training_seconds", 0.0)
-    return seconds, relative_mse(image, reference), train
+    return seconds, relative_mse(image, reference), stats.get("guiding", {})
 
 
 def mitsuba_point(path, spp, size, reference):
@@ -46,16 +55,41 @@ def mitsuba_point(path, spp, size, reference):
     return time.perf_counter() - start, relative_mse(image, reference)
 
 
+def measure(scene, spps, depth, resolution, reference, modes, repeats):
+    """{(mode, spp): (median seconds, relMSE, guiding figures, median training seconds)}, the
+    modes in turns within each repeat."""
+    for guiding in modes:   # warm-up: compile (auto's trial too)
+        ptrace_point(scene, 16, depth, resolution, guiding, reference)
+    runs = {}
+    for _ in range(repeats):
+        for spp in spps:
+            for guiding in modes:
+                runs.setdefault((guiding, spp), []).append(
+                    ptrace_point(scene, spp, depth, resolution, guiding, reference))
+    return {key: (statistics.median(r[0] for r in points), points[-1][1], points[-1][2],
+                  statistics.median(r[2].get("training_seconds", 0.0) for r in points))
+            for key, points in runs.items()}
+
+
+def auto_text(figures):
+    if not figures.get("decision"):
+        return "off (too few samples)"
+    d = figures["decision"]
+    return f"{'on' if figures['guided'] else 'off'} ({d['ratio']:.2f})"
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m benchmarks.guiding")
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--spp", default=None)
     parser.add_argument("--reference-spp", type=int, default=None)
+    parser.add_argument("--repeats", type=int, default=None)
     args = parser.parse_args(argv)
     size = args.size or (32 if args.quick else 128)
-    spps = [int(s) for s in (args.spp or ("4,8" if args.quick else "16,32,64,128")).split(",")]
-    reference_spp = args.reference_spp or (32 if args.quick else 1024)
+    spps = [int(s) for s in (args.spp or ("16,32" if args.quick else "16,32,64,128")).split(",")]
+    reference_spp = args.reference_spp or (64 if args.quick else 1024)
+    repeats = args.repeats or (1 if args.quick else 3)
     import ptrace
     try:
         import mitsuba as mi
@@ -64,38 +98,66 @@ def main(argv=None):
         mi = None
     lines = [report.header("Path guiding: relative MSE against wall time"),
              f"{size}x{size}, reference: ptrace unguided at {reference_spp} spp; 2 threads; "
-             "seconds include training (guided) and exclude compiling (a warm-up render runs "
-             "first). Mitsuba: `path`, llvm_ad_rgb, max_depth one more than ptrace's -m.", ""]
+             "seconds include training (guided, auto) and exclude compiling (warm-up renders "
+             f"run first); medians of {repeats} runs, the modes in turns. Mitsuba: `path`, "
+             "llvm_ad_rgb, max_depth one more than ptrace's -m. Ratios are to unguided ptrace "
+             "at the same spp: relMSE at equal samples, and relMSE x seconds (equal time). "
+             "auto: its choice and its trial's ratio (guided error x cost over unguided's; "
+             "on below 0.8).", ""]
     for name, depth in CASES:
         path = SCENES / name
         scene = ptrace.load(str(path), defines={"res": str(size)})   # the whole view
+        resolution = (size, size)
         reference = ptrace.render(scene, spp=reference_spp, max_depth=depth,
-                                  resolution=(size, size), seed=99)
-        for guiding in ("off", "on"):   # warm-up: compile
-            ptrace.render(scene, spp=4, max_depth=depth, resolution=(size, size),
-                          guiding=guiding)
-        rows = {"unguided": [], "guided": [], "mitsuba": []}
+                                  resolution=resolution, seed=99)
+        points = measure(scene, spps, depth, resolution, reference, MODES, repeats)
+        rows = {"unguided": [], "guided": [], "auto": [], "mitsuba": []}
         lines += [f"## {name} (-m {depth})", "",
                   "| spp | unguided s | unguided relMSE | guided s (training s) | guided relMSE "
-                  "| guided/unguided relMSE x time | mitsuba s | mitsuba relMSE |",
-                  "|---|---|---|---|---|---|---|---|"]
+                  "| guided/unguided relMSE | guided/unguided relMSE x s | auto s | auto "
+                  "relMSE x s / unguided | auto | mitsuba s | mitsuba relMSE |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for spp in spps:
-            off = ptrace_point(scene, spp, depth, size, "off", reference)
-            on = ptrace_point(scene, spp, depth, size, "on", reference)
-            rows["unguided"].append(off[:2])
-            rows["guided"].append(on[:2])
-            mit = ("-", "-")
+            off, on, auto = (points[(m, spp)] for m in MODES)
+            for label, p in (("unguided", off), ("guided", on), ("auto", auto)):
+                rows[label].append(p[:2])
+            mit_text = "- | -"
             if mi is not None:
                 mit = mitsuba_point(path, spp, size, reference)
                 rows["mitsuba"].append(mit)
-            ratio = (on[0] * on[1]) / (off[0] * off[1])
-            mit_text = f"{mit[0]:.2f} | {mit[1]:.4f}" if mi is not None else "- | -"
-            lines.append(f"| {spp} | {off[0]:.2f} | {off[1]:.4f} | {on[0]:.2f} ({on[2]:.2f}) "
-                         f"| {on[1]:.4f} | {ratio:.2f} | {mit_text} |")
+                mit_text = f"{mit[0]:.2f} | {mit[1]:.4f}"
+            lines.append(
+                f"| {spp} | {off[0]:.2f} | {off[1]:.4f} | {on[0]:.2f} ({on[3]:.2f}) "
+                f"| {on[1]:.4f} | {on[1] / off[1]:.2f} | {on[0] * on[1] / (off[0] * off[1]):.2f} "
+                f"| {auto[0]:.2f} | {auto[0] * auto[1] / (off[0] * off[1]):.2f} "
+                f"| {auto_text(auto[2])} | {mit_text} |")
             print(lines[-1], flush=True)
         lines.append("")
         chart(rows, report.destination(f"guiding_{path.stem}.png"), name)
         lines += [f"![{name}](guiding_{path.stem}.png)", ""]
+    root = Path(os.environ.get("PTRACE_SCENES", report.RESULTS.parents[2] / "shared" / "scenes"
+                               / "cs184"))
+    course = [c for c in COURSE if (root / c[0]).exists()]
+    if course:
+        spp = max(spps) if args.quick else 64
+        lines += [f"## Course boxes under --guiding auto ({spp} spp, reference unguided at "
+                  f"{reference_spp // 2} spp)", "",
+                  "| scene | unguided s | unguided relMSE | auto s (training s) | auto relMSE "
+                  "| auto/unguided relMSE x s | auto | guided/unguided relMSE |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for relpath, depth, resolution in course:
+            scene = ptrace.load(str(root / relpath))
+            reference = ptrace.render(scene, spp=reference_spp // 2, max_depth=depth,
+                                      resolution=resolution, seed=99)
+            points = measure(scene, [spp], depth, resolution, reference, MODES,
+                             max(repeats, 5) if not args.quick else 1)
+            off, on, auto = (points[(m, spp)] for m in MODES)
+            lines.append(f"| {Path(relpath).stem} {resolution[0]}x{resolution[1]} -m {depth} "
+                         f"| {off[0]:.2f} | {off[1]:.5f} | {auto[0]:.2f} ({auto[3]:.2f}) "
+                         f"| {auto[1]:.5f} | {auto[0] * auto[1] / (off[0] * off[1]):.3f} "
+                         f"| {auto_text(auto[2])} | {on[1] / off[1]:.2f} |")
+            print(lines[-1], flush=True)
+        lines.append("")
     out = report.destination("guiding.md")
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(out)

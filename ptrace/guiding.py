@@ -24,15 +24,49 @@ import threading
 import numpy as np
 from numba import njit
 
-from .kernel.guide import GuideArrays, guide_leaf, sphere_to_square
+from .kernel.guide import (
+    R_BSDF,
+    R_DX,
+    R_ENERGY,
+    R_F,
+    R_NX,
+    GuideArrays,
+    folded_pdf,
+    guide_leaf,
+    sphere_to_square,
+    uniform_guide,
+)
 
 RESOLUTION = 64          # grid cells per side of a leaf's directions: quadtree depth <= 6
 LEVELS = 6               # log2(RESOLUTION)
 MAX_LEAVES = 1024        # spatial leaves at most
 SPLIT_SAMPLES = 4000     # a leaf splits past this many records x sqrt(the iteration's passes)
+SPLIT_PIXELS = 4         # ... or past (pixels / SPLIT_PIXELS) x sqrt(passes), if fewer
+SPLIT_LEAST = 2000       #     but at least this many
 ENERGY_SHARE = 0.01      # a quadrant is divided above this share of its leaf's energy
-ALPHA = 0.5              # the guide's share of the bounces
+ALPHA = 0.5              # the guide's share of the bounces where it is fixed (learn=False)
+SHARES = np.linspace(0.0, 0.9, 10)   # the guide's shares a spatial leaf learns from
+SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over all records
+KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
 TRAIN_SHARE = 0.25       # training passes take at most this share of -s
+CHUNK = 4                # training passes traced in one call, their records merged after it
+LEARN = True             # learn each spatial leaf's share (else ALPHA everywhere)
+# --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
+# the guide is turned off); then, on every SUBSET-th pixel, the BSDF alone renders TRIAL
+# (= PROBE) samples once and the guide they trained twice, under other scrambles of the
+# sampler; the guide stays on only if its error (its renders' squared difference) times its
+# cost (rays traced, times GUIDED_COST for the guide's own work) is below MARGIN times the
+# BSDF's (against the first iteration's image)
+PROBE = 4
+TRIAL = PROBE
+SUBSET = 16
+GUIDED_COST = 1.6          # measured: guided passes 1.6-1.7x the unguided time per ray (Zen 1)
+MARGIN = 0.8
+
+
+def split_samples(pixels):
+    """The spatial tree's split threshold (times sqrt(passes)) for an image of `pixels`."""
+    return max(SPLIT_LEAST, min(SPLIT_SAMPLES, pixels // SPLIT_PIXELS))
 
 
 def schedule(spp, first=1):
@@ -106,15 +140,51 @@ class SpatialTree:
 
 
 @njit(cache=True, nogil=True)
-def accumulate(axis, split, child, root, records, counts, grid):
-    """Each record (column of records) counted in its leaf and its energy added to the leaf's
-    grid cell of its direction, in column order."""
+def accumulate(axis, split, child, root, records, counts, grid, leaves):
+    """Each record (column of records) counted in its leaf (written to leaves) and its energy
+    added to the leaf's grid cell of its direction, in column order."""
     for k in range(records.shape[1]):
         leaf = guide_leaf(axis, split, child, root, records[0, k], records[1, k], records[2, k])
+        leaves[k] = leaf
         counts[leaf] += 1
-        x, y = sphere_to_square(records[3, k], records[4, k], records[5, k])
+        x, y = sphere_to_square(records[R_DX, k], records[R_DX + 1, k], records[R_DX + 2, k])
         cell = int(y * RESOLUTION) * RESOLUTION + int(x * RESOLUTION)
-        grid[leaf, cell] += records[6, k]
+        grid[leaf, cell] += records[R_ENERGY, k]
+
+
+@njit(cache=True)
+def learn_share(guide, leaves, kept, shares, least):
+    """Each of `leaves` spatial leaves' share of the guide: of `shares`, the one whose mixture
+    share g + (1 - share) b has the least estimated second moment of the bounce's estimate F / p
+    over the leaf's kept records (rows: leaf, F / p under the pdf p that drew it, p, the BSDF's
+    pdf b, direction, normal, position), mean of (F / p)^2 p / mixture; g is the folded pdf of
+    `guide`, the guide that drew the records (so the records did not make it: no in-sample
+    optimism). A leaf of fewer than `least` records takes the choice over all records."""
+    k = shares.shape[0]
+    moments = np.zeros((leaves + 1, k))
+    counts = np.zeros(leaves + 1, dtype=np.int64)
+    for r in range(kept.shape[1]):
+        leaf = int(kept[0, r])
+        counts[leaf] += 1
+        counts[leaves] += 1
+        x = kept[1, r]
+        if not x > 0.0:
+            continue
+        node = guide_leaf(guide.axis, guide.split, guide.child, guide.root, kept[10, r],
+                          kept[11, r], kept[12, r])
+        g = folded_pdf(guide, node, kept[4, r], kept[5, r], kept[6, r], kept[7, r], kept[8, r],
+                       kept[9, r])
+        b, p = kept[3, r], kept[2, r]
+        for a in range(k):
+            q = shares[a] * g + (1.0 - shares[a]) * b
+            m = x * x * p / q if q > 0.0 else math.inf
+            moments[leaf, a] += m
+            moments[leaves, a] += m
+    out = np.zeros(leaves)
+    best = shares[np.argmin(moments[leaves])] if counts[leaves] > 0 else 0.0
+    for leaf in range(leaves):
+        out[leaf] = shares[np.argmin(moments[leaf])] if counts[leaf] >= least else best
+    return out
 
 
 @njit(cache=True)
@@ -174,9 +244,10 @@ class Trainer:
     guides made from them. Blocks hand their records in through add (from any thread); merge,
     after a pass, sums them in (first sample, first row) order."""
 
-    def __init__(self, lower, upper, split_samples=SPLIT_SAMPLES):
+    def __init__(self, lower, upper, split_samples=SPLIT_SAMPLES, learn=None):
         self.tree = SpatialTree(lower, upper)
         self.split_samples = split_samples
+        self.learn = LEARN if learn is None else learn
         self._lock = threading.Lock()
         self._blocks = {}
         self.records = 0
@@ -188,6 +259,9 @@ class Trainer:
         SpatialTree.refine), or from zero."""
         leaves = len(self.tree.leaves())
         self.counts = np.zeros(leaves, dtype=np.int64)
+        self.kept, self.seen, self.count = [], 0, 0
+        self.stride = getattr(self, "stride", 1)   # (the last iteration's, a good first guess)
+        self.keep = origin is not None   # (the first iteration's guide learns no share)
         if origin is None:
             self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
         else:
@@ -206,16 +280,46 @@ class Trainer:
         axis, split, child, root = self._arrays
         for key in sorted(blocks):
             records = np.ascontiguousarray(blocks[key])
-            self.records += records.shape[1]
-            accumulate(axis, split, child, root, records, self.counts, self.grid)
+            n = records.shape[1]
+            self.records += n
+            leaves = np.empty(n, dtype=np.int64)
+            accumulate(axis, split, child, root, records, self.counts, self.grid, leaves)
+            if self.learn and self.keep:
+                self._keep(records, leaves)
 
-    def finish(self, passes, alpha=ALPHA):
+    def _keep(self, records, leaves):
+        """Keep every stride-th record of the iteration (by its place in merge order) for
+        learn_share, doubling the stride while more than KEEP_RECORDS are kept."""
+        first = (-self.seen) % self.stride
+        self.seen += records.shape[1]
+        pick = records[:, first::self.stride]
+        self.kept.append(np.vstack([leaves[first::self.stride][None].astype(np.float64),
+                                    pick[R_F:R_BSDF + 1], pick[R_DX:R_DX + 3],
+                                    pick[R_NX:R_NX + 3], pick[0:3]]))
+        self.count += pick.shape[1]
+        if self.count > KEEP_RECORDS:   # (the same records whatever the blocks: by index)
+            kept = np.concatenate(self.kept, axis=1)[:, ::2]
+            self.kept, self.count, self.stride = [kept], kept.shape[1], 2 * self.stride
+
+    def finish(self, passes, sampled=None, alpha=ALPHA):
         """End an iteration of `passes` passes: the guide made from its records (to sample the
-        next iteration), and the tree refined for the next one's records."""
+        next iteration), and the tree refined for the next one's records. The guide's share in
+        each spatial leaf is learnt from the records against `sampled`, the guide that drew
+        them (learn_share), or is `alpha` everywhere where there is none (the first iteration)
+        or without learning."""
         self.merge()
         q_child, q_energy, roots = build_quadtrees(self.grid, ENERGY_SHARE)
         axis, split, child, root = self.tree.arrays(roots)
-        guide = GuideArrays(axis, split, child, root, q_child, q_energy, float(alpha), 1)
+        share = np.ones(q_child.shape[0])
+        guide = GuideArrays(axis, split, child, root, q_child, q_energy, share, 1.0, 1)
+        self.shares = np.full(roots.shape[0], float(alpha))
+        if self.learn and sampled is not None:
+            kept = np.concatenate(self.kept, axis=1) if self.kept else np.zeros((13, 0))
+            kept = np.ascontiguousarray(kept)
+            self.shares = learn_share(sampled, roots.shape[0], kept, SHARES, SHARE_RECORDS)
+            share[roots] = self.shares
+        else:
+            guide = guide._replace(alpha=float(alpha))
         self.begin(self.tree.refine(self.counts, self.split_samples * math.sqrt(passes)))
         return guide
 
@@ -238,60 +342,152 @@ def relative_variance(sum_l, sum_l2, count):
     return float(np.mean(variance)) / (level * level) if level > 0 else math.inf
 
 
+def auto_schedule(spp):
+    """--guiding auto's iterations: PROBE unguided passes, then guided ones of PROBE, 2 PROBE,
+    ... while the total stays within TRAIN_SHARE of spp (none, auto off, below 32 spp: the
+    probe's records and the trial cost about as much as 2 unguided samples, too much of
+    fewer)."""
+    if 2 * PROBE > TRAIN_SHARE * spp:
+        return []
+    out, total, n = [PROBE], PROBE, PROBE
+    while total + n <= TRAIN_SHARE * spp and total + n < spp:
+        out.append(n)
+        total += n
+        n *= 2
+    return out
+
+
+def relative_error(a, b, level):
+    """Half the mean squared difference of two independent estimates a, b of the same image
+    (N, 3) over (level^2 + 1e-3), level the image's estimate: the relative MSE of either if
+    they are alike."""
+    return float(np.mean((a - b) ** 2 / (level ** 2 + 1e-3))) / 2.0
+
+
+def trial(job, pixel_x, pixel_y, guide, probe):
+    """Render TRIAL samples of every SUBSET-th pixel with the BSDF alone and with `guide`,
+    under other scrambles of the sampler (other seeds), and compare at equal cost: (guided
+    error x cost) / (unguided error x cost), and the figures. `probe` is the unguided first
+    iteration's image (TRIAL samples, a net of the render's own sequence), independent of
+    both: the mean squared difference of two independent unbiased images is the sum of their
+    errors, so the BSDF render's against the probe is twice the unguided error, and the guided
+    render's against the probe is the guided error plus the unguided one. The sampler is the
+    render's, so its stratification is in both errors."""
+    wavefront = job.wavefront
+    options = wavefront.options
+    rows = np.arange(0, pixel_x.shape[0], SUBSET)
+    sub_x, sub_y = pixel_x[rows], pixel_y[rows]
+    index = np.arange(rows.shape[0])
+    from .rendering.tiles import new_sums
+
+    half = rows.shape[0] // 2
+    parts = ((0, half), (half, rows.shape[0]))
+
+    def render(seed, alpha):
+        wavefront.options = options._replace(seed=(options.seed + seed) % (1 << 31))
+        wavefront.guide = guide._replace(alpha=alpha, record=0)
+        sums = new_sums(rows.shape[0])
+        before = job.rays_traced
+        # two halves on two threads (a call of fewer pixels than a block runs on one)
+        list(pool.map(lambda p: job.trace(sub_x[p[0]:p[1]], sub_y[p[0]:p[1]], 0, TRIAL, sums,
+                                          index[p[0]:p[1]]), parts))
+        return sums[0] / TRIAL, job.rays_traced - before
+
+    from concurrent.futures import ThreadPoolExecutor
+    pool = ThreadPoolExecutor(2)
+    try:
+        u1, ru = render(1000003, 0.0)
+        g1, rg = render(2000003, 1.0)
+    finally:
+        wavefront.options = options
+        pool.shutdown()
+    u2 = probe[rows]
+    level = (u1 + u2 + g1) / 3.0
+    unguided = relative_error(u1, u2, level)
+    guided = max(2.0 * relative_error(g1, u2, level) - unguided, 0.0)
+    cost = GUIDED_COST * rg / max(ru, 1)
+    ratio = guided * cost / unguided if unguided > 0 else math.inf
+    return ratio, dict(unguided_error=unguided, guided_error=guided, cost=cost, ratio=ratio)
+
+
 def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     """Train job's guide (its wavefront must be guided) on the pixels: the iterations of
-    schedule(spp) (under mode "auto", from 2 passes, the first unguided so the guided ones'
-    variance can be compared with it), on samples spp - training .. spp - 1. Sets the guide
-    the rest of the render samples with (under "auto", alpha 0 when the last guided iteration's
-    relative_variance is not below the first's). Returns (training samples, figures, images):
-    images, for combine, holds each guided iteration's samples, relative variance and mean
-    radiance per pixel."""
+    schedule(spp) (under mode "auto", auto_schedule(spp)), the first unguided, on the samples
+    from spp down (the last iteration's lowest), so the final passes render the first ones.
+    Each iteration's records make the guide the next one samples (its share per spatial leaf
+    learnt, Trainer.finish). Under "auto", after the unguided first iteration, trial() decides:
+    if the guide does not lower the error at equal cost by MARGIN, training stops and the
+    guide is off for the rest of the render, whose final passes with the first iteration's
+    are then the unguided render of spp - PROBE ... (its samples 0 .. spp - 1). Returns
+    (training samples, figures, images): images, for combine, holds each iteration's samples,
+    relative variance and mean radiance per pixel, or the first iteration's sums to add."""
     from .rendering.tiles import new_sums
     wavefront = job.wavefront
-    plan = schedule(spp, 2 if mode == "auto" else 1)
-    total = sum(plan)
+    plan = auto_schedule(spp) if mode == "auto" else schedule(spp)
     bounds = job.scene.geometry.bounds()
-    figures = dict(iterations=plan, training_samples=total, records=0, guide_bytes=0,
+    figures = dict(iterations=plan, training_samples=sum(plan), records=0, guide_bytes=0,
                    variance=[], guided=True)
     images = []
     if not plan or bounds is None:
+        if mode == "auto":
+            wavefront.guide = uniform_guide()
+            figures.update(guided=False, iterations=[], training_samples=0)
         return 0, figures, images
-    trainer = Trainer(*bounds)
+    trainer = Trainer(*bounds, split_samples=split_samples(pixel_x.shape[0]))
     rows = np.arange(pixel_x.shape[0])
-    first = spp - total
-    wavefront.guide = GuideArrays(*wavefront.guide[:6], 0.0, 1)
+    top = spp
+    wavefront.guide = uniform_guide(0.0, True)
     wavefront.trainer = trainer
+    done, guide = [], None
     try:
         for passes in plan:
             sums = new_sums(pixel_x.shape[0])
-            for s in range(passes):
-                job.trace(pixel_x, pixel_y, first, 1, sums, rows, on_chunk)
+            top -= passes
+            for s in range(0, passes, CHUNK):   # (CHUNK passes' records held at once)
+                job.trace(pixel_x, pixel_y, top + s, min(CHUNK, passes - s), sums, rows,
+                          on_chunk)
                 trainer.merge()
-                first += 1
+            done.append(passes)
             variance = relative_variance(*sums[1:])
             figures["variance"].append(variance)
-            if wavefront.guide.alpha > 0 and math.isfinite(variance):
+            if math.isfinite(variance):
                 images.append((passes, variance, sums[0] / np.maximum(sums[3], 1)[:, None]))
-            wavefront.guide = trainer.finish(passes)
+            guide = trainer.finish(passes, guide if len(done) > 1 else None)
+            if mode == "auto" and len(done) == 1:
+                wavefront.trainer = None
+                ratio, figures["decision"] = trial(job, pixel_x, pixel_y, guide,
+                                                   sums[0] / np.maximum(sums[3], 1)[:, None])
+                wavefront.trainer = trainer
+                if not ratio < MARGIN:   # the unguided render, with this iteration's samples
+                    figures["guided"] = False
+                    images = [sums]
+                    break
+            wavefront.guide = guide
     finally:
         wavefront.trainer = None
-    guide = wavefront.guide
-    if mode == "auto" and len(plan) > 1 and \
-            not figures["variance"][-1] < figures["variance"][0]:
-        figures["guided"] = False
-    wavefront.guide = GuideArrays(*guide[:6], ALPHA if figures["guided"] else 0.0, 0)
+    total = sum(done)
     figures.update(records=trainer.records, guide_bytes=guide_bytes(guide),
-                   leaves=len(trainer.tree.leaves()))
-    return total, figures, images if figures["guided"] else []
+                   leaves=len(trainer.tree.leaves()), iterations=done, training_samples=total)
+    if figures["guided"]:
+        wavefront.guide = guide._replace(record=0)
+        figures["share_mean"] = float(np.mean(trainer.shares))
+    else:
+        wavefront.guide = guide._replace(alpha=0.0, record=0)
+    return total, figures, images
 
 
 def combine(sums, images):
-    """The final passes' sums (rgb, l, l2, count) rescaled in place so that their mean per
-    pixel is the combination of their image with the training iterations' images, each
-    weighted by its samples over its relative_variance (the 2019 course's inverse-variance
-    combination); the counts stay the final passes'. Returns the weights, the final image's
-    last."""
+    """The unguided first iteration's sums added to the final passes' (when --guiding auto
+    turned the guide off), or else the final passes' sums (rgb, l, l2, count) rescaled in
+    place so that their mean per pixel is the combination of their image with the training
+    iterations' images, each weighted by its samples over its relative_variance (the 2019
+    course's inverse-variance combination); the counts stay the final passes'. Returns the
+    weights, the final image's last."""
     sum_rgb, sum_l, sum_l2, count = sums
+    if len(images) == 1 and len(images[0]) == 4:   # the unguided first iteration's sums
+        for total, part in zip(sums, images[0]):
+            total += part
+        return []
     variance = relative_variance(sum_l, sum_l2, count)
     if not images or not math.isfinite(variance) or not variance > 0:
         return []

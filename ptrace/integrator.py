@@ -74,7 +74,6 @@ OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primiti
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
 DIMS_PER_VERTEX = 1 << 24
 DIM_BSDF, DIM_GLASS, DIM_RR, DIM_LIGHT = 0, 2, 3, 8
-DIM_GUIDE = 4           # (--guiding) the choice between the guide and the BSDF
 DIM_LENS = 2            # the camera vertex's (vertex 0) lens sample; 0 and 1 are the pixel jitter
 DIM_SELECT = 1 << 23    # the independent sampler's dimensions for choosing an emissive primitive
 DIM_CHOOSE = 4          # (power, bvh) key offsets from DIM_LIGHT: the choice of light, and

@@ -194,7 +194,7 @@ MUTANTS = {
         [GUIDE_TEST, "-k", "means_agree"]),
     "guide-chosen-at-half-alpha": (
         "the guide is chosen with probability alpha / 2 while the pdf mixes at alpha",
-        [(SHADING, "base + DIM_GUIDE) < mix:", "base + DIM_GUIDE) < 0.5 * mix:")],
+        [(SHADING, "                if u1 < mix:", "                if u1 < 0.5 * mix:")],
         [GUIDE_TEST, "-k", "means_agree"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "

@@ -21,15 +21,24 @@ from numba import njit
 from .layout import MAT, VERTEX, R
 
 GuideArrays = namedtuple("GuideArrays", ["axis", "split", "child", "root", "q_child",
-                                         "q_energy", "alpha", "record"])
+                                         "q_energy", "share", "alpha", "record"])
+# share: per quadtree root node (what guide_leaf returns), the guide's learnt share of that
+# spatial leaf's bounces; a vertex draws from the guide with probability alpha * share[leaf],
+# and alpha 0 turns the guide off (the kernels then skip it: no lookup, no pdf).
 
 # the rows of a wave's vertex history (one column per path slot and recorded vertex): the
 # vertex, the unit direction it left by, the mixture pdf of that direction, the throughput after
-# the bounce, the path's radiance when the bounce ray left, and whether the column is set
+# the bounce, the path's radiance when the bounce ray left, whether the column is set, the
+# bounce's f cos / pdf (R, G, B), the BSDF's own pdf of the direction and the shading normal
 (H_PX, H_PY, H_PZ, H_DX, H_DY, H_DZ, H_PDF, H_TR, H_TG, H_TB, H_LR, H_LG, H_LB,
- H_VALID) = range(14)
-HISTORY_ROWS = 14
-RECORD_ROWS = 7     # a record: position (3), unit direction (3), luminance of Li / pdf
+ H_VALID, H_MR, H_MG, H_MB, H_BSDF, H_NX, H_NY, H_NZ) = range(21)
+HISTORY_ROWS = 21
+# a record: position (3), unit direction (3), luminance of Li / pdf (the guide's energy), the
+# bounce's contribution over its pdf F / p (luminance), the mixture pdf p, the BSDF's pdf, and
+# the shading normal (3): the last five learn the guide's share (ptrace.guiding.learn_share)
+(R_PX, R_PY, R_PZ, R_DX, R_DY, R_DZ, R_ENERGY, R_F, R_PDF, R_BSDF, R_NX, R_NY,
+ R_NZ) = range(13)
+RECORD_ROWS = 13
 INV_FOUR_PI = 0.25 / math.pi
 
 
@@ -37,7 +46,7 @@ def uniform_guide(alpha=0.0, record=False):
     """A guide of one spatial leaf whose quadtree is uniform over the sphere."""
     return GuideArrays(np.full(1, -1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=np.int64),
                        np.zeros(1, dtype=np.int64), np.full((1, 4), -1, dtype=np.int64),
-                       np.ones((1, 4)), float(alpha), int(bool(record)))
+                       np.ones((1, 4)), np.ones(1), float(alpha), int(bool(record)))
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -202,8 +211,10 @@ def record_stage(floats, size, history, depth, out):
     """The records of a finished wave's first `size` slots into out (RECORD_ROWS, at least
     size x depth): for each set history column, the vertex, its bounce direction, and the
     mean over R, G, B of the radiance the bounce brought back (what the path gathered after it,
-    divided by the throughput after it) divided by the bounce's pdf. Clears the columns; returns
-    the count, in slot and vertex order."""
+    divided by the throughput after it) divided by the bounce's pdf, that radiance times the
+    bounce's f cos / pdf (the bounce's estimate F / p of the light it reflects), the pdf, the
+    BSDF's pdf and the normal. Clears the columns; returns the count, in slot and vertex
+    order."""
     count = 0
     for i in range(size):
         for v in range(depth):
@@ -212,13 +223,19 @@ def record_stage(floats, size, history, depth, out):
                 continue
             history[H_VALID, col] = 0.0
             li = 0.0
+            contribution = 0.0
             for c in range(3):
                 t = history[H_TR + c, col]
                 if t > 0.0:
-                    li += (floats[R + c, i] - history[H_LR + c, col]) / t
+                    lc = (floats[R + c, i] - history[H_LR + c, col]) / t
+                    li += lc
+                    contribution += lc * history[H_MR + c, col]
             weight = li / (3.0 * history[H_PDF, col])
             if not (weight > 0.0 and weight < math.inf):
                 weight = 0.0
+            contribution /= 3.0
+            if not (contribution > 0.0 and contribution < math.inf):
+                contribution = 0.0
             out[0, count] = history[H_PX, col]
             out[1, count] = history[H_PY, col]
             out[2, count] = history[H_PZ, col]
@@ -226,13 +243,21 @@ def record_stage(floats, size, history, depth, out):
             out[4, count] = history[H_DY, col]
             out[5, count] = history[H_DZ, col]
             out[6, count] = weight
+            out[7, count] = contribution
+            out[8, count] = history[H_PDF, col]
+            out[9, count] = history[H_BSDF, col]
+            out[10, count] = history[H_NX, col]
+            out[11, count] = history[H_NY, col]
+            out[12, count] = history[H_NZ, col]
             count += 1
     return count
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb):
-    """Path slot i's bounce at `vertex` (from 1) into its history column, if within depth."""
+def remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb, mr, mg, mb,
+             bsdf_pdf, nx, ny, nz):
+    """Path slot i's bounce at `vertex` (from 1) into its history column, if within depth: m is
+    the bounce's f cos / pdf, n the shading normal."""
     v = vertex - 1
     if v < depth:
         col = i * depth + v
@@ -240,5 +265,8 @@ def remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb)
         history[H_DX, col], history[H_DY, col], history[H_DZ, col] = dx, dy, dz
         history[H_PDF, col] = pdf
         history[H_TR, col], history[H_TG, col], history[H_TB, col] = tr, tg, tb
+        history[H_MR, col], history[H_MG, col], history[H_MB, col] = mr, mg, mb
+        history[H_BSDF, col] = bsdf_pdf
+        history[H_NX, col], history[H_NY, col], history[H_NZ, col] = nx, ny, nz
         history[H_VALID, col] = 1.0
 

@@ -17,7 +17,6 @@ from ..integrator import (
     DIM_CHOOSE,
     DIM_CHOOSE_PRIM,
     DIM_GLASS,
-    DIM_GUIDE,
     DIM_LIGHT,
     DIM_RR,
     DIM_SELECT,
@@ -200,10 +199,11 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
 
     With `guided` (a kind that is not delta, without -H), the bounce is drawn from the guide
     (ptrace.kernel.guide.GuideArrays), folded above the surface (every such kind only
-    reflects), with probability guide.alpha and from the BSDF otherwise,
-    and weighted by the mixture's pdf, which the light samples' MIS weights use too; with
-    guide.record set, each bounce is remembered in `history` (its first `depth` vertices) for
-    the guide's records. Without it, guide, history and depth are not read.
+    reflects), with probability guide.alpha x guide.share of the vertex's spatial leaf (the
+    first bounce sample's u1 split at it) and from the BSDF otherwise, and weighted by the
+    mixture's pdf, which the light samples' MIS weights use too; guide.alpha 0 skips the guide.
+    With guide.record set, each bounce is remembered in `history` (its first `depth` vertices)
+    for the guide's records. Without it, guide, history and depth are not read.
 
     With `angular`, the scene's spots fall off as Mitsuba's
     (ptrace.lights.sample_light_angular); without it, as glTF's. With `exact`, a GLASS kind
@@ -261,9 +261,11 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                 alpha, metallic = materials.alpha[m], materials.metallic[m]
             base = vertex * DIMS_PER_VERTEX
             rays = 0
-            if GUIDED:
+            mix = 0.0
+            leaf = 0
+            if GUIDED and guide.alpha > 0.0:   # (alpha 0: the guide is off, and skipped)
                 leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, px, py, pz)
-                mix = guide.alpha
+                mix = guide.alpha * guide.share[leaf]
             if LIT:   # (a delta kind's kernel has no light sampling code at all)
                 if HEMI and light_count:    # -H: the course's uniform hemisphere sampling
                     count = 0
@@ -363,7 +365,7 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                             other = BSDF_PDF(ar, ag, ab, alpha, metallic, materials.eta,
                                              materials.k, materials.specular, m, wox, woy, woz,
                                              wix, wiy, wiz)
-                            if GUIDED:   # the bounce's pdf is the mixture's
+                            if GUIDED and mix > 0.0:   # the bounce's pdf is the mixture's
                                 other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
                                                                                wz, nx, ny, nz)
                             scale *= power_heuristic(weight * pdf, other)
@@ -391,8 +393,16 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             if LOBES:
                 u3 = sample_1d(options, pixel, sample, sample, base + DIM_GLASS,
                                base + DIM_GLASS)
-            if GUIDED and sample_1d(options, pixel, sample, sample, base + DIM_GUIDE,
-                                    base + DIM_GUIDE) < mix:
+            guided = False
+            if GUIDED and mix > 0.0:
+                # the choice between the guide and the BSDF splits u1 (Müller et al.'s code),
+                # so each keeps a stratified share of the 2D points
+                if u1 < mix:
+                    guided = True
+                    u1 = min(u1 / mix, 0.9999999999999999)
+                else:
+                    u1 = min((u1 - mix) / (1.0 - mix), 0.9999999999999999)
+            if guided:
                 # the guide's direction, weighted by the mixture's pdf
                 wx, wy, wz, guided_pdf = folded_sample(guide, leaf, u1, u2, nx, ny, nz)
                 wix = wx * xx + wy * xy + wz * xz
@@ -401,15 +411,16 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                 fr, fg, fb = BSDF_EVAL(ar, ag, ab, alpha, metallic, materials.eta,
                                        materials.k, materials.specular, m, wox, woy, woz, wix,
                                        wiy, wiz)
-                pdf = mix * guided_pdf + (1.0 - mix) * BSDF_PDF(
-                    ar, ag, ab, alpha, metallic, materials.eta, materials.k, materials.specular,
-                    m, wox, woy, woz, wix, wiy, wiz)
+                bsdf_pdf = BSDF_PDF(ar, ag, ab, alpha, metallic, materials.eta, materials.k,
+                                    materials.specular, m, wox, woy, woz, wix, wiy, wiz)
+                pdf = mix * guided_pdf + (1.0 - mix) * bsdf_pdf
             else:
                 wix, wiy, wiz, fr, fg, fb, pdf = BSDF_SAMPLE(
                     ar, ag, ab, materials.transmittance, materials.ior, alpha, metallic,
                     materials.eta, materials.k, materials.specular, m, wox, woy, woz, u1, u2,
                     u3)
-                if GUIDED and pdf > 1e-11:
+                bsdf_pdf = pdf
+                if GUIDED and mix > 0.0 and pdf > 1e-11:
                     wx = wix * xx + wiy * yx + wiz * nx
                     wy = wix * xy + wiy * yy + wiz * ny
                     wz = wix * xz + wiy * yz + wiz * nz
@@ -424,9 +435,10 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             if not pdf > 1e-11 or (fr == 0.0 and fg == 0.0 and fb == 0.0):
                 continue
             weight = abs(wiz) / pdf
-            tr *= fr * weight
-            tg *= fg * weight
-            tb *= fb * weight
+            mr, mg, mb = fr * weight, fg * weight, fb * weight
+            tr *= mr
+            tg *= mg
+            tb *= mb
             if options.roulette and vertex >= options.rr_depth:
                 q = min(options.rr_cap, max(tr, tg, tb))
                 if not sample_1d(options, pixel, sample, sample, base + DIM_RR,
@@ -449,7 +461,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             floats[TR, i], floats[TG, i], floats[TB, i] = tr, tg, tb
             floats[PDF, i] = pdf
             if GUIDED and guide.record:
-                remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb)
+                remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb,
+                         mr, mg, mb, bsdf_pdf, nx, ny, nz)
             ints[DELTA, i] = delta
             ints[KEY, i] = base
             ints[RAYS, i] += 1
