@@ -129,8 +129,8 @@ MUTANTS = {
     "last-vertex-delta-only-under-mis": (
         "at the last vertex a mirror's or glass's ray is traced only under MIS, so under "
         "--direct light, -H or with point lights the mirror shows no light",
-        [(SHADING, "if vertex == max_depth and not (DELTA_KIND or mis):",
-          "if vertex == max_depth and not mis:")],
+        [(SHADING, "if vertex == max_depth and not (DELTA_KIND or MIXED_KIND or mis):",
+          "if vertex == max_depth and not (MIXED_KIND or mis):")],
         [PROMISES, "-k", "last_vertex"]),
     "face-anywhere-in-the-plane": (
         "an emissive panel anywhere in a light's plane is taken for the light's face (the "
