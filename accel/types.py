@@ -114,9 +114,8 @@ class Rays:
         n = origins.shape[0]
         if directions.shape[0] != n:
             raise ValueError(f"{n} origins but {directions.shape[0]} directions")
-        tmin, tmax = (np.ascontiguousarray(np.broadcast_to(np.asarray(
-            default if value is None else value, dtype=np.float64), (n,)))
-            for value, default in ((self.tmin, 0.0), (self.tmax, np.inf)))
+        tmin, tmax = (_t_bounds(default if value is None else value, n)
+                      for value, default in ((self.tmin, 0.0), (self.tmax, np.inf)))
         _store(self, origins=origins, directions=directions, tmin=tmin, tmax=tmax)
 
     def __len__(self):
@@ -129,6 +128,14 @@ class Rays:
             raise ValueError("rays contain NaN or infinite origins or directions")
         if problem == 2:
             raise ValueError("rays contain NaN t bounds or an infinite tmin")
+
+
+def _t_bounds(value, n):
+    """A t bound as n float64 values: a scalar made an array, an array of n kept as it is (not a
+    broadcast view, which numpy makes read-only: a read-only array is another type to numba, and
+    every kernel would compile once more for the batches that carry one)."""
+    value = np.asarray(value, dtype=np.float64)
+    return np.ascontiguousarray(value if value.shape == (n,) else np.broadcast_to(value, (n,)))
 
 
 @njit(cache=True)

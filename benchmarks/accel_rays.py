@@ -42,6 +42,7 @@ thread halves the rates, so --threads 1 2 would take about 30 minutes: --threads
 only.
 """
 import argparse
+import itertools
 import os
 import statistics
 import time
@@ -89,9 +90,11 @@ def timed(function, *args):
 
 
 def warm_up():
-    """Compile (or load from numba's cache) every kernel on a tiny mesh; return the seconds."""
-    tiny = accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
-    rays = raygen.sphere_rays(tiny, 8)
+    """Compile (or load from numba's cache) every kernel on tiny meshes; return the seconds. Two
+    meshes: the BVH keeps float32 blocks for coordinates that are all float32 values and float64
+    ones otherwise, and each is a kernel of its own (accel.bvh.BVHRecord)."""
+    tinies = [accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
+              accel.Geometry([[0, 0, 0], [1, 0, 0], [0, 1, 0.1]], [[0, 1, 2]])]
     seconds = {}
     for kind in accel.KINDS:
         start = time.perf_counter()
@@ -100,8 +103,9 @@ def warm_up():
             variants.append({"triangle": "moller-trumbore"})
         if kind == "bvh":
             variants += [{"split": "sah"}, {"split": "sah", "triangle": "moller-trumbore"}]
-        for options in variants:
+        for tiny, options in itertools.product(tinies, variants):
             backend = accel.build(kind, tiny, **options)
+            rays = raygen.sphere_rays(tiny, 8)
             backend.intersect(rays)
             backend.occluded(rays)
         seconds[kind] = time.perf_counter() - start
