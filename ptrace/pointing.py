@@ -14,6 +14,7 @@ import numpy as np
 
 from .camera import BASE_HEIGHT, BASE_WIDTH, Camera, course_camera, widen_to_base_aspect
 from .errors import PtraceError, SceneError
+from .io.limits import problem
 
 Y_UP = (0.0, 1.0, 0.0)
 # a mesh file's default camera: its longer image side spans the course's CB camera's horizontal
@@ -90,8 +91,18 @@ def file_camera(scene, index=None, width=BASE_WIDTH, height=BASE_HEIGHT, names=P
                 reach = np.linalg.norm(_corners(lower, upper) - position, axis=1).max()
             zfar = max(DEFAULT_ZFAR, 2 * float(reach))
     zfar = DEFAULT_ZFAR if zfar is None else zfar
-    return Camera(position, position + depth * forward, axes, float(focal), width, height,
-                  float(record.znear), float(zfar), focal_distance=depth)
+    which = index if index is not None else first_perspective(scene)
+    where = f"the file's camera {which} ({record.name!r}, on node {record.node})"
+    target = position + depth * forward
+    words = problem(np.append(target, depth))
+    if words is not None:    # the loader checked its position; its focus is another number
+        raise SceneError(scene.path, f"{where}: its focus, the centre of the scene's bounds "
+                                     f"{depth:.4g} in front of it, {words}")
+    try:
+        return Camera(position, target, axes, float(focal), width, height,
+                      float(record.znear), float(zfar), focal_distance=depth)
+    except PtraceError as error:     # a number no check above foresaw: still the file's
+        raise SceneError(scene.path, f"{where}: {error}") from None
 
 
 def file_camera_notes(scene, index, width, height):

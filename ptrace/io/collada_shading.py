@@ -249,6 +249,11 @@ def read_camera(document, camera, world):
                 document.fail(f"{document.describe(aspect_element)}: aspect ratio {aspect} "
                               f"is not positive")
             vfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov) / 2) / aspect))
+    for tag, number in (("znear", znear), ("zfar", zfar)):
+        words = problem(number)      # finite (the reader refuses NaN and inf), maybe huge
+        if words is not None:
+            document.fail(f"{document.describe(document.child(perspective, tag))}: {tag} "
+                          f"{words}")
     if not 0 <= znear < zfar:
         document.fail(f"{document.describe(perspective)}: znear {znear:g} and zfar {zfar:g}: "
                       f"camera rays run from znear to zfar, so 0 <= znear < zfar is needed")

@@ -13,6 +13,8 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene import FileCamera
+from .gltf_scene import unit_or_zero
+from .limits import problem
 from .materials import check_numbers
 
 PERSPECTIVE, ORTHOGRAPHIC = "perspective", "orthographic"
@@ -39,6 +41,11 @@ def gltf_cameras(path, document, matrices, notes):
             continue
         camera = _dict(cameras[index])
         label = f"camera {index} ({str(camera.get('name', camera.get('type')))[:60]!r})"
+        words = problem(matrices[i][:3, 3])
+        if words is not None:    # each node's numbers are in range, their product is not
+            named = f" ({str(node['name'])[:60]!r})" if "name" in node else ""
+            raise SceneError(path, f"{label} on node {i}{named}: its position, where the node "
+                                   f"and its ancestors place it, {words}")
         axes = _axes(matrices[i][:3, :3])
         if axes is None:
             notes.append(f"<{where}>: a camera on a node of zero or degenerate scale has no "
@@ -99,11 +106,13 @@ def camera_note(cameras):
 
 def _axes(linear):
     """camera_to_world (columns right, up, backward) of a node's 3x3 world matrix: its Z
-    column (backward) and Y column (up) made unit and at right angles; None if degenerate."""
-    backward, up = linear[:, 2].astype(float), linear[:, 1].astype(float)
-    if not (np.isfinite(linear).all() and np.linalg.norm(backward) > 1e-12):
+    column (backward) and Y column (up) made unit and at right angles; None if degenerate
+    (lengths taken without overflow: a product of large scales still has its axes)."""
+    if not np.isfinite(linear).all():
         return None
-    backward = backward / np.linalg.norm(backward)
+    backward, up = unit_or_zero(linear[:, 2]), unit_or_zero(linear[:, 1])
+    if backward is None or up is None:
+        return None
     right = np.cross(up, backward)
     if not np.linalg.norm(right) > 1e-12:
         return None

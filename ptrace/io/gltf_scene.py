@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene import DIRECTIONAL, PHYSICAL, POINT, SPOT
+from .limits import problem
 from .materials import check_numbers
 
 
@@ -79,6 +80,22 @@ def local_matrix(path, node, i):
     return matrix
 
 
+def unit_or_zero(vector):
+    """The vector made unit length, or None when it is (numerically) zero: a node of zero
+    scale. Its length is taken after dividing by its largest component, so that a product of
+    large scales (finite, each in range) gives a direction, not an overflowed length of inf
+    and a direction of zeros."""
+    vector = np.asarray(vector, dtype=np.float64)
+    largest = float(np.abs(vector).max())
+    if not (math.isfinite(largest) and largest > 0):
+        return None
+    scaled = vector / largest
+    length = float(np.linalg.norm(scaled))
+    if not largest * length > 1e-12:
+        return None
+    return scaled / length
+
+
 def gltf_lights(path, document, notes):
     """ptrace light records of glTF's KHR_lights_punctual (point, spot and directional lights,
     all of the PHYSICAL model: intensity times colour as the radiance numerator, inverse-square
@@ -118,21 +135,24 @@ def gltf_lights(path, document, notes):
             continue
         matrix = matrices[i]
         radiance = tuple(np.asarray(colour) * intensity[0])
-        position = tuple(matrix[:3, 3])
-        axis = matrix[:3, :3] @ np.array([0.0, 0.0, -1.0])   # lights point down their -Z
         kind = light.get("type")
+        position = tuple(matrix[:3, 3])
+        words = problem(position) if kind in ("point", "spot") else None
+        if words is not None:    # each node's numbers are in range, their product is not
+            named = f" ({str(_dict(node)['name'])[:60]!r})" if "name" in _dict(node) else ""
+            raise SceneError(path, f"{label} on node {i}{named}: its position, where the node "
+                                   f"and its ancestors place it, {words}")
+        axis = unit_or_zero(matrix[:3, :3] @ np.array([0.0, 0.0, -1.0]))   # down its -Z
         if light.get("range") is not None:
             span = check_numbers([light["range"]], f"{label}: range", low=0.0)
             if isinstance(span, str) or span[0] == 0.0:
                 raise SceneError(path, span if isinstance(span, str) else
                                  f"{label}: range 0 (must be positive)")
             notes.append(f"<{where}>: light range ignored (no cut-off)")
-        if kind in ("spot", "directional") and not np.linalg.norm(axis) > 1e-12:
+        if kind in ("spot", "directional") and axis is None:
             notes.append(f"<{where}>: a {kind} light on a node of zero scale has no "
                          f"direction: dropped")
             continue
-        if kind in ("spot", "directional"):
-            axis = axis / np.linalg.norm(axis)
         if kind == "point":
             records.append({"kind": POINT, "radiance": radiance, "position": position,
                             "model": PHYSICAL})

@@ -7,6 +7,7 @@ ptrace.rendering.timing clocks the phases. Random numbers are keyed by (seed, pi
 dimension), and pass sizes depend only on -s and -a, so an image does not depend on threads, chunks,
 tiles or backend.
 """
+import math
 import sys
 import warnings
 
@@ -56,9 +57,55 @@ def check_frame(width, height, crop=None, features=False, max_memory=None):
     return need
 
 
+# Embree computes in float32. Its triangle test forms products of three lengths (a ray's
+# distance to the hit times the triangle's edge cross product, about twice that in all): past
+# float32's largest number (3.4e38) they overflow and the hit is lost (measured: a square OBJ
+# framed by the default camera renders black with embree from 5e12 across, 4.8e12 renders as
+# with bvh; random rays at a cube lose hits from 4.4e12 across, at a square from 5e12; the
+# warning's bound starts at 3.2e12 and 3.6e12: benchmarks/results/hostile_inputs.md)
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+EMBREE_PRODUCT_FACTOR = 2.0
+CHUNK_TRIANGLES = 1 << 20     # the exact check's triangles at a time (bounded temporaries)
+
+
+def embree_overflow(geometry):
+    """None, or (largest triangle's edge cross product, the triangles' box diagonal, the bound
+    on Embree's product) when Embree's float32 triangle test can overflow on this geometry and
+    lose hits. The bound takes a ray's distance to a hit as at most three diagonals of the
+    triangles' box: accel.embree moves an origin farther than its scale (under two diagonals)
+    from the box to where the ray enters it, and the hit lies within one more diagonal."""
+    if geometry.triangle_count == 0:
+        return None
+    vertices, faces = geometry.vertices, geometry.faces
+    # first a bound from every vertex's box (the cross product is at most its diagonal squared):
+    # the scenes far below the limit pay two passes over the vertices and no more
+    diagonal = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    if not EMBREE_PRODUCT_FACTOR * 3.0 * diagonal ** 3 > FLOAT32_MAX:
+        return None
+    largest, lower, upper = 0.0, np.full(3, np.inf), np.full(3, -np.inf)
+    for start in range(0, len(faces), CHUNK_TRIANGLES):
+        corners = vertices[faces[start:start + CHUNK_TRIANGLES]]
+        lower = np.minimum(lower, corners.min(axis=(0, 1)))
+        upper = np.maximum(upper, corners.max(axis=(0, 1)))
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        largest = max(largest, float(np.sqrt(np.einsum("ij,ij->i", cross, cross)).max()))
+    diagonal = float(np.linalg.norm(upper - lower))      # the triangles' own box
+    product = EMBREE_PRODUCT_FACTOR * 3.0 * diagonal * largest
+    return (largest, diagonal, product) if product > FLOAT32_MAX else None
+
+
 def scene_warnings(scene, settings):
     """What a user should hear about this scene and these settings before a render."""
     out = []
+    overflow = embree_overflow(scene.geometry) if settings.accel == "embree" else None
+    if overflow is not None:
+        cross, diagonal, product = overflow
+        out.append(f"--accel embree computes in float32, and this scene's triangles are too "
+                   f"large for it: the largest spans about {math.sqrt(cross):.3g} (its edges' "
+                   f"cross product {cross:.3g}) in a scene {diagonal:.3g} across, and Embree's "
+                   f"products of such lengths (up to {product:.3g}) pass float32's "
+                   f"{FLOAT32_MAX:.3g}: it can lose hits and draw those triangles black; "
+                   f"--accel bvh computes in float64")
     emitters = np.isin(scene.material_index,
                        np.nonzero(scene.materials.emits())[0]).any()
     if settings.integrator == "path" and not emitters and len(scene.lights) == 0:
