@@ -171,8 +171,9 @@ class RenderJob:
         records_seconds are the wall time of the build and of the records."""
         lap = lap if lap is not None else (lambda phase: None)
         lap("compile")
-        cold_kernels = cold(accel.record_class(settings.accel))
-        if notice is not None and cold_kernels is not None:
+        # (only where someone hears of it: a Dask worker's job compiles without a word)
+        cold_kernels = cold(accel.record_class(settings.accel)) if notice is not None else None
+        if cold_kernels is not None:
             estimate = f"about {compile_estimate(cold_kernels):.0f} s"
             notice(f"compiling kernels (first run only, {estimate})" if cold_kernels == "first"
                    else f"compiling the {settings.accel} backend's kernels (first run with it "
