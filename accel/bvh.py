@@ -15,7 +15,7 @@ import time
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange, uint64
+from numba import njit, uint64
 from numba.cpython.unsafe.numbers import trailing_zeros  # numba's llvm.cttz
 
 from . import compiled, interpreted
@@ -50,7 +50,6 @@ from .kernels import (
 )
 from .simd import BLOCK, make_slab_test, moller_trumbore_block, watertight_block
 
-RAY_BLOCK = compiled.RAY_BLOCK   # rays per parallel work item of the batch kernels
 WIDE_STACK = (WIDTH - 1) * STACK_SIZE + WIDTH   # each pop pushes at most WIDTH - 1 more
 slab_test = make_slab_test(WIDTH)
 # the root's payload and the miss's primitive as int64 values, not literals: a literal argument
@@ -286,16 +285,15 @@ for _record in RECORDS:
     compiled.register(_record, new_scratch, closest_hit, any_hit)
 
 
-@njit(cache=True, parallel=True)
-def _count_work(record, origins, directions, tmin, tmax, out_visits, out_tests):
-    """Each ray's wide-node visits and primitive tests in a closest-hit trace (traversal_work)."""
-    n_rays = origins.shape[0]
-    for block in prange((n_rays + RAY_BLOCK - 1) // RAY_BLOCK):
-        scratch = new_scratch(record)
-        for r in range(block * RAY_BLOCK, min(n_rays, (block + 1) * RAY_BLOCK)):
-            out_visits[r], out_tests[r] = _closest(
-                record, scratch, origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
-                directions[r, 1], directions[r, 2], tmin[r], tmax[r])[4:]
+@njit(cache=True, nogil=True)
+def _count_work(record, origins, directions, tmin, tmax, out_visits, out_tests, start, end):
+    """Rays start .. end - 1's wide-node visits and primitive tests in a closest-hit trace
+    (traversal_work)."""
+    scratch = new_scratch(record)
+    for r in range(start, end):
+        out_visits[r], out_tests[r] = _closest(
+            record, scratch, origins[r, 0], origins[r, 1], origins[r, 2], directions[r, 0],
+            directions[r, 1], directions[r, 2], tmin[r], tmax[r])[4:]
 
 
 def _mean(values):
@@ -392,8 +390,8 @@ class BVHAccelerator(compiled.CompiledFace):
         rays.validate()
         visits = np.empty(len(rays), dtype=np.int64)
         tests = np.empty(len(rays), dtype=np.int64)
-        _count_work(self.compiled, rays.origins, rays.directions, rays.tmin, rays.tmax, visits,
-                    tests)
+        compiled.in_blocks(_count_work, len(rays), self.compiled, rays.origins, rays.directions,
+                           rays.tmin, rays.tmax, visits, tests)
         return _mean(visits), _mean(tests)
 
     def stats(self):

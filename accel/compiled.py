@@ -19,14 +19,17 @@ functions by the record's type, so a numba kernel written against them is compil
 plain Python (a kernel's py_func, in tests) they dispatch the same way.
 """
 import inspect
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
-from numba import njit, prange, types
+from numba import njit, types
 from numba.extending import overload
 
 from .interpreted import interpreted
 
-RAY_BLOCK = 64   # rays per parallel work item of the batch kernels: scratch is made per block
+RAY_BLOCK = 4096   # rays per work item of the batch kernels (each makes its own scratch)
 
 _FACES = {}      # record class -> (new_scratch, closest_hit, any_hit), numba functions
 
@@ -127,48 +130,82 @@ def by_class(cls, its_fn, other_fn):
 
 
 # -- the batch face on top of the compiled one (for backends without a batch kernel of their own)
+# Plain nogil kernels over a range of rays, run on numba's thread count of Python threads
+# (in_blocks), not prange: numba's parallel lowering compiled each of them for 3-4 s, once per
+# backend record and ray layout, where a serial loop compiles in a fraction of a second.
 
-@njit(cache=True, parallel=True)
-def intersect_batch(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v):
-    """closest_hit for every ray of a batch, in parallel over blocks of RAY_BLOCK rays."""
-    n = origins.shape[0]
-    for block in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
-        scratch = new_scratch(record)
-        for r in range(block * RAY_BLOCK, min(n, (block + 1) * RAY_BLOCK)):
-            t, prim, u, v = closest_hit(record, scratch, origins[r, 0], origins[r, 1],
-                                        origins[r, 2], directions[r, 0], directions[r, 1],
-                                        directions[r, 2], tmin[r], tmax[r])
-            out_t[r] = t
-            out_prim[r] = prim
-            out_u[r] = u
-            out_v[r] = v
+@njit(cache=True, nogil=True)
+def intersect_batch(record, origins, directions, tmin, tmax, out_t, out_prim, out_u, out_v,
+                    start, end):
+    """closest_hit for rays start .. end - 1 of a batch."""
+    scratch = new_scratch(record)
+    for r in range(start, end):
+        t, prim, u, v = closest_hit(record, scratch, origins[r, 0], origins[r, 1],
+                                    origins[r, 2], directions[r, 0], directions[r, 1],
+                                    directions[r, 2], tmin[r], tmax[r])
+        out_t[r] = t
+        out_prim[r] = prim
+        out_u[r] = u
+        out_v[r] = v
 
 
-@njit(cache=True, parallel=True)
-def occluded_batch(record, origins, directions, tmin, tmax, out):
-    """any_hit for every ray of a batch, in parallel over blocks of RAY_BLOCK rays."""
-    n = origins.shape[0]
-    for block in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
-        scratch = new_scratch(record)
-        for r in range(block * RAY_BLOCK, min(n, (block + 1) * RAY_BLOCK)):
-            out[r] = any_hit(record, scratch, origins[r, 0], origins[r, 1], origins[r, 2],
-                             directions[r, 0], directions[r, 1], directions[r, 2], tmin[r],
-                             tmax[r])
+@njit(cache=True, nogil=True)
+def occluded_batch(record, origins, directions, tmin, tmax, out, start, end):
+    """any_hit for rays start .. end - 1 of a batch."""
+    scratch = new_scratch(record)
+    for r in range(start, end):
+        out[r] = any_hit(record, scratch, origins[r, 0], origins[r, 1], origins[r, 2],
+                         directions[r, 0], directions[r, 1], directions[r, 2], tmin[r], tmax[r])
+
+
+_pool = {"size": 0, "pool": None}
+_pool_lock = threading.Lock()
+
+
+def in_blocks(kernel, n, *args):
+    """kernel(*args, start, end) over rays 0 .. n - 1 in blocks of RAY_BLOCK, handed out to
+    numba's thread count (numba.get_num_threads(), as -t sets it) of threads as they free up;
+    a kernel compiled with nogil runs them side by side. On an interrupt, the blocks not
+    started are cancelled and the running ones awaited, so nothing writes after it returns."""
+    blocks = [(start, min(n, start + RAY_BLOCK)) for start in range(0, n, RAY_BLOCK)]
+    threads = numba.get_num_threads()
+    if threads == 1 or len(blocks) <= 1:
+        for start, end in blocks:
+            kernel(*args, start, end)
+        return
+    with _pool_lock:
+        if _pool["size"] != threads:
+            if _pool["pool"] is not None:
+                _pool["pool"].shutdown(wait=True)
+            _pool["pool"] = ThreadPoolExecutor(threads, thread_name_prefix="accel")
+            _pool["size"] = threads
+        pool = _pool["pool"]
+    futures = [pool.submit(kernel, *args, start, end) for start, end in blocks]
+    try:
+        for future in futures:
+            future.result()
+    finally:
+        for future in futures:
+            future.cancel()
+        for future in futures:
+            if not future.cancelled():
+                future.exception()
 
 
 def run_intersect(record, rays, hits_class):
     """The batch intersect of a backend through its compiled face."""
     n = len(rays)
     hits = hits_class(np.empty(n), np.empty(n, dtype=np.int64), np.empty(n), np.empty(n))
-    intersect_batch(record, rays.origins, rays.directions, rays.tmin, rays.tmax, hits.t,
-                    hits.prim, hits.u, hits.v)
+    in_blocks(intersect_batch, n, record, rays.origins, rays.directions, rays.tmin, rays.tmax,
+              hits.t, hits.prim, hits.u, hits.v)
     return hits
 
 
 def run_occluded(record, rays):
     """The batch occluded of a backend through its compiled face."""
     out = np.empty(len(rays), dtype=np.bool_)
-    occluded_batch(record, rays.origins, rays.directions, rays.tmin, rays.tmax, out)
+    in_blocks(occluded_batch, len(rays), record, rays.origins, rays.directions, rays.tmin,
+              rays.tmax, out)
     return out
 
 

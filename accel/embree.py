@@ -3,7 +3,7 @@
 Why the C API. embreex's Python `run()` answers a whole batch per call, on float32 copies of the
 rays made in Python, and those copies plus the call cost more than Embree's traversal itself;
 nor can compiled code reach it. Here numba code calls `rtcIntersect1` / `rtcOccluded1` once per
-ray, inside prange, so Embree is one more compiled face (accel.compiled): the batch face runs it
+ray, so Embree is one more compiled face (accel.compiled): the batch face runs it
 over a batch, and the path tracer's one compiled loop calls it directly. The two functions are
 declared as numba ExternalFunctions taking pointers as integers (intp), resolved by name in the
 library loaded with llvmlite's `load_library_permanently`; code calling them stays cacheable

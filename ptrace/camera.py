@@ -10,7 +10,7 @@ W x H render is the central W x H window of the 800 x 600 view.
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .errors import PtraceError, SceneError, require_regular_file
 from .io.limits import LIMIT, problem
@@ -106,13 +106,13 @@ class Camera:
         return out
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)   # serial: a prange loop's parallel lowering costs seconds of compile
 def _directions(px, py, half_width, half_height, screen_dist, camera_to_world, out):
     # (2u - 1) tan(hfov / 2) with u = px / W is (px - W/2) / screen_dist; written this way a
     # pixel of a W x H window gets bit-identical rays to the same pixel of the 800 x 600 view.
     # A kernel rather than numpy: per-pixel arithmetic in one pass, no temporaries.
     m = camera_to_world
-    for i in prange(px.shape[0]):
+    for i in range(px.shape[0]):
         sx = (px[i] - half_width) / screen_dist
         sy = (py[i] - half_height) / screen_dist
         x = sx * m[0, 0] + sy * m[0, 1] - m[0, 2]
