@@ -1,7 +1,7 @@
 """Feature buffers (AOVs): what each camera ray's first hit is, averaged per pixel like the
 radiance, for a denoiser's guides and for users: albedo, shading normal and distance.
 
-The kernel side is `ptrace.integrator.hit_features`, which the wavefront's features_stage takes of
+The kernel side is `ptrace.kernel.aovs.hit_features`, which the wavefront's features_stage takes of
 each camera ray's hit when a render asks for AOVs (`ptrace.render(..., aovs={})`, the CLI's
 `--aov`): the camera rays are traced once more for it, before the paths start from them, so a
 render without AOVs pays nothing and a render with them pays one ray per sample. Here: the

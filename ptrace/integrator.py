@@ -25,7 +25,6 @@ from numba import njit
 
 from accel.compiled import by_class
 
-from .bsdf import conductor_fresnel
 from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
     AUTO_EVERY_LIGHT,
     AUTO_MANY,
@@ -65,10 +64,9 @@ from .scene import (
     ENVIRONMENT,
     GLASS,
     GLTF_PBR,
-    MICROFACET,
     REFRACTION,
 )
-from .textures import mapped_normal, surface_albedo, surface_emission
+from .textures import surface_emission
 
 OFFSET = 1e-6           # spawn offset, relative to the hit point's (and primitive's) magnitude
 SHADOW_SHORTEN = 1e-6   # shadow rays stop this fraction short of the light sample
@@ -464,37 +462,6 @@ def hit_normal_colour(shapes, ox, oy, oz, dx, dy, dz, t, prim, u, v):
         ny = (oy + t * dy - shapes.centers[s, 1]) / radius
         nz = (oz + t * dz - shapes.centers[s, 2]) / radius
     return 0.5 * nx + 0.5, 0.5 * ny + 0.5, 0.5 * nz + 0.5
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v):
-    """(albedo r, g, b, normal x, y, z, distance, hit) of a camera ray's hit (t, prim, u, v),
-    o + t d: the surface's albedo at the hit as a denoiser wants it (diffuse: its albedo;
-    mirror: its reflectance; glass and refraction: their transmittance; a conductor: its
-    reflectance at normal incidence; an emitter: its emission clamped to 1), the shading normal
-    turned toward the camera, world space (bent by a normal texture), and the distance along the
-    ray; zeros and hit 0 on a miss."""
-    m, px, py, pz, gx, gy, gz, nx, ny, nz, offset = surface(shapes, materials.kind, ox, oy, oz,
-                                                            dx, dy, dz, t, prim, u, v)
-    if m < 0:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    nx, ny, nz = mapped_normal(shapes, materials, m, prim, u, v, nx, ny, nz)
-    kind = materials.kind[m]
-    ar, ag, ab, alpha, _ = surface_albedo(shapes, materials, m, prim, u, v)
-    if kind == EMISSION:
-        er, eg, eb = surface_emission(shapes, materials, m, prim, u, v)
-        ar, ag, ab = min(er, 1.0), min(eg, 1.0), min(eb, 1.0)
-    elif kind == GLASS or kind == REFRACTION:
-        tr = materials.transmittance
-        ar, ag, ab = tr[m, 0], tr[m, 1], tr[m, 2]
-    elif kind == MICROFACET:
-        eta, k = materials.eta, materials.k
-        ar = conductor_fresnel(eta[m, 0], k[m, 0], 1.0)
-        ag = conductor_fresnel(eta[m, 1], k[m, 1], 1.0)
-        ab = conductor_fresnel(eta[m, 2], k[m, 2], 1.0)
-    if nx * dx + ny * dy + nz * dz > 0.0:    # glass keeps its outward normal: face the camera
-        nx, ny, nz = -nx, -ny, -nz
-    return ar, ag, ab, nx, ny, nz, t * math.sqrt(dx * dx + dy * dy + dz * dz), 1.0
 
 
 

@@ -214,6 +214,7 @@ def _locked(method, exclusive):
 
 
 _DEPENDENCY_FOLDERS = []
+_BY_IMPORTS = []   # the folders of _DEPENDENCY_FOLDERS whose kernels depend on their imports
 
 
 # ptrace's subpackages that hold no compiled code and that no kernel reads from (the loaders,
@@ -240,29 +241,128 @@ def _folders_digest(folders):
     return digest.digest()
 
 
-def depend_on_folders(folders):
-    """Make the cached kernels defined under `folders` depend on every source file there, not
-    only on the file that defines each: numba's cache checks a kernel's own file alone, so after
-    an edit to a module it calls (and inlines), the old kernel would be loaded (an editable
-    install updated with `git pull` would render with stale code). Called for ptrace's and
-    accel's folders on import."""
+_NAMES = {}    # folders -> _module_names(folders)
+
+
+def _module_names(folders):
+    """{dotted module name: source path} of every .py file under the folders (each folder a
+    package named as it is)."""
+    if tuple(folders) in _NAMES:
+        return _NAMES[tuple(folders)]
+    names = _NAMES[tuple(folders)] = {}
+    for folder in folders:
+        package = os.path.basename(folder)
+        for root, dirs, files in os.walk(folder):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(files):
+                if name.endswith(".py"):
+                    path = os.path.join(root, name)
+                    parts = [package] + os.path.relpath(path, folder)[:-3].split(os.sep)
+                    if parts[-1] == "__init__":
+                        parts.pop()
+                    names[".".join(parts)] = path
+    return names
+
+
+_PARSED = {}   # source path -> (modules it imports within the by-imports folders, other folders)
+
+
+def _imports(path, module, names):
+    """(the modules of `names` that the source at `path`, module `module`, imports anywhere in
+    it, inside functions too; the other dependency folders whose packages it imports from), by
+    its import statements: `from a import b` imports a.b if that is a module, else a."""
+    if path in _PARSED:
+        return _PARSED[path]
+    import ast
+    with open(path, "rb") as source:
+        tree = ast.parse(source.read(), path)
+    package = module if path.endswith("__init__.py") else module.rpartition(".")[0]
+    own = module.split(".")[0]
+    packages = {os.path.basename(folder): folder for folder in _DEPENDENCY_FOLDERS}
+    found, others = set(), set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[:len(parts) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            found.update(f"{base}.{alias.name}" if f"{base}.{alias.name}" in names else base
+                         for alias in node.names)
+    for name in found:
+        head = name.split(".")[0]
+        if head != own and head in packages:
+            others.add(packages[head])
+    _PARSED[path] = ({name for name in found if name in names}, others)
+    return _PARSED[path]
+
+
+def _imports_digest(path, folders, whole):
+    """sha256 over the sources of the module at `path` and of every module it imports,
+    directly or through others, within `folders`; another dependency folder imported from
+    brings in its whole digest (`whole(folder)`)."""
+    names = _module_names(folders)
+    modules = {os.path.abspath(source): name for name, source in names.items()}
+    start = modules.get(os.path.abspath(path))
+    if start is None:    # (not a module of theirs: a file numba found another way)
+        return b"".join(whole(folder) for folder in folders)
+    seen, todo, others = {start}, [start], set()
+    while todo:
+        module = todo.pop()
+        imported, folders_used = _imports(names[module], module, names)
+        others |= folders_used
+        for name in imported - seen:
+            seen.add(name)
+            todo.append(name)
+    digest = hashlib.sha256()
+    for name in sorted(seen):
+        digest.update(name.encode() + b"\0")
+        with open(names[name], "rb") as source:
+            digest.update(source.read())
+    for folder in sorted(others):
+        digest.update(whole(folder))
+    return digest.digest()
+
+
+def depend_on_folders(folders, by_imports=()):
+    """Make the cached kernels defined under `folders` depend on other source files, not only on
+    the file that defines each: numba's cache checks a kernel's own file alone, so after an edit
+    to a module it calls (and inlines), the old kernel would be loaded (an editable install
+    updated with `git pull` would render with stale code). A kernel under a folder of
+    `by_imports` depends on its module and every module that one imports, directly or through
+    others, by their import statements (so an edit to the BSDFs recompiles what imports them,
+    not the sampler or the solid-angle code); any other kernel, and any module importing from
+    another of the folders, on every source file of that folder (accel's backends register
+    themselves with accel.compiled, which imports none of them). Called for ptrace's (by
+    imports) and accel's folders on import."""
     from numba.core import caching
     mixin = caching._SourceFileBackedLocatorMixin
     folders = [os.path.abspath(folder) for folder in folders]
-    _DEPENDENCY_FOLDERS.extend(f for f in folders if f not in _DEPENDENCY_FOLDERS)
+    by_imports = [os.path.abspath(folder) for folder in by_imports]
+    _DEPENDENCY_FOLDERS.extend(f for f in folders + by_imports if f not in _DEPENDENCY_FOLDERS)
+    _BY_IMPORTS.extend(f for f in by_imports if f not in _BY_IMPORTS)
     if getattr(mixin, "_ptrace_stamp", None) is not None:
         return
     own_stamp = mixin.get_source_stamp
     digests = {}
+
+    def whole(folder):
+        if folder not in digests:
+            digests[folder] = _folders_digest([folder])
+        return digests[folder]
 
     def stamp(self):
         base = own_stamp(self)
         path = os.path.abspath(self._py_file)
         for folder in _DEPENDENCY_FOLDERS:
             if path.startswith(folder + os.sep):
-                if folder not in digests:
-                    digests[folder] = _folders_digest([folder])
-                return (base, digests[folder])
+                if folder in _BY_IMPORTS:
+                    if path not in digests:
+                        digests[path] = _imports_digest(path, _BY_IMPORTS, whole)
+                    return (base, digests[path])
+                return (base, whole(folder))
         return base
 
     mixin.get_source_stamp = stamp
@@ -313,7 +413,7 @@ def _key_closures_by_their_functions():
 
 try:
     _guard_cache_files()
-    depend_on_folders(_kernel_folders())
+    depend_on_folders(_kernel_folders()[1:], by_imports=_kernel_folders()[:1])
     _key_closures_by_their_functions()
 except (ImportError, AttributeError):   # numba's internals moved: its own behaviour stays
     pass

@@ -18,7 +18,6 @@ from ..integrator import (
     camera_ray,
     emission_found,
     emits,
-    hit_features,
     hit_normal_colour,
     power_heuristic,
     surface,
@@ -235,20 +234,6 @@ def hit_stage(general=False, mode=LIGHTS_ALL):
 
     _HIT_STAGES[key] = stage
     return stage
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def features_stage(shapes, materials, floats, ints, n, features):
-    """The AOVs (albedo, normal, distance, hit: ptrace.integrator.hit_features) of each of
-    the first n paths' camera hit, into the rows of features (8, wave size). materials: the
-    full record (ptrace.integrator.MaterialArrays)."""
-    for i in range(n):
-        a0, a1, a2, a3, a4, a5, a6, a7 = hit_features(
-            shapes, materials, floats[OX, i], floats[OY, i], floats[OZ, i], floats[DX, i],
-            floats[DY, i], floats[DZ, i], floats[T, i], ints[PRIM, i], floats[U, i],
-            floats[V, i])
-        features[0, i], features[1, i], features[2, i], features[3, i] = a0, a1, a2, a3
-        features[4, i], features[5, i], features[6, i], features[7, i] = a4, a5, a6, a7
 
 
 @njit(cache=True, nogil=True, _nrt=False)

@@ -36,13 +36,13 @@ from ..scene import (
     SPOT,
 )
 from ..solid_angle import rectangle_axes_table
+from .aovs import features_stage
 from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
 from .layout import Wave
 from .shading import shading_stage
 from .stages import (
     add_stage,
     camera_stage,
-    features_stage,
     fold_stage,
     hit_stage,
     normals_stage,

@@ -157,6 +157,44 @@ def test_an_edit_to_a_called_module_recompiles_its_callers(tmp_path):
     assert python(RUN_CALLER, env, tmp_path).stdout.strip() == "14"   # and cached so
 
 
+OTHER = ("from numba import njit\n\n\n@njit(cache=True)\ndef plus_one(x):\n"
+         "    return x + 1{comment}\n")
+RUN_BY_IMPORTS = ("import ptrace.jit, os; "
+                  "ptrace.jit.depend_on_folders([], by_imports=[os.path.abspath('kernels')]); "
+                  "import kernels.caller as c, kernels.other as o; "
+                  "print(c.twice_scaled(1), o.plus_one(1), "
+                  "sum(c.twice_scaled.stats.cache_hits.values()), "
+                  "sum(o.plus_one.stats.cache_hits.values()))")
+
+
+def test_a_kernel_depends_on_the_modules_it_imports_and_on_no_other(tmp_path):
+    """Under depend_on_folders' by_imports (ptrace's folder on import), an edit recompiles the
+    kernels of the edited module and of those importing it, directly or not, and loads every
+    other kernel from the cache."""
+    package = tmp_path / "kernels"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "callee.py").write_text(CALLEE.format(scale=3))
+    (package / "caller.py").write_text(CALLER)
+    (package / "other.py").write_text(OTHER.format(comment=""))
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"),
+               PYTHONPATH=os.pathsep.join([str(tmp_path), str(REPO)]))
+
+    def run():
+        result = python(RUN_BY_IMPORTS, env, tmp_path)
+        assert result.returncode == 0, result.stderr
+        return result.stdout.split()
+
+    assert run() == ["6", "2", "0", "0"]          # both compiled
+    assert run() == ["6", "2", "1", "1"]          # both from the cache
+    (package / "callee.py").write_text(CALLEE.format(scale=5))
+    assert run() == ["10", "2", "0", "1"]         # the caller recompiled, the other cached
+    (package / "other.py").write_text(OTHER.format(comment="  # edited"))
+    assert run() == ["10", "2", "1", "0"]         # the other recompiled, the caller cached
+    (package / "__init__.py").write_text("# a package edit imports nothing into its modules\n")
+    assert run() == ["10", "2", "1", "1"]
+
+
 def test_a_cache_entry_is_saved_whole_while_another_process_reads_the_index(tmp_path):
     """numba saves an entry as an index and a data file, each replaced on its own; ptrace holds
     a lock on the index across both (and across a load's two reads), so a save waits while a
