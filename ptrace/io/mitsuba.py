@@ -43,7 +43,7 @@ SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 # integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
 UPSAMPLE, FINE_ENVMAP = 16, 2048     # latlong_from_mitsuba's resampling of small maps
 INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
-               "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
+               "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple", "guided_path")
 
 
 def load_mitsuba(path, defines=None):
@@ -74,6 +74,7 @@ class Builder:
         self.count = 0
         self.lights, self.cameras, self.environment = [], [], None
         self.settings = {}
+        self.hide_emitters = None   # the <integrator> that asks for it
 
     def build(self):
         scene = self.reader.read()
@@ -82,6 +83,11 @@ class Builder:
             self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
                               f"upgrades it")
         self._count_meshes(scene)
+        # an area emitter declared at the top with an id and <ref>'d from shapes (as
+        # Mitsuba's cbox-rgb.xml does) is each shape's, not an emitter of its own
+        self.shape_emitters = {id(p) for shape in scene.children if shape.tag == "shape"
+                               for p in list(shape.children) + list(shape.params.values())
+                               if isinstance(p, Plugin) and p.tag == "emitter"}
         for plugin in scene.children:
             handler = getattr(self, "_" + plugin.tag, None)
             if handler is not None:
@@ -203,6 +209,9 @@ class Builder:
             self.lights.append({"kind": POINT, "model": PHYSICAL, "position": position,
                                 "radiance": self._radiance(emitter, "intensity")})
         elif kind == "spot":
+            if emitter.has("texture"):
+                emitter.fail("a spot light's texture (a projected image) is not supported: "
+                             "the image would be wrong")
             cutoff = emitter.float("cutoff_angle", 20.0)
             beam = emitter.float("beam_width", cutoff * 0.75)
             if not 0 < beam <= cutoff < 180:
@@ -229,7 +238,9 @@ class Builder:
                 emitter.fail("a second environment emitter (ptrace has one environment)")
             self.environment = self._environment(emitter, transform)
         elif kind == "area":
-            emitter.fail("an area emitter must sit inside a <shape>")
+            if id(emitter) in self.shape_emitters:
+                return
+            emitter.fail("an area emitter must sit inside a <shape> (or be <ref>'d from one)")
         else:
             emitter.fail(f"emitter type {kind!r} is not supported (ptrace reads area, point, "
                          f"spot, directional, constant, envmap)")
@@ -310,18 +321,44 @@ class Builder:
             sensor.fail("to_world mirrors the image (a negative scale); ptrace's cameras "
                         "cannot")
         near, far = sensor.float("near_clip", 0.01), sensor.float("far_clip", 10000.0)
-        if not 0 <= near < far:
-            sensor.fail(f"near_clip {near:g} and far_clip {far:g}: need 0 <= near < far")
+        if not 0 < near < far:      # Mitsuba refuses near_clip <= 0 too
+            sensor.fail(f"near_clip {near:g} and far_clip {far:g}: need 0 < near_clip < "
+                        f"far_clip")
+        if sensor.has("near_clip") or sensor.has("far_clip"):
+            self.notes.append(f"<sensor type=\"{sensor.type}\">: near_clip {near:g} and "
+                              f"far_clip {far:g} cut each camera ray at those distances along "
+                              f"it (Mitsuba's: at those depths along the view axis; the same "
+                              f"in the image's centre)")
         if sensor.type == "thinlens":
-            radius = sensor.float("aperture_radius", 0.03)
-            distance = sensor.float("focus_distance", 0.0)
-            self.notes.append(f"<sensor type=\"thinlens\">: rendered as a pinhole unless given "
-                              f"-b {radius:g} -d {distance:g}")
+            self._lens(sensor, far)
+        else:
+            sensor.get("focus_distance")    # Mitsuba's perspective sensor ignores it too
         self.cameras.append(FileCamera(
             name=sensor.id or sensor.type, node=len(self.cameras), kind="perspective",
             position=matrix[:3, 3].copy(), camera_to_world=axes, znear=near, zfar=far,
             yfov=yfov, aspect=width / height))
         self._unread(sensor)
+
+    def _lens(self, sensor, far):
+        """The thin lens of a thinlens sensor (Mitsuba's: aperture_radius required,
+        focus_distance, the depth of the plane in focus, by default far_clip), for -b and -d
+        where the command line does not give them (render_defaults: lens_radius,
+        focal_distance); the first sensor's only, as the others are not the default camera."""
+        from ..io.limits import LIMIT
+        if not sensor.has("aperture_radius"):
+            sensor.fail("has no aperture_radius (Mitsuba requires one)")
+        radius = sensor.float("aperture_radius")
+        distance = sensor.float("focus_distance", far)
+        if not 0 <= radius <= LIMIT:
+            sensor.fail(f"aperture_radius {radius:g}: need 0 <= aperture_radius <= {LIMIT:g}")
+        if not 0 < distance <= LIMIT:
+            sensor.fail(f"focus_distance {distance:g}: need 0 < focus_distance <= {LIMIT:g}")
+        if not self.cameras:
+            self.settings["lens_radius"], self.settings["focal_distance"] = radius, distance
+        else:
+            self.notes.append(f"<sensor type=\"thinlens\">: not the first sensor: rendered "
+                              f"(--camera-index) as a pinhole unless given -b {radius:g} "
+                              f"-d {distance:g}")
 
     def _yfov(self, sensor, aspect):
         """The vertical field of view (degrees) of the sensor's fov on its fov_axis."""
@@ -378,7 +415,7 @@ class Builder:
                               f"path tracer")
         self.settings["max_depth"] = depth
         if integrator.boolean("hide_emitters", False):
-            self.notes.append("<integrator>: hide_emitters ignored (ptrace shows emitters)")
+            self.hide_emitters = integrator
         integrator._read.update(integrator.params)
 
     def _unread(self, plugin):
@@ -389,6 +426,14 @@ class Builder:
     # --- the scene ------------------------------------------------------------------------
 
     def _finish(self):
+        if self.hide_emitters is not None:
+            if self.environment is not None or \
+                    any(r["kind"] == EMISSION for r in self.materials.records):
+                self.hide_emitters.fail("hide_emitters is not supported: ptrace's camera sees "
+                                        "the environment and the area emitters, so the image "
+                                        "would be wrong")
+            self.notes.append("<integrator>: hide_emitters: no emitter the camera could see "
+                              "(point, spot and directional lights are unseen anyway)")
         vertices = np.concatenate(self.vertices) if self.vertices else np.zeros((0, 3))
         faces = np.concatenate(self.faces) if self.faces else np.zeros((0, 3), np.int64)
         normals = np.concatenate(self.normals) if self.normals else np.zeros((0, 3))
@@ -435,6 +480,8 @@ class Builder:
         if "spp" in settings:
             flags.append(f"-s {settings['spp']}")
         flags.append(f"-m {settings['max_depth']}")
+        if "lens_radius" in settings:
+            flags.append(f"-b {settings['lens_radius']:g} -d {settings['focal_distance']:g}")
         if "rr_depth" in settings:
             flags.append(f"roulette from depth {settings['rr_depth']}")
         self.notes.append(f"the file's sensor and integrator render with {', '.join(flags)} "
