@@ -75,6 +75,7 @@ class Builder:
         self.lights, self.cameras, self.environment = [], [], None
         self.settings = {}
         self.hide_emitters = None   # the <integrator> that asks for it
+        self.delta_scale = 1        # of point, spot and directional lights (_integrator)
 
     def build(self):
         scene = self.reader.read()
@@ -159,19 +160,30 @@ class Builder:
         else:
             vertices, faces, uv = getattr(shapes, shape.type)()
         transform = self.materials.uv_transforms.get(material)
+        one_sided = material in self.materials.one_sided
         if uv is None:
             material = self.materials.untextured(material, f"<shape type=\"{shape.type}\">")
         elif transform is not None:
             uv = uv @ transform[:2, :2].T + transform[:2, 2]
         vertices, faces, uv = shapes.placed(shape, vertices, faces, uv)
         if radiance is not None:    # the emitting front, and behind it the reflecting back
-            self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance))
+            front = self.materials.glowing(material, radiance)
+            self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance)
+                                if front is None else front)
             vertices, faces, uv = shapes.backing(vertices, faces, uv)
             self.notes.append(f"<shape type=\"{shape.type}\">: an area emitter: its shape "
-                              f"emits from its front only, as Mitsuba's, and reflects with its "
-                              f"BSDF from its back ({shapes.BACKING:g} of its size behind), not "
-                              f"from its front")
+                              f"emits from its front only, as Mitsuba's, and "
+                              + ("is black from its back (its BSDF is one-sided)" if one_sided
+                                 else "reflects with its BSDF from its back")
+                              + f" ({shapes.BACKING:g} of its size behind)"
+                              + (", not from its front" if front is None else ""))
+            self._add_triangles(vertices, faces, uv,
+                                self.materials.black() if one_sided else material)
+            self._unread(shape)
+            return
         self._add_triangles(vertices, faces, uv, material)
+        if one_sided and not shapes.closed(vertices, faces):   # Mitsuba's black back
+            self._add_triangles(*shapes.backing(vertices, faces, uv), self.materials.black())
         self._unread(shape)
 
     def _add_triangles(self, vertices, faces, uv, material):
@@ -404,6 +416,14 @@ class Builder:
         depth = integrator.integer("max_depth", -1)
         if integrator.type == "direct":
             depth = 2
+            # Mitsuba 3's direct integrator sums its emitter_samples samples of a point, spot
+            # or directional light without dividing by their count (its MIS weight of a delta
+            # light is 1, where an area light's is 1 / emitter_samples): such lights render
+            # emitter_samples times as bright, as _finish scales them
+            # (with none, only its BSDF samples, which never find such a light)
+            self.delta_scale = integrator.integer("emitter_samples", 1)
+            if not 0 <= self.delta_scale <= 1 << 16:
+                integrator.fail(f"emitter_samples {self.delta_scale} is not from 0 to 65536")
         elif integrator.has("rr_depth"):
             rr_depth = integrator.integer("rr_depth")
             low, high = RANGES["rr_depth"]
@@ -425,15 +445,35 @@ class Builder:
 
     # --- the scene ------------------------------------------------------------------------
 
+    def _glowing(self):
+        """Whether any material emits (an area emitter's: EMISSION, or glTF's of emission)."""
+        return any(r["kind"] == EMISSION or max(r.get("emission", (0.0,))) > 0
+                   for r in self.materials.records)
+
     def _finish(self):
+        if self.materials.rough_glass and self.lights:
+            # a point, spot or directional light's highlight on slightly rough glass is lit
+            # by its direct light, which smooth glass never receives (a glass sphere under a
+            # point light: 13 % darker than Mitsuba's)
+            self.materials.rough_glass[0].fail(
+                "rough glass drawn smooth would miss the highlights of the scene's point, "
+                "spot or directional lights (ptrace has no rough glass)")
         if self.hide_emitters is not None:
-            if self.environment is not None or \
-                    any(r["kind"] == EMISSION for r in self.materials.records):
+            if self.environment is not None or self._glowing():
                 self.hide_emitters.fail("hide_emitters is not supported: ptrace's camera sees "
                                         "the environment and the area emitters, so the image "
                                         "would be wrong")
             self.notes.append("<integrator>: hide_emitters: no emitter the camera could see "
                               "(point, spot and directional lights are unseen anyway)")
+        if self.delta_scale != 1 and self.lights:
+            for light in self.lights:
+                light["radiance"] = tuple(self.delta_scale * v for v in light["radiance"])
+            self.notes.append(f"<integrator type=\"direct\">: emitter_samples "
+                              f"{self.delta_scale}: its point, spot and directional lights "
+                              f"rendered {self.delta_scale} times as bright, as Mitsuba 3's "
+                              f"direct integrator renders them (it does not divide their "
+                              f"samples by emitter_samples, as it does an area light's; with "
+                              f"none, its BSDF samples never find them)")
         vertices = np.concatenate(self.vertices) if self.vertices else np.zeros((0, 3))
         faces = np.concatenate(self.faces) if self.faces else np.zeros((0, 3), np.int64)
         normals = np.concatenate(self.normals) if self.normals else np.zeros((0, 3))
@@ -443,8 +483,7 @@ class Builder:
         if "max_depth" not in self.settings:    # Mitsuba's path tracer without an <integrator>
             self.settings["max_depth"] = -1
         defaults = self._render_defaults()
-        if not self.lights and self.environment is None and \
-                not any(r["kind"] == EMISSION for r in self.materials.records):
+        if not self.lights and self.environment is None and not self._glowing():
             self.notes.append("no emitters in the scene: the image is black, as Mitsuba's")
         if not len(faces) and not self.radii:
             self.notes.append("no geometry in the scene")

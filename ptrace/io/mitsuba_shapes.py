@@ -265,3 +265,22 @@ def backing(vertices, faces, uv):
     behind = corners[:, [0, 2, 1]].reshape(-1, 3)
     return behind, np.arange(len(behind), dtype=np.int64).reshape(-1, 3), \
         None if uv is None else uv[:, [0, 2, 1]]
+
+
+def closed(vertices, faces):
+    """Whether the triangles (vertices merged by position) close a surface consistently
+    wound: every directed edge once, and its reverse once too (so that no ray from outside
+    reaches a back)."""
+    if not len(faces):
+        return False
+    _, inverse = np.unique(vertices, axis=0, return_inverse=True)
+    f = inverse.reshape(-1)[faces].astype(np.int64)
+    n = int(f.max()) + 1
+    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    keys = np.sort(a * n + b)
+    if (np.diff(keys) == 0).any() or (a == b).any():
+        return False
+    reverse = b * n + a
+    at = np.minimum(np.searchsorted(keys, reverse), len(keys) - 1)
+    return bool((keys[at] == reverse).all())

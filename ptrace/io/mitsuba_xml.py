@@ -428,7 +428,10 @@ class Reader:
                 raise at(path, element, ": needs one number, has "
                                         f"{values.size}")
             return float(values[0])
-        if values.size not in (1, 3) or tag == "spectrum" and values.size != 1:
+        if tag == "spectrum" and values.size != 1:     # as Mitsuba 3 refuses it
+            raise at(path, element, f": needs one number or wavelength:value pairs, has "
+                                    f"{values.size} numbers (for a colour, give <rgb>)")
+        if values.size not in (1, 3):
             raise at(path, element, ": needs one number or three, has "
                                     f"{values.size}")
         values = np.resize(values, 3)
