@@ -161,6 +161,9 @@ class Builder:
             vertices, faces, uv = getattr(shapes, shape.type)()
         transform = self.materials.uv_transforms.get(material)
         one_sided = material in self.materials.one_sided
+        # Mitsuba's black back, where a one-sided surface can be seen from behind (the
+        # file's own vertex indices, before face_normals splits them)
+        open_back = one_sided and radiance is None and not shapes.closed(vertices, faces)
         if uv is None:
             material = self.materials.untextured(material, f"<shape type=\"{shape.type}\">")
         elif transform is not None:
@@ -182,7 +185,7 @@ class Builder:
             self._unread(shape)
             return
         self._add_triangles(vertices, faces, uv, material)
-        if one_sided and not shapes.closed(vertices, faces):   # Mitsuba's black back
+        if open_back:
             self._add_triangles(*shapes.backing(vertices, faces, uv), self.materials.black())
         self._unread(shape)
 

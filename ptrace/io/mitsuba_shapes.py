@@ -267,20 +267,37 @@ def backing(vertices, faces, uv):
         None if uv is None else uv[:, [0, 2, 1]]
 
 
+MERGE_LIMIT = 200_000
+
+
 def closed(vertices, faces):
-    """Whether the triangles (vertices merged by position) close a surface consistently
-    wound: every directed edge once, and its reverse once too (so that no ray from outside
-    reaches a back)."""
+    """Whether the triangles close a surface consistently wound: every directed edge once,
+    and its reverse once too (so that no ray from outside reaches a back). Their vertex
+    indices are tried first, then, for up to MERGE_LIMIT vertices (a lexical sort of more
+    costs seconds), their positions (a file's vertices split at seams or corners): a mesh
+    not found closed gets a back it may not need, which costs triangles, not a wrong image."""
     if not len(faces):
         return False
-    _, inverse = np.unique(vertices, axis=0, return_inverse=True)
-    f = inverse.reshape(-1)[faces].astype(np.int64)
+    faces = np.asarray(faces, dtype=np.int64)
+    if _closed_by_index(faces):
+        return True
+    if len(vertices) > MERGE_LIMIT:
+        return False
+    rows = np.asarray(vertices, dtype=np.float64)
+    order = np.lexsort((rows[:, 2], rows[:, 1], rows[:, 0]))
+    ordered = rows[order]
+    same = np.zeros(len(rows), dtype=np.int64)
+    same[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    inverse = np.empty(len(rows), dtype=np.int64)
+    inverse[order] = np.cumsum(same)        # one index per position
+    return _closed_by_index(inverse[faces])
+
+
+def _closed_by_index(f):
     n = int(f.max()) + 1
     a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
     b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
     keys = np.sort(a * n + b)
-    if (np.diff(keys) == 0).any() or (a == b).any():
+    if (keys[1:] == keys[:-1]).any():
         return False
-    reverse = b * n + a
-    at = np.minimum(np.searchsorted(keys, reverse), len(keys) - 1)
-    return bool((keys[at] == reverse).all())
+    return bool(np.array_equal(keys, np.sort(b * n + a)))
