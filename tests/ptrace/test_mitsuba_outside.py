@@ -291,3 +291,20 @@ def test_rough_glass_under_a_point_light_is_refused(tmp_path, capsys):
     notes = ptrace.load(path).notes
     assert any("drawn smooth" in n for n in notes)
     assert not any("no emitters" in n for n in notes)     # the lamp's glTF front emits
+
+
+def test_a_torus_split_at_its_seams_is_closed():
+    """Its seam's vertices repeated (and cos 2 pi not quite cos 0): closed once merged by
+    position, so it gets no back; a torus missing a triangle is open."""
+    from ptrace.io import mitsuba_shapes as shapes
+    n, m = 12, 8
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(m + 1), indexing="ij")
+    u, v = 2 * np.pi * i / n, 2 * np.pi * j / m
+    vertices = np.stack([(2 + np.cos(v)) * np.cos(u), (2 + np.cos(v)) * np.sin(u), np.sin(v)],
+                        axis=-1).reshape(-1, 3)
+    at = lambda a, b: a * (m + 1) + b     # noqa: E731
+    a, b = (x.ravel() for x in np.meshgrid(np.arange(n), np.arange(m), indexing="ij"))
+    faces = np.concatenate([np.stack([at(a, b), at(a + 1, b), at(a + 1, b + 1)], axis=1),
+                            np.stack([at(a, b), at(a + 1, b + 1), at(a, b + 1)], axis=1)])
+    assert shapes.closed(vertices, faces)
+    assert not shapes.closed(vertices, faces[1:])
