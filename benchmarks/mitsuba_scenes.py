@@ -21,7 +21,6 @@ import argparse
 import math
 import os
 import time
-import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import numpy as np
@@ -69,26 +68,12 @@ def defines(width, height, spp):
     return {"width": str(width), "height": str(height), "spp": str(spp)}
 
 
-def lens(path):
-    """(aperture_radius, focus_distance) of the file's thinlens sensor, or None."""
-    sensor = ElementTree.parse(path).getroot().find("sensor")
-    if sensor is None or sensor.get("type") != "thinlens":
-        return None
-    values = {f.get("name"): float(f.get("value")) for f in sensor.findall("float")}
-    return values.get("aperture_radius", 0.03), values.get("focus_distance", 0.0)
-
-
 def ptrace_render(path, width, height, spp, seed, threads):
     """(image, load seconds, render seconds) of ptrace on the file at this size."""
     start = time.perf_counter()
     scene = ptrace.load(path, defines=defines(width, height, spp))
     loaded = time.perf_counter()
-    camera = None
-    thin = lens(path)
-    if thin is not None:
-        from ptrace.pointing import default_camera
-        camera = default_camera(scene, width, height).with_lens(*thin)
-    image = ptrace.render(scene, seed=seed, threads=threads, camera=camera)
+    image = ptrace.render(scene, seed=seed, threads=threads)     # the file's lens too
     return np.asarray(image, np.float64), loaded - start, time.perf_counter() - loaded
 
 

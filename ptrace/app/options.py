@@ -366,8 +366,8 @@ def plan(args, files_of):
 
 def scene_defaults(args, scene):
     """Take the scene's own render settings (Scene.render_defaults: a Mitsuba scene's film,
-    sampler and integrator) for -r, -s, -m and the roulette depth where the command line did
-    not give them (args.given). Returns whether any was taken."""
+    sampler, integrator and thin lens) for -r, -s, -m, the roulette depth, -b and -d where the
+    command line did not give them (args.given; -b and -d: None). Returns whether any was taken."""
     defaults = getattr(scene, "render_defaults", None) or {}
     given = getattr(args, "given", set(FALLBACKS))
     taken = False
@@ -375,6 +375,10 @@ def scene_defaults(args, scene):
         if name in defaults and name not in given:
             setattr(args, name, tuple(defaults[name]) if name == "resolution" else
                     defaults[name])
+            taken = True
+    for name in ("lens_radius", "focal_distance"):     # a Mitsuba thinlens's, for -b and -d
+        if name in defaults and getattr(args, name, None) is None:
+            setattr(args, name, defaults[name])
             taken = True
     return taken
 

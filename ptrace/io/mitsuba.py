@@ -43,7 +43,7 @@ SHAPES = ("obj", "ply", "serialized", "rectangle", "cube", "disk", "sphere")
 # integrators whose expected image is the path tracer's (of 3.x and of the 0.6 files upgraded)
 UPSAMPLE, FINE_ENVMAP = 16, 2048     # latlong_from_mitsuba's resampling of small maps
 INTEGRATORS = ("path", "volpath", "volpathmis", "ptracer", "prb", "prbvolpath", "bdpt", "mlt",
-               "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple")
+               "pssmlt", "erpt", "sppm", "photonmapper", "volpath_simple", "guided_path")
 
 
 def load_mitsuba(path, defines=None):
@@ -74,6 +74,8 @@ class Builder:
         self.count = 0
         self.lights, self.cameras, self.environment = [], [], None
         self.settings = {}
+        self.hide_emitters = None   # the <integrator> that asks for it
+        self.delta_scale = 1        # of point, spot and directional lights (_integrator)
 
     def build(self):
         scene = self.reader.read()
@@ -82,6 +84,11 @@ class Builder:
             self.notes.append(f"a Mitsuba {self.reader.version} file, upgraded as Mitsuba 3 "
                               f"upgrades it")
         self._count_meshes(scene)
+        # an area emitter declared at the top with an id and <ref>'d from shapes (as
+        # Mitsuba's cbox-rgb.xml does) is each shape's, not an emitter of its own
+        self.shape_emitters = {id(p) for shape in scene.children if shape.tag == "shape"
+                               for p in list(shape.children) + list(shape.params.values())
+                               if isinstance(p, Plugin) and p.tag == "emitter"}
         for plugin in scene.children:
             handler = getattr(self, "_" + plugin.tag, None)
             if handler is not None:
@@ -153,19 +160,33 @@ class Builder:
         else:
             vertices, faces, uv = getattr(shapes, shape.type)()
         transform = self.materials.uv_transforms.get(material)
+        one_sided = material in self.materials.one_sided
+        # Mitsuba's black back, where a one-sided surface can be seen from behind (the
+        # file's own vertex indices, before face_normals splits them)
+        open_back = one_sided and radiance is None and not shapes.closed(vertices, faces)
         if uv is None:
             material = self.materials.untextured(material, f"<shape type=\"{shape.type}\">")
         elif transform is not None:
             uv = uv @ transform[:2, :2].T + transform[:2, 2]
         vertices, faces, uv = shapes.placed(shape, vertices, faces, uv)
         if radiance is not None:    # the emitting front, and behind it the reflecting back
-            self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance))
+            front = self.materials.glowing(material, radiance)
+            self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance)
+                                if front is None else front)
             vertices, faces, uv = shapes.backing(vertices, faces, uv)
             self.notes.append(f"<shape type=\"{shape.type}\">: an area emitter: its shape "
-                              f"emits from its front only, as Mitsuba's, and reflects with its "
-                              f"BSDF from its back ({shapes.BACKING:g} of its size behind), not "
-                              f"from its front")
+                              f"emits from its front only, as Mitsuba's, and "
+                              + ("is black from its back (its BSDF is one-sided)" if one_sided
+                                 else "reflects with its BSDF from its back")
+                              + f" ({shapes.BACKING:g} of its size behind)"
+                              + (", not from its front" if front is None else ""))
+            self._add_triangles(vertices, faces, uv,
+                                self.materials.black() if one_sided else material)
+            self._unread(shape)
+            return
         self._add_triangles(vertices, faces, uv, material)
+        if open_back:
+            self._add_triangles(*shapes.backing(vertices, faces, uv), self.materials.black())
         self._unread(shape)
 
     def _add_triangles(self, vertices, faces, uv, material):
@@ -203,6 +224,9 @@ class Builder:
             self.lights.append({"kind": POINT, "model": PHYSICAL, "position": position,
                                 "radiance": self._radiance(emitter, "intensity")})
         elif kind == "spot":
+            if emitter.has("texture"):
+                emitter.fail("a spot light's texture (a projected image) is not supported: "
+                             "the image would be wrong")
             cutoff = emitter.float("cutoff_angle", 20.0)
             beam = emitter.float("beam_width", cutoff * 0.75)
             if not 0 < beam <= cutoff < 180:
@@ -229,7 +253,9 @@ class Builder:
                 emitter.fail("a second environment emitter (ptrace has one environment)")
             self.environment = self._environment(emitter, transform)
         elif kind == "area":
-            emitter.fail("an area emitter must sit inside a <shape>")
+            if id(emitter) in self.shape_emitters:
+                return
+            emitter.fail("an area emitter must sit inside a <shape> (or be <ref>'d from one)")
         else:
             emitter.fail(f"emitter type {kind!r} is not supported (ptrace reads area, point, "
                          f"spot, directional, constant, envmap)")
@@ -310,18 +336,44 @@ class Builder:
             sensor.fail("to_world mirrors the image (a negative scale); ptrace's cameras "
                         "cannot")
         near, far = sensor.float("near_clip", 0.01), sensor.float("far_clip", 10000.0)
-        if not 0 <= near < far:
-            sensor.fail(f"near_clip {near:g} and far_clip {far:g}: need 0 <= near < far")
+        if not 0 < near < far:      # Mitsuba refuses near_clip <= 0 too
+            sensor.fail(f"near_clip {near:g} and far_clip {far:g}: need 0 < near_clip < "
+                        f"far_clip")
+        if sensor.has("near_clip") or sensor.has("far_clip"):
+            self.notes.append(f"<sensor type=\"{sensor.type}\">: near_clip {near:g} and "
+                              f"far_clip {far:g} cut each camera ray at those distances along "
+                              f"it (Mitsuba's: at those depths along the view axis; the same "
+                              f"in the image's centre)")
         if sensor.type == "thinlens":
-            radius = sensor.float("aperture_radius", 0.03)
-            distance = sensor.float("focus_distance", 0.0)
-            self.notes.append(f"<sensor type=\"thinlens\">: rendered as a pinhole unless given "
-                              f"-b {radius:g} -d {distance:g}")
+            self._lens(sensor, far)
+        else:
+            sensor.get("focus_distance")    # Mitsuba's perspective sensor ignores it too
         self.cameras.append(FileCamera(
             name=sensor.id or sensor.type, node=len(self.cameras), kind="perspective",
             position=matrix[:3, 3].copy(), camera_to_world=axes, znear=near, zfar=far,
             yfov=yfov, aspect=width / height))
         self._unread(sensor)
+
+    def _lens(self, sensor, far):
+        """The thin lens of a thinlens sensor (Mitsuba's: aperture_radius required,
+        focus_distance, the depth of the plane in focus, by default far_clip), for -b and -d
+        where the command line does not give them (render_defaults: lens_radius,
+        focal_distance); the first sensor's only, as the others are not the default camera."""
+        from ..io.limits import LIMIT
+        if not sensor.has("aperture_radius"):
+            sensor.fail("has no aperture_radius (Mitsuba requires one)")
+        radius = sensor.float("aperture_radius")
+        distance = sensor.float("focus_distance", far)
+        if not 0 <= radius <= LIMIT:
+            sensor.fail(f"aperture_radius {radius:g}: need 0 <= aperture_radius <= {LIMIT:g}")
+        if not 0 < distance <= LIMIT:
+            sensor.fail(f"focus_distance {distance:g}: need 0 < focus_distance <= {LIMIT:g}")
+        if not self.cameras:
+            self.settings["lens_radius"], self.settings["focal_distance"] = radius, distance
+        else:
+            self.notes.append(f"<sensor type=\"thinlens\">: not the first sensor: rendered "
+                              f"(--camera-index) as a pinhole unless given -b {radius:g} "
+                              f"-d {distance:g}")
 
     def _yfov(self, sensor, aspect):
         """The vertical field of view (degrees) of the sensor's fov on its fov_axis."""
@@ -367,6 +419,14 @@ class Builder:
         depth = integrator.integer("max_depth", -1)
         if integrator.type == "direct":
             depth = 2
+            # Mitsuba 3's direct integrator sums its emitter_samples samples of a point, spot
+            # or directional light without dividing by their count (its MIS weight of a delta
+            # light is 1, where an area light's is 1 / emitter_samples): such lights render
+            # emitter_samples times as bright, as _finish scales them
+            # (with none, only its BSDF samples, which never find such a light)
+            self.delta_scale = integrator.integer("emitter_samples", 1)
+            if not 0 <= self.delta_scale <= 1 << 16:
+                integrator.fail(f"emitter_samples {self.delta_scale} is not from 0 to 65536")
         elif integrator.has("rr_depth"):
             rr_depth = integrator.integer("rr_depth")
             low, high = RANGES["rr_depth"]
@@ -378,7 +438,7 @@ class Builder:
                               f"path tracer")
         self.settings["max_depth"] = depth
         if integrator.boolean("hide_emitters", False):
-            self.notes.append("<integrator>: hide_emitters ignored (ptrace shows emitters)")
+            self.hide_emitters = integrator
         integrator._read.update(integrator.params)
 
     def _unread(self, plugin):
@@ -388,7 +448,35 @@ class Builder:
 
     # --- the scene ------------------------------------------------------------------------
 
+    def _glowing(self):
+        """Whether any material emits (an area emitter's: EMISSION, or glTF's of emission)."""
+        return any(r["kind"] == EMISSION or max(r.get("emission", (0.0,))) > 0
+                   for r in self.materials.records)
+
     def _finish(self):
+        if self.materials.rough_glass and self.lights:
+            # a point, spot or directional light's highlight on slightly rough glass is lit
+            # by its direct light, which smooth glass never receives (a glass sphere under a
+            # point light: 13 % darker than Mitsuba's)
+            self.materials.rough_glass[0].fail(
+                "rough glass drawn smooth would miss the highlights of the scene's point, "
+                "spot or directional lights (ptrace has no rough glass)")
+        if self.hide_emitters is not None:
+            if self.environment is not None or self._glowing():
+                self.hide_emitters.fail("hide_emitters is not supported: ptrace's camera sees "
+                                        "the environment and the area emitters, so the image "
+                                        "would be wrong")
+            self.notes.append("<integrator>: hide_emitters: no emitter the camera could see "
+                              "(point, spot and directional lights are unseen anyway)")
+        if self.delta_scale != 1 and self.lights:
+            for light in self.lights:
+                light["radiance"] = tuple(self.delta_scale * v for v in light["radiance"])
+            self.notes.append(f"<integrator type=\"direct\">: emitter_samples "
+                              f"{self.delta_scale}: its point, spot and directional lights "
+                              f"rendered {self.delta_scale} times as bright, as Mitsuba 3's "
+                              f"direct integrator renders them (it does not divide their "
+                              f"samples by emitter_samples, as it does an area light's; with "
+                              f"none, its BSDF samples never find them)")
         vertices = np.concatenate(self.vertices) if self.vertices else np.zeros((0, 3))
         faces = np.concatenate(self.faces) if self.faces else np.zeros((0, 3), np.int64)
         normals = np.concatenate(self.normals) if self.normals else np.zeros((0, 3))
@@ -398,8 +486,7 @@ class Builder:
         if "max_depth" not in self.settings:    # Mitsuba's path tracer without an <integrator>
             self.settings["max_depth"] = -1
         defaults = self._render_defaults()
-        if not self.lights and self.environment is None and \
-                not any(r["kind"] == EMISSION for r in self.materials.records):
+        if not self.lights and self.environment is None and not self._glowing():
             self.notes.append("no emitters in the scene: the image is black, as Mitsuba's")
         if not len(faces) and not self.radii:
             self.notes.append("no geometry in the scene")
@@ -435,6 +522,8 @@ class Builder:
         if "spp" in settings:
             flags.append(f"-s {settings['spp']}")
         flags.append(f"-m {settings['max_depth']}")
+        if "lens_radius" in settings:
+            flags.append(f"-b {settings['lens_radius']:g} -d {settings['focal_distance']:g}")
         if "rr_depth" in settings:
             flags.append(f"roulette from depth {settings['rr_depth']}")
         self.notes.append(f"the file's sensor and integrator render with {', '.join(flags)} "

@@ -34,6 +34,8 @@ from .mitsuba_xml import Colour, Plugin
 # Mitsuba's luminance weights of linear RGB (its RGB variants' mean of a bitmap)
 LUMINANCE = (0.212671, 0.715160, 0.072169)
 WRAP = {"repeat": REPEAT, "mirror": MIRROR_REPEAT, "clamp": CLAMP}
+# BSDFs that Mitsuba's evaluate as black from behind unless inside a twosided
+ONE_SIDED = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor", "principled")
 REFUSED = {"blendbsdf": "a blend of two BSDFs", "bumpmap": "a bump map",
            "normalmap": "a normal map", "hair": "hair", "measured": "measured data",
            "pplastic": "polarised plastic", "polarizer": "a polariser", "retarder": "a retarder",
@@ -58,6 +60,8 @@ class Materials:
         self.textured = False
         self.uv_transforms = {}     # material index -> 3 x 3 transform of Mitsuba's (u, v)
         self.sided = False      # reading the BSDF inside a twosided
+        self.one_sided = set()  # indices of the materials Mitsuba's are black from behind
+        self.rough_glass = []   # the roughdielectric BSDFs drawn smooth
         self._tables = {}       # (alpha, eta, ggx) -> a roughplastic's rough_coat_tables
 
     def index(self, bsdf):
@@ -70,6 +74,8 @@ class Materials:
                 bsdf.fail("its textures transform the texture coordinates differently (ptrace "
                           "gives a material one transform)")
             self._index[key] = len(self.records)
+            if bsdf is None or bsdf.type in ONE_SIDED:
+                self.one_sided.add(self._index[key])
             if self._uv and not np.array_equal(self._uv[0], np.eye(3)):
                 self.uv_transforms[self._index[key]] = self._uv[0]
             self.records.append(record)
@@ -104,6 +110,40 @@ class Materials:
         from ..scene import EMISSION
         self.records.append({"kind": EMISSION, "emission": tuple(radiance), "name": "emitter"})
         return len(self.records) - 1
+
+    def black(self):
+        """The index of a black diffuse material: the back of a one-sided surface."""
+        if "black" not in self._index:
+            self._index["black"] = len(self.records)
+            self.records.append({"kind": DIFFUSE, "albedo": (0.0, 0.0, 0.0), "name": "back"})
+        return self._index["black"]
+
+    def glowing(self, index, radiance):
+        """The index of the material an area emitter's front gets: Mitsuba's front emits and
+        also reflects with the shape's BSDF. A black diffuse one (the usual lamp) is an
+        emission material, exact; another diffuse one (Mitsuba's default BSDF too) becomes
+        glTF's BRDF of roughness 1, not metallic, of its albedo and that emission, which
+        reflects about as a Lambertian surface does (its 4 % dielectric coat aside); None for
+        any other BSDF (its front does not reflect: the caller's note)."""
+        record = self.records[index]
+        if record["kind"] != DIFFUSE:
+            return None
+        if record.get("albedo_texture", -1) < 0 and max(record["albedo"]) <= 0:
+            return self.emitter(radiance)
+        key = ("glowing", index, tuple(radiance))
+        if key not in self._index:
+            self._index[key] = len(self.records)
+            glow = {k: v for k, v in record.items() if k != "kind"}
+            glow.update(kind=GLTF_PBR, metallic=0.0, alpha=1.0, emission=tuple(radiance),
+                        name="emitter")
+            self.records.append(glow)
+            if index in self.uv_transforms:
+                self.uv_transforms[self._index[key]] = self.uv_transforms[index]
+            self.notes.append("an area emitter on a diffuse BSDF: its front emits and "
+                              "reflects as glTF's BRDF of roughness 1 (the diffuse albedo "
+                              "under a 4 % dielectric coat), close to, not exactly, Mitsuba's "
+                              "Lambertian reflection")
+        return self._index[key]
 
     def note(self, plugin, text):
         self.notes.append(f"<bsdf type=\"{plugin.type}\">: {text}")
@@ -160,8 +200,9 @@ class Materials:
 
     def _diffuse(self, bsdf):
         if not self.sided:
-            self.note(bsdf, "outside a twosided: ptrace's reflects on both sides, where "
-                            "Mitsuba's is black from behind")
+            self.note(bsdf, "outside a twosided: one-sided, as Mitsuba's: an open shape of "
+                            "it is black from behind (a black copy of it 0.0001 of its size "
+                            "behind); a closed one is seen from outside only")
         record = {"kind": DIFFUSE}
         self._albedo(bsdf, "reflectance", record, (0.5, 0.5, 0.5))
         return record
@@ -247,6 +288,7 @@ class Materials:
                 bsdf.fail(f"rough glass (alpha {alpha:g}) is not supported by ptrace (its glass "
                           f"is smooth; up to alpha {ROUGH_GLASS_LIMIT} is drawn smooth)")
             self.note(bsdf, f"rough glass of alpha up to {ROUGH_GLASS_LIMIT} drawn smooth")
+            self.rough_glass.append(bsdf)
         return {"kind": GLASS, "ior": ior, "fresnel": EXACT,
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
                     "specular_reflectance", Colour((1.0,) * 3))),
@@ -280,8 +322,9 @@ class Materials:
                                  bsdf.colour("specular_reflectance", Colour((1.0,) * 3)))
         nonlinear = bsdf.boolean("nonlinear", False)
         if not self.sided:
-            self.note(bsdf, "outside a twosided: ptrace's reflects on both sides, where "
-                            "Mitsuba's is black from behind")
+            self.note(bsdf, "outside a twosided: one-sided, as Mitsuba's: an open shape of "
+                            "it is black from behind (a black copy of it 0.0001 of its size "
+                            "behind); a closed one is seen from outside only")
         record = {"kind": PLASTIC, "ior": eta, "specular": specular}
         value = bsdf.colour("diffuse_reflectance", Colour((0.5,) * 3))
         self._albedo(bsdf, "diffuse_reflectance", record, (0.5, 0.5, 0.5))

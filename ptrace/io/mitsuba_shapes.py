@@ -265,3 +265,58 @@ def backing(vertices, faces, uv):
     behind = corners[:, [0, 2, 1]].reshape(-1, 3)
     return behind, np.arange(len(behind), dtype=np.int64).reshape(-1, 3), \
         None if uv is None else uv[:, [0, 2, 1]]
+
+
+MERGE_LIMIT = 200_000
+
+
+def closed(vertices, faces):
+    """Whether the triangles close a surface consistently wound: every directed edge once,
+    and its reverse once too (so that no ray from outside reaches a back). Their vertex
+    indices are tried first; then the vertices on edges left unpaired (a file's vertices
+    split at seams or corners), up to MERGE_LIMIT of them, are merged by position (within
+    1e-7 of their spread) and the
+    edges tried again. A mesh not found closed gets a back it may not need, which costs
+    triangles, not a wrong image."""
+    if not len(faces):
+        return False
+    faces = np.asarray(faces, dtype=np.int64)
+    unpaired = _unpaired(faces)
+    if unpaired is None:
+        return False        # an edge twice the same way: not a consistent closed surface
+    if not len(unpaired):
+        return True
+    if len(unpaired) > MERGE_LIMIT:
+        return False
+    rows = np.asarray(vertices, dtype=np.float64)[unpaired]
+    # positions within 1e-7 of the mesh's size are one (cos 2 pi is not quite cos 0)
+    size = float(np.ptp(rows, axis=0).max()) or 1.0
+    rows = np.round(rows / (1e-7 * size))
+    order = np.lexsort((rows[:, 2], rows[:, 1], rows[:, 0]))
+    ordered = rows[order]
+    start = np.ones(len(rows), dtype=bool)
+    start[1:] = np.any(ordered[1:] != ordered[:-1], axis=1)
+    first = np.maximum.accumulate(np.where(start, np.arange(len(rows)), 0))
+    canonical = np.arange(int(faces.max()) + 1, dtype=np.int64)
+    canonical[unpaired[order]] = unpaired[order][first]     # one index per position
+    merged = canonical[faces]
+    again = _unpaired(merged)
+    return again is not None and not len(again)
+
+
+def _unpaired(f):
+    """The vertices of the directed edges whose reverse is missing (sorted, unique), or None
+    when an edge appears twice the same way or a triangle repeats a vertex."""
+    n = int(f.max()) + 1
+    a = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    b = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    if (a == b).any():
+        return None
+    keys = a * n + b
+    ordered = np.sort(keys)
+    if (ordered[1:] == ordered[:-1]).any():
+        return None
+    reverse = b * n + a
+    at = np.minimum(np.searchsorted(ordered, reverse), len(ordered) - 1)
+    missing = ordered[at] != reverse
+    return np.unique(np.concatenate([a[missing], b[missing]]))

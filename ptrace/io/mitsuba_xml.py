@@ -143,6 +143,7 @@ class Reader:
         self.path = str(path)
         self.folder = os.path.dirname(os.path.realpath(self.path))
         self.search = [self.folder]
+        self.roots = [self.folder]     # the folders files may be read from (_inside)
         self.params = {str(k): str(v) for k, v in (defines or {}).items()}
         self.ids, self.refs, self.including = {}, [], []
         self.upgrade = False
@@ -216,23 +217,49 @@ class Reader:
             plugin.fail(f"{name!r} is not a regular file")
         return path
 
+    def _inside(self, candidate):
+        return any(os.path.commonpath([root, candidate]) == root for root in self.roots)
+
     def _resolve(self, where, path, name, line=None):
-        """The real path of a file named in `path` at `where`, inside the scene's folder (as
-        named, from the naming file's folder or a <path> folder)."""
+        """The real path of a file named in `path` at `where`, inside the scene's folder or a
+        folder its <path> elements name (as named, from the naming file's folder or a <path>
+        folder)."""
         if not name or "\x00" in name:
             raise ElementError(path, f"{where}: an empty or invalid file name", line)
         name = name.replace("\\", "/")
         for folder in ([os.path.dirname(os.path.realpath(path))] + self.search):
             candidate = os.path.realpath(os.path.join(folder, name))
-            if os.path.commonpath([self.folder, candidate]) != self.folder:
+            if not self._inside(candidate):
                 continue
             if os.path.exists(candidate):
                 return candidate
         candidate = os.path.realpath(os.path.join(self.folder, name))
-        if os.path.commonpath([self.folder, candidate]) != self.folder:
+        if not self._inside(candidate):
             raise ElementError(path, f"{where}: {name!r} is outside the scene's folder; ptrace "
-                                     f"reads only files inside it", line)
+                                     f"reads only files inside it and the folders its <path> "
+                                     f"elements name", line)
         raise ElementError(path, f"{where}: file {name!r} not found", line)
+
+    def _search_folder(self, element, path):
+        """A <path value=..> folder (from the naming file's folder): searched for the files
+        the scene names, and read from even outside the scene's folder (as Mitsuba's scenes
+        share a `common` folder beside theirs), since the file itself names it (noted)."""
+        name = self.required(element, "value", path).replace("\\", "/")
+        if not name or "\x00" in name:
+            raise at(path, element, ": an empty or invalid folder name")
+        # from the naming file's folder, else the scene's (an included file's <path> is
+        # Mitsuba's relative to the scene's folder)
+        found = [f for f in (os.path.realpath(os.path.join(base, name)) for base in
+                             (os.path.dirname(os.path.realpath(path)), self.folder))
+                 if os.path.isdir(f)]
+        if not found:
+            raise at(path, element, f": folder {name!r} not found")
+        folder = found[0]
+        if not self._inside(folder):
+            self.roots.append(folder)
+            self.notes.append(f"<path value=\"{name}\">: a folder outside the scene's folder, "
+                              f"read from as the file names it")
+        self.search.append(folder)
 
     # --- elements -------------------------------------------------------------------------
 
@@ -272,9 +299,7 @@ class Reader:
             elif tag == "include":
                 self._include(child, holder, path, depth)
             elif tag == "path":
-                self.search.append(self._resolve(describe(child), path,
-                                                 self.required(child, "value", path),
-                                                 getattr(child, "sourceline", None)))
+                self._search_folder(child, path)
             elif tag == "alias":
                 ident = self.required(child, "id", path)
                 if ident not in self.ids:
@@ -403,7 +428,10 @@ class Reader:
                 raise at(path, element, ": needs one number, has "
                                         f"{values.size}")
             return float(values[0])
-        if values.size not in (1, 3) or tag == "spectrum" and values.size != 1:
+        if tag == "spectrum" and values.size != 1:     # as Mitsuba 3 refuses it
+            raise at(path, element, f": needs one number or wavelength:value pairs, has "
+                                    f"{values.size} numbers (for a colour, give <rgb>)")
+        if values.size not in (1, 3):
             raise at(path, element, ": needs one number or three, has "
                                     f"{values.size}")
         values = np.resize(values, 3)

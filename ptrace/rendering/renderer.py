@@ -123,9 +123,9 @@ def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, 
            notice=None, aovs=None, max_memory=None, **options):
     """Render `scene`; return linear radiance as float32 (H, W, 3), top row first.
 
-    spp (default 1), max_depth and rr_depth not given, and resolution without a camera, are
-    the scene's own (scene.render_defaults: a Mitsuba scene's film, sampler and integrator)
-    where it has them.
+    spp (default 1), max_depth and rr_depth not given, and resolution and the thin lens
+    without a camera, are the scene's own (scene.render_defaults: a Mitsuba scene's film,
+    sampler, integrator and thinlens sensor) where it has them.
     resolution is (W, H), default the camera's own size, or without a camera the course's
     800x600; camera (a ptrace.Camera: ptrace.course_camera, ptrace.look_at, ...) replaces
     the scene's default camera (ptrace.pointing.default_camera: the course's for a course scene,
@@ -201,8 +201,12 @@ def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, 
 
 def _render(scene, settings, width, height, crop, camera, progress, stats, client,
             worker_threads, notice, phases, aovs):
-    camera = default_camera(scene, width, height) if camera is None \
-        else camera.resized(width, height)
+    if camera is None:      # with the scene's own thin lens (a Mitsuba thinlens sensor's)
+        defaults = getattr(scene, "render_defaults", None) or {}
+        camera = default_camera(scene, width, height).with_lens(
+            defaults.get("lens_radius"), defaults.get("focal_distance"))
+    else:
+        camera = camera.resized(width, height)
     x0, y0, cell_w, cell_h = crop if crop is not None else (0, 0, width, height)
     for message in scene_warnings(scene, settings):
         warnings.warn(message, RuntimeWarning, stacklevel=4)

@@ -21,7 +21,6 @@ from ptrace.scene import (
     BLEND_CUT,
     DIFFUSE,
     DIRECTIONAL,
-    EMISSION,
     EXACT,
     GLASS,
     GLTF_PBR,
@@ -38,6 +37,15 @@ def write(tmp_path, body, name="scene.xml", version="3.0.0"):
     path = tmp_path / name
     path.write_text(f'<scene version="{version}">\n{body}\n</scene>\n', encoding="utf-8")
     return path
+
+
+def front(scene):
+    """(vertices, faces) of the scene's triangles without the black backs the reader gives an
+    open shape of a one-sided BSDF (Mitsuba's default diffuse too): the shapes as placed."""
+    back = [i for i, name in enumerate(scene.materials.names) if name == "back"]
+    faces = scene.geometry.faces
+    faces = faces[~np.isin(scene.material_index[:len(faces)], back)]
+    return scene.geometry.vertices[np.unique(faces)], faces
 
 
 def to_world(tmp_path, steps):
@@ -178,7 +186,7 @@ def test_path_folders_aliases_and_file_names_with_spaces(tmp_path):
                            '<shape type="obj"><string name="filename" value="a quad.obj"/>'
                            '<ref id="dull"/></shape>')
     scene = ptrace.load(path)
-    assert scene.triangle_count == 1
+    assert len(front(scene)[1]) == 1
     np.testing.assert_allclose(scene.materials.albedo[scene.material_index[0]], [0.25] * 3)
 
 
@@ -234,10 +242,10 @@ def test_rectangle_vertices_and_normal(tmp_path):
                            '</transform></shape>')
     scene = ptrace.load(path)
     vertices = scene.geometry.vertices
-    corners = {tuple(np.round(v, 9) + 0.0) for v in vertices}
+    corners = {tuple(np.round(v, 9) + 0.0) for v in front(scene)[0]}
     assert corners == {(-2.0, -1.0, 2.0), (2.0, -1.0, 2.0), (2.0, -1.0, -2.0),
                        (-2.0, -1.0, -2.0)}
-    for a, b, c in scene.geometry.faces:    # +z turned by -90 degrees about x is +y
+    for a, b, c in front(scene)[1]:    # +z turned by -90 degrees about x is +y
         normal = np.cross(vertices[b] - vertices[a], vertices[c] - vertices[a])
         np.testing.assert_allclose(normal / np.linalg.norm(normal), [0, 1, 0], atol=1e-12)
 
@@ -286,8 +294,9 @@ def test_disk_keeps_its_area_and_sphere_its_placement(tmp_path):
                            '</transform></shape><shape type="sphere"><point name="center" '
                            'x="1" y="0" z="0"/><transform name="to_world"><scale value="3"/>'
                            '<translate z="1"/></transform></shape>')
-    geometry = ptrace.load(path).geometry
-    corners = geometry.vertices[geometry.faces]
+    scene = ptrace.load(path)
+    geometry = scene.geometry
+    corners = geometry.vertices[front(scene)[1]]
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
                                          corners[:, 2] - corners[:, 0]), axis=1).sum()
     assert area == pytest.approx(math.pi * 0.25, rel=1e-9)
@@ -307,11 +316,12 @@ def test_obj_and_ply_shapes_are_read_by_ptrace_readers(tmp_path):
                            '<shape type="obj"><string name="filename" value="quad.obj"/>'
                            '<boolean name="face_normals" value="true"/></shape>')
     scene = ptrace.load(path)
-    assert scene.triangle_count == 2 + 1 + 2
-    first = scene.geometry.vertices[scene.geometry.faces[:2]]
+    faces = front(scene)[1]
+    assert len(faces) == 2 + 1 + 2
+    first = scene.geometry.vertices[faces[:2]]
     assert np.all(first[..., 2] == 5.0)
     # face_normals: the last quad's triangles share no vertex
-    assert len(np.unique(scene.geometry.faces[-2:])) == 6
+    assert len(np.unique(faces[-2:])) == 6
 
 
 def test_texture_coordinates_follow_mitsuba(tmp_path):
@@ -471,14 +481,15 @@ def test_serialized_meshes_read_as_mitsuba_reads_them(tmp_path, version):
     path = write(tmp_path, '<shape type="serialized"><string name="filename" '
                            'value="parts.serialized"/><integer name="shape_index" value="1"/>'
                            '<transform name="to_world"><translate x="5"/></transform></shape>')
-    geometry = ptrace.load(path).geometry
+    scene = ptrace.load(path)
+    geometry = scene.geometry
     np.testing.assert_allclose(geometry.vertices[geometry.faces[0]],
                                [[5, 0, 1], [7, 0, 1], [5, 3, 1]])
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_rgb")
     shape = mi.load_file(str(path)).shapes()[0]
     theirs = np.array(mi.traverse(shape)["vertex_positions"]).reshape(-1, 3)
-    np.testing.assert_allclose(np.sort(theirs, axis=0), np.sort(geometry.vertices, axis=0))
+    np.testing.assert_allclose(np.sort(theirs, axis=0), np.sort(front(scene)[0], axis=0))
 
 
 @pytest.mark.parametrize("lie, fragment", [
@@ -510,7 +521,7 @@ def test_the_memory_budget_counts_every_mesh_placed(tmp_path):
     one = '<shape type="obj"><string name="filename" value="quad.obj"/></shape>'
     path = write(tmp_path, one * 3)
     per_quad = ptrace.budget.LOAD_BYTES_PER_TRIANGLE * 2
-    assert ptrace.load(path, max_memory=3 * per_quad).triangle_count == 6
+    assert len(front(ptrace.load(path, max_memory=3 * per_quad))[1]) == 6
     with pytest.raises(ptrace.budget.BudgetError, match="memory budget"):
         ptrace.load(path, max_memory=3 * per_quad - 1)
 
@@ -564,13 +575,13 @@ def test_a_binary_ply_is_read_as_mitsuba_reads_it(tmp_path):
     np.testing.assert_allclose(parts["uv"][1], [[0, 0], [1, 1], [0, 1]])
     scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
                                         'value="t.ply"/></shape>'))
-    np.testing.assert_allclose(scene.geometry.vertices[scene.geometry.faces],
+    np.testing.assert_allclose(scene.geometry.vertices[front(scene)[1]],
                                np.array(rows)[:, :3][[[0, 1, 2], [0, 2, 4]]])
     binary_ply(tmp_path / "q.ply", np.array(rows)[:4, :3], [[0, 1, 2, 3]])
     assert mitsuba_shapes._binary_ply(str(tmp_path / "q.ply")) is None
     scene = ptrace.load(write(tmp_path, '<shape type="ply"><string name="filename" '
                                         'value="q.ply"/></shape>', name="q.xml"))
-    assert scene.triangle_count == 2
+    assert len(front(scene)[1]) == 2
 
 
 # --- materials ------------------------------------------------------------------------------
@@ -712,7 +723,8 @@ def test_emitters(tmp_path):
     assert lights.falloff[spot] == ANGULAR
     np.testing.assert_allclose(lights.direction[directional], [0, 1, 0])   # toward the light
     np.testing.assert_allclose(scene.environment.image, 0.5)
-    emitting = scene.materials.kind[scene.material_index] == EMISSION
+    # the rectangle's front emits and reflects (Mitsuba's default diffuse: glTF's BRDF)
+    emitting = scene.materials.emits()[scene.material_index]
     assert emitting.sum() == 2 and (scene.materials.emission[scene.material_index[emitting]]
                                     == 7).all()
 
