@@ -143,8 +143,8 @@ def read_plain_binary(path, data):
         return None
     (n_vertices, vertex_properties), (n_faces, face_properties) = \
         elements["vertex"], elements["face"]
-    if n_vertices < 0 or n_faces < 0:
-        return None
+    if n_vertices < 0 or n_faces < 0 or n_vertices > MAX_VERTICES:
+        return None     # read_header refuses more vertices than int32 faces index
     names = [p[-1] for p in vertex_properties]
     if any(len(p) != 2 or p[0] not in SCALAR_TYPES for p in vertex_properties) or \
             not {"x", "y", "z"} <= set(names) or ATTRIBUTE_NAMES & set(names) or \
@@ -169,8 +169,6 @@ def read_plain_binary(path, data):
     vertices = np.empty((n_vertices, 3))
     for axis, name in enumerate("xyz"):
         vertices[:, axis] = rows[name]
-    if n_vertices > MAX_VERTICES:
-        return None     # read_header refuses it
     faces = np.empty((n_faces, 3), np.int32)
     for first in range(0, n_faces, CHUNK):
         chunk = records["i"][first:first + CHUNK]
