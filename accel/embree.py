@@ -280,11 +280,13 @@ class EmbreeAccelerator(compiled.CompiledFace):
         box = np.zeros(6)
         scale = 0.0
         if geometry.triangle_count:
-            if geometry.vertices.shape[0] >= 2 ** 32:
-                raise ValueError("Embree's index buffer holds at most 2**32 - 1 vertices")
             vertices = np.zeros(geometry.vertices.size + 4, dtype=np.float32)  # + 16 bytes
-            vertices[:-4] = (geometry.vertices - centre).reshape(-1)
-            indices = np.ascontiguousarray(geometry.faces, dtype=np.uint32)
+            for first in range(0, len(geometry.vertices), 1 << 16):   # no float64 temporary
+                rows = geometry.vertices[first:first + (1 << 16)]
+                vertices[3 * first:3 * (first + len(rows))] = (rows - centre).reshape(-1)
+            # the geometry's int32 faces (each in 0..2**31 - 2) are Embree's uint32 indices as
+            # they are: shared, not copied; the geometry outlives the scene (held here)
+            indices = geometry.faces.view(np.uint32)
             box, scale = self._box(geometry, centre, vertices[:-4].reshape(-1, 3))
             device, scene = _build_scene(vertices, indices)
             # the shared buffers are owned here and by the finalizer, which lets them go last

@@ -8,6 +8,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+# faces are int32: a mesh indexes at most this many vertices (one dtype for every mesh, so that
+# no kernel is compiled twice, and 12 bytes a triangle that Embree shares as its index buffer)
+MAX_VERTICES = np.iinfo(np.int32).max
+
 
 def _checked_array(name, value, shape_tail, dtype=np.float64, rows="N"):
     """`value` as a C-contiguous array of `dtype` and shape (rows, *shape_tail) (an empty one
@@ -21,6 +25,18 @@ def _checked_array(name, value, shape_tail, dtype=np.float64, rows="N"):
     return array
 
 
+def _int32_faces(value, n_vertices):
+    """`value` as C-contiguous int32 faces of shape (F, 3), each index in 0..n_vertices - 1
+    (checked before the cast, which would wrap a larger one), or ValueError."""
+    faces = np.asarray(value)
+    if faces.dtype != np.int32:
+        faces = np.asarray(faces, dtype=np.int64)
+    faces = _checked_array("faces", faces, (3,), dtype=faces.dtype, rows="F")
+    if faces.size and (faces.min() < 0 or faces.max() >= n_vertices):
+        raise ValueError(f"faces index vertices outside 0..{n_vertices - 1}")
+    return np.ascontiguousarray(faces, dtype=np.int32)
+
+
 def _store(instance, **arrays):
     """Set a frozen dataclass's fields to their checked arrays (its __post_init__'s last step)."""
     for name, array in arrays.items():
@@ -31,7 +47,8 @@ def _store(instance, **arrays):
 class Geometry:
     """Triangles (vertices, faces) and analytic spheres (centers, radii).
 
-    Primitive ids: triangles 0..F-1, then spheres F..F+S-1.
+    Primitive ids: triangles 0..F-1, then spheres F..F+S-1. Vertices are float64, faces int32
+    (at most MAX_VERTICES vertices).
     """
     vertices: np.ndarray
     faces: np.ndarray
@@ -39,8 +56,11 @@ class Geometry:
     radii: np.ndarray = None
 
     def __post_init__(self):
+        if len(self.vertices) > MAX_VERTICES:
+            raise ValueError(f"the mesh has {len(self.vertices):,} vertices, more than the "
+                             f"{MAX_VERTICES:,} its int32 faces can index")
         vertices = _checked_array("vertices", self.vertices, (3,))
-        faces = _checked_array("faces", self.faces, (3,), dtype=np.int64, rows="F")
+        faces = _int32_faces(self.faces, len(vertices))
         centers = _checked_array("centers",
                                  np.empty((0, 3)) if self.centers is None else self.centers, (3,))
         radii = np.ascontiguousarray(np.empty(0) if self.radii is None else self.radii,
@@ -53,8 +73,6 @@ class Geometry:
             raise ValueError("spheres contain NaN or infinite values")
         if (radii < 0).any():
             raise ValueError("sphere radii must not be negative")
-        if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
-            raise ValueError(f"faces index vertices outside 0..{len(vertices) - 1}")
         _store(self, vertices=vertices, faces=faces, centers=centers, radii=radii)
 
     @property

@@ -134,7 +134,10 @@ def gltf_lights(path, document, notes):
             notes.append(f"<{where}>: a light outside the file's scene: ignored")
             continue
         matrix = matrices[i]
-        radiance = tuple(np.asarray(colour) * intensity[0])
+        radiance = tuple(np.asarray(colour, dtype=np.float64) * intensity[0])
+        words = problem(radiance)
+        if words is not None:    # each factor is in range, their product need not be
+            raise SceneError(path, f"{label}: its color times its intensity {words}")
         kind = light.get("type")
         position = tuple(matrix[:3, 3])
         words = problem(position) if kind in ("point", "spot") else None

@@ -15,6 +15,7 @@ import os
 import numpy as np
 
 import accel
+from accel.types import MAX_VERTICES
 
 from .. import budget
 from ..budget import BudgetError
@@ -338,11 +339,15 @@ def _assemble(path, scene, document, missing, notes, untextured):
         cameras = gltf_cameras.gltf_cameras(path, document, gltf.node_matrices(path, document),
                                             notes)
     if not vertices:
-        return {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int64),
+        return {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int32),
                 "material_index": np.zeros(0, np.int32), "materials": [],
                 "uv": None, "vertex_colours": None, "textures": pool, "notes": notes,
                 "lights": lights, "cameras": cameras, "defaulted": 0}
-    return {"vertices": np.concatenate(vertices), "faces": np.concatenate(faces),
+    if offset > MAX_VERTICES:
+        raise SceneError(path, f"{offset:,} vertices, more than the {MAX_VERTICES:,} that "
+                               f"ptrace's int32 faces can index")
+    return {"vertices": np.concatenate(vertices),
+            "faces": np.concatenate(faces, dtype=np.int32, casting="unsafe"),
             "material_index": np.concatenate(material_index), "materials": records,
             "uv": np.concatenate(uvs) if textured else None,
             "vertex_colours": np.concatenate(colours) if coloured else None,

@@ -20,6 +20,8 @@ import re
 
 import numpy as np
 
+from accel.types import MAX_VERTICES
+
 from ..errors import SceneError
 from . import files, mtl
 from .limits import LIMIT, LIMIT_WORDS
@@ -97,7 +99,10 @@ def read_obj(path):
         used = keys // span
         del keys
     del tri_v
-    faces = faces.reshape(-1, 3)
+    if len(used) > MAX_VERTICES:
+        raise SceneError(path, f"{len(used):,} vertices, more than the {MAX_VERTICES:,} that "
+                               f"ptrace's int32 faces can index")
+    faces = faces.reshape(-1, 3).astype(np.int32)
     material_of_face = _per_face(state["materials"], len(counts), -1)[face_of_triangle]
     for word, count in sorted(state["skipped"].items()):
         notes.append(f"OBJ: {count} {SKIPPED_NAMES.get(word, word)} statement(s) ignored "

@@ -9,6 +9,8 @@ by any of their common names and read from trimesh's raw element data.
 """
 import numpy as np
 
+from accel.types import MAX_VERTICES
+
 from ..errors import SceneError
 
 COLOUR_NAMES = (("red", "green", "blue"), ("r", "g", "b"),
@@ -45,6 +47,10 @@ def read_header(path, data):
             current = elements.setdefault(words[1], (count, {}))
         elif words[0] == "property" and current is not None and len(words) >= 3:
             current[1][words[-1]] = words[1] if words[1] != "list" else "list"
+    vertex_count = elements.get("vertex", (0, {}))[0]
+    if vertex_count > MAX_VERTICES:
+        raise SceneError(path, f"PLY header: {vertex_count:,} vertices, more than the "
+                               f"{MAX_VERTICES:,} that ptrace's int32 faces can index")
     faces, face_properties = elements.get("face", (0, {}))
     if faces <= 0:
         if elements.get("tristrips", (0, {}))[0] > 0:
@@ -105,7 +111,7 @@ def read_plain_binary(path, data):
     """The parts of a binary PLY file of triangles and positions alone (a vertex element of
     scalar properties with x, y, z and none of ATTRIBUTE_NAMES, then a face element of one
     list of three indices per face, no other element and no texture comment), read straight
-    from the file's bytes into the flat arrays: positions as float64, faces as int64. The
+    from the file's bytes into the flat arrays: positions as float64, faces as int32. The
     faces with a NaN or infinite corner are kept and counted (ptrace.io.meshes drops them),
     and vertices at the same position (to 1e-8) are merged into one, first one first, as
     the trimesh reader merges them. None for any other PLY: trimesh reads it."""
@@ -137,8 +143,8 @@ def read_plain_binary(path, data):
         return None
     (n_vertices, vertex_properties), (n_faces, face_properties) = \
         elements["vertex"], elements["face"]
-    if n_vertices < 0 or n_faces < 0:
-        return None
+    if n_vertices < 0 or n_faces < 0 or n_vertices > MAX_VERTICES:
+        return None     # read_header refuses more vertices than int32 faces index
     names = [p[-1] for p in vertex_properties]
     if any(len(p) != 2 or p[0] not in SCALAR_TYPES for p in vertex_properties) or \
             not {"x", "y", "z"} <= set(names) or ATTRIBUTE_NAMES & set(names) or \
@@ -163,12 +169,13 @@ def read_plain_binary(path, data):
     vertices = np.empty((n_vertices, 3))
     for axis, name in enumerate("xyz"):
         vertices[:, axis] = rows[name]
-    faces = np.empty((n_faces, 3), np.int64)
+    faces = np.empty((n_faces, 3), np.int32)
     for first in range(0, n_faces, CHUNK):
-        faces[first:first + CHUNK] = records["i"][first:first + CHUNK]
+        chunk = records["i"][first:first + CHUNK]
+        if chunk.min() < 0 or chunk.max() >= n_vertices:     # before the cast could wrap it
+            raise SceneError(path, "face indices out of range")
+        faces[first:first + CHUNK] = chunk
     del rows, records
-    if n_faces and (faces.min() < 0 or faces.max() >= n_vertices):
-        raise SceneError(path, "face indices out of range")
     return vertices, faces
 
 
@@ -192,7 +199,7 @@ def merge_vertices(vertices, faces):
         stacked = np.round(vertices[chosen] * 10.0 ** MERGE_DIGITS).astype(np.int64)
     unique, inverse = unique_rows(stacked, keep_order=True)
     del stacked
-    remap = np.zeros(len(vertices), np.int64)
+    remap = np.zeros(len(vertices), faces.dtype)
     remap[chosen] = inverse
     del inverse
     vertices = vertices[chosen[unique]]

@@ -201,6 +201,18 @@ def test_lights_the_extension_forbids_are_refused_naming_the_light(tmp_path, lig
     assert "light 0" in message and words in message, message
 
 
+def test_a_light_whose_colour_times_intensity_passes_the_limit_is_refused(tmp_path):
+    """Each factor is within 1e30 alone; 1e20 x 1e20 is not (a float32 .exr holds 3.4e38, and
+    the emitters' power sums would overflow). 1e15 x 1e15 is at the limit: taken, as given."""
+    message = load_error(lights_file(tmp_path, {"type": "point", "name": "lamp",
+                                                "color": [1, 1e20, 1], "intensity": 1e20}))
+    assert "lit.gltf" in message and "light 0 ('lamp')" in message, message
+    assert "color times its intensity 1e+40 is beyond" in message, message
+    scene = ptrace.load(lights_file(tmp_path, {"type": "point", "color": [1, 1e15, 0.5],
+                                               "intensity": 1e15}))
+    np.testing.assert_array_equal(scene.lights.radiance[0], [1e15, 1e30, 5e14])
+
+
 def test_a_directional_light_on_a_zero_scale_node_is_dropped_with_a_note(tmp_path):
     """Zero scale is how glTF hides a node; the light has no direction (every sample would be
     NaN). The file then has no light: the default ambient light, noted."""
