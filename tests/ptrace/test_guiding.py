@@ -31,6 +31,7 @@ from ptrace.kernel.guide import (
     guide_sample,
     quadtree_pdf,
     quadtree_sample,
+    square_to_sphere,
 )
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -113,6 +114,37 @@ def test_the_solid_angle_pdf_integrates_to_one_over_the_sphere_and_matches_its_s
         dx, dy, dz, pdf = guide_sample(guide, 0, u1, u2)
         assert dx * dx + dy * dy + dz * dz == pytest.approx(1.0, abs=1e-12)
         assert pdf == pytest.approx(guide_pdf(guide, 0, dx, dy, dz), rel=1e-9)
+
+
+def test_the_guide_s_pdf_finds_each_direction_s_cell_without_an_arctangent():
+    """guide_pdf tells a direction's half of each node's phi interval by a sign, not atan2: it
+    agrees with the quadtree's density at the point numpy's arctan2 and the equal-area map
+    give, on random directions, on the axes, and on directions a hair on either side of cell
+    edges in phi (where a wrong half would show); and square_to_sphere's one-cosine direction
+    maps back to its point."""
+    guide = one_leaf_guide(peaked_grid(seed=8))
+    rng = np.random.default_rng(12)
+    d = rng.normal(size=(20000, 3))
+    edges = 2 * np.pi * (np.arange(RESOLUTION) / RESOLUTION)
+    z = rng.uniform(-0.99, 0.99, 2 * edges.size)
+    phi = np.concatenate([edges + 1e-9, edges - 1e-9])
+    r = np.sqrt(1 - z * z)
+    axes = np.vstack([np.eye(3), -np.eye(3)]) + 0.0   # (zeros of one sign: atan2 of -0 differs)
+    d = np.vstack([d / np.linalg.norm(d, axis=1)[:, None], axes,
+                   np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)])
+    x = np.clip(0.5 * (d[:, 2] + 1), 0, 1 - 1e-16)
+    y = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi) / (2 * np.pi)
+    y = np.clip(y, 0, 1 - 1e-16)
+    expected = np.array([quadtree_pdf(guide.q_child, guide.q_energy, 0, a, b)
+                         for a, b in zip(x, y)]) / (4 * np.pi)
+    got = np.array([guide_pdf(guide, 0, *v) for v in d])
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)   # (same cells)
+    assert len(set(np.round(got, 9).tolist())) > 20     # a divided tree: many different cells
+    for u1, u2 in rng.random((2000, 2)):
+        v = np.array(square_to_sphere(u1, u2))
+        assert np.linalg.norm(v) == pytest.approx(1.0, abs=1e-12)
+        back = np.mod(np.arctan2(v[1], v[0]), 2 * np.pi) / (2 * np.pi)
+        assert (0.5 * (v[2] + 1), back) == pytest.approx((u1, u2), abs=1e-9)
 
 
 def test_the_folded_guide_stays_above_the_surface_and_its_pdf_integrates_to_one_there():
