@@ -17,6 +17,7 @@ from ptrace.guiding import (
     RESOLUTION,
     SHARES,
     Trainer,
+    accumulate,
     auto_schedule,
     build_quadtrees,
     learn_share,
@@ -31,6 +32,7 @@ from ptrace.kernel.guide import (
     guide_sample,
     quadtree_pdf,
     quadtree_sample,
+    sphere_to_square,
     square_to_sphere,
 )
 
@@ -199,6 +201,39 @@ def test_a_guide_trained_on_one_small_distant_light_concentrates_toward_it():
             near += d @ light > math.cos(math.radians(15))
         assert near / 2000 > 0.9     # uniform directions: 0.017
         assert guide_pdf(guide, leaf, *light) > 50 / (4 * math.pi)
+
+
+def test_the_box_filter_splats_a_record_into_the_leaves_its_box_overlaps():
+    """Two leaves of the box [-1, 1]^3 split at x = 0: a record at x = -0.25 has a box the
+    size of its leaf (1 x 2 x 2) from x = -0.75 to 0.25, three quarters in its leaf and one in
+    the other; one at the middle of its leaf stays there; one at x = -0.9 has a box partly
+    outside the tree, [-1, -0.4] of it inside and all of that in its leaf (shares of the whole
+    box would lose 0.4 of its energy). Without the filter each stays in its leaf, and the
+    grid's total is the records' energy either way."""
+    axis, split = np.array([0, -1, -1]), np.array([0.0, 0.0, 0.0])
+    child, root = np.array([1, 0, 0]), np.array([0, 0, 1])
+    lower, upper = -np.ones(3), np.ones(3)
+    d = np.array([0.3, -0.4, math.sqrt(0.75)])
+    records = np.zeros((13, 3))
+    records[0] = [-0.25, -0.5, -0.9]
+    records[3:6] = d[:, None]
+    records[6] = [8.0, 4.0, 2.0]
+    records[12] = 1.0
+    x, y = sphere_to_square(*d)
+    cell = int(y * RESOLUTION) * RESOLUTION + int(x * RESOLUTION)
+    for box, expected in ((True, [6.0 + 4.0 + 2.0, 2.0]), (False, [14.0, 0.0])):
+        grid = np.zeros((2, RESOLUTION * RESOLUTION))
+        counts, leaves = np.zeros(2, dtype=np.int64), np.zeros(3, dtype=np.int64)
+        accumulate(axis, split, child, root, lower, upper, records, counts, grid, leaves,
+                   False, box)
+        assert list(leaves) == [0, 0, 0] and list(counts) == [3, 0]
+        assert grid[:, cell] == pytest.approx(expected, rel=1e-12)
+        assert grid.sum() == pytest.approx(14.0, rel=1e-12)
+    # with the cosine, each record's energy times |d . n| (n = +z here)
+    grid = np.zeros((2, RESOLUTION * RESOLUTION))
+    accumulate(axis, split, child, root, lower, upper, records, np.zeros(2, dtype=np.int64),
+               grid, np.zeros(3, dtype=np.int64), True, False)
+    assert grid[0, cell] == pytest.approx(14.0 * math.sqrt(0.75), rel=1e-12)
 
 
 def test_training_is_the_same_whatever_order_blocks_hand_their_records_in():
