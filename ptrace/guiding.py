@@ -64,7 +64,7 @@ BOX = True               # splat records into the leaves a box filter overlaps (
 PROBE = 4
 TRIAL = PROBE
 SUBSET = 16
-GUIDED_COST = 1.3          # measured: guided final passes 1.2-1.3x the unguided time a sample (Zen 1)
+GUIDED_COST = 1.3          # measured: a guided final pass 1.2-1.3x an unguided one (Zen 1)
 MARGIN = 0.8
 
 
