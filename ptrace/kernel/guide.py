@@ -62,11 +62,13 @@ def guide_leaf(axis, split, child, root, px, py, pz):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def square_to_sphere(x, y):
-    """The unit direction of point (x, y) of the unit square (equal-area map)."""
+    """The unit direction of point (x, y) of the unit square (equal-area map). One cosine: the
+    sine is its complement's square root, negative from y = 1/2 on (phi from pi)."""
     z = 2.0 * x - 1.0
     r = math.sqrt(max(0.0, 1.0 - z * z))
-    phi = 2.0 * math.pi * y
-    return r * math.cos(phi), r * math.sin(phi), z
+    c = math.cos(2.0 * math.pi * y)
+    s = math.sqrt(max(0.0, (1.0 - c) * (1.0 + c)))
+    return r * c, (r * s if y < 0.5 else -(r * s)), z
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -152,6 +154,61 @@ def quadtree_pdf(q_child, q_energy, node, x, y):
             return pdf
 
 
+# cos and sin of phi = 2 pi j / 2^MID_LEVELS: the middles of the quadtrees' first MID_LEVELS
+# levels in y, against which direction_pdf tells a direction's half without an arctangent
+MID_LEVELS = 6
+MID_COS = np.cos(2.0 * np.pi * np.arange(1 << MID_LEVELS) / (1 << MID_LEVELS))
+MID_SIN = np.sin(2.0 * np.pi * np.arange(1 << MID_LEVELS) / (1 << MID_LEVELS))
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def direction_pdf(q_child, q_energy, node, dx, dy, dz):
+    """quadtree_pdf at the point of the square of direction d (sphere_to_square's), found
+    without the arctangent: at level l < MID_LEVELS the y half (phi at or past the middle of
+    the node's phi interval) is the sign of the sine of phi minus that middle, dy cos - dx sin
+    (the interval is at most pi wide from level 1 on; level 0's half is phi >= pi, dy < 0); past
+    them, from sphere_to_square's y. The same cells as quadtree_pdf's but where d is within
+    rounding of a cell's edge."""
+    mids = 1 << MID_LEVELS
+    x = min(max(0.5 * (dz + 1.0), 0.0), 0.9999999999999999)
+    if dx == 0.0 and dy == 0.0:   # a pole: phi 0, as atan2(0, 0)
+        dx = 1.0
+    y = 0.0
+    low = 0        # the node's phi interval starts at 2 pi low / mids (levels < MID_LEVELS)
+    level = 0
+    pdf = 1.0
+    while True:
+        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
+                          q_energy[node, 3])
+        total = e0 + e1 + e2 + e3
+        if not total > 0.0:
+            return pdf
+        ix = 1 if x >= 0.5 else 0
+        x = min(2.0 * x - ix, 0.9999999999999999)
+        if level == 0:
+            iy = 1 if (dy < 0.0 or (dy == 0.0 and dx < 0.0)) else 0
+            low = iy * (mids >> 1)
+        elif level < MID_LEVELS:
+            half = mids >> (level + 1)
+            j = low + half
+            iy = 1 if dy * MID_COS[j] - dx * MID_SIN[j] >= 0.0 else 0
+            low += iy * half
+        else:
+            if level == MID_LEVELS:   # (deeper than the guides ptrace.guiding builds)
+                y = min(max(sphere_to_square(dx, dy, dz)[1] * mids - low, 0.0),
+                        0.9999999999999999)
+            iy = 1 if y >= 0.5 else 0
+            y = min(2.0 * y - iy, 0.9999999999999999)
+        q = 2 * iy + ix
+        pdf *= 4.0 * q_energy[node, q] / total
+        if pdf == 0.0:
+            return 0.0
+        node = q_child[node, q]
+        if node < 0:
+            return pdf
+        level += 1
+
+
 @njit(cache=True, _nrt=False, forceinline=True)
 def guide_sample(guide, node, u1, u2):
     """A unit direction drawn from the guide's quadtree `node`: (dx, dy, dz, pdf in solid
@@ -164,8 +221,7 @@ def guide_sample(guide, node, u1, u2):
 @njit(cache=True, _nrt=False, forceinline=True)
 def guide_pdf(guide, node, dx, dy, dz):
     """The solid-angle density of guide_sample from quadtree `node` at unit direction d."""
-    x, y = sphere_to_square(dx, dy, dz)
-    return quadtree_pdf(guide.q_child, guide.q_energy, node, x, y) * INV_FOUR_PI
+    return direction_pdf(guide.q_child, guide.q_energy, node, dx, dy, dz) * INV_FOUR_PI
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -182,12 +238,15 @@ def folded_pdf(guide, node, dx, dy, dz, nx, ny, nz):
 @njit(cache=True, _nrt=False, forceinline=True)
 def folded_sample(guide, node, u1, u2, nx, ny, nz):
     """A direction of guide_sample, mirrored through the surface of unit normal n when it
-    points below it (a BSDF that only reflects would waste it): (dx, dy, dz, folded_pdf)."""
-    dx, dy, dz, _ = guide_sample(guide, node, u1, u2)
+    points below it (a BSDF that only reflects would waste it): (dx, dy, dz, folded_pdf). The
+    drawn direction's density is the warp's; only its mirror image's is looked up."""
+    dx, dy, dz, pdf = guide_sample(guide, node, u1, u2)
     c = dx * nx + dy * ny + dz * nz
+    mx, my, mz = dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
+    pdf += guide_pdf(guide, node, mx, my, mz)
     if c < 0.0:
-        dx, dy, dz = dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
-    return dx, dy, dz, folded_pdf(guide, node, dx, dy, dz, nx, ny, nz)
+        return mx, my, mz, pdf
+    return dx, dy, dz, pdf
 
 
 @njit(cache=True, nogil=True, _nrt=False)

@@ -201,7 +201,8 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
     (ptrace.kernel.guide.GuideArrays), folded above the surface (every such kind only
     reflects), with probability guide.alpha x guide.share of the vertex's spatial leaf (the
     first bounce sample's u1 split at it) and from the BSDF otherwise, and weighted by the
-    mixture's pdf, which the light samples' MIS weights use too; guide.alpha 0 skips the guide.
+    mixture's pdf; the MIS weights between the light samples and the bounce's emission take the
+    BSDF's pdf alone (no guide lookup per light sample); guide.alpha 0 skips the guide.
     With guide.record set, each bounce is remembered in `history` (its first `depth` vertices)
     for the guide's records. Without it, guide, history and depth are not read.
 
@@ -365,9 +366,6 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
                             other = BSDF_PDF(ar, ag, ab, alpha, metallic, materials.eta,
                                              materials.k, materials.specular, m, wox, woy, woz,
                                              wix, wiy, wiz)
-                            if GUIDED and mix > 0.0:   # the bounce's pdf is the mixture's
-                                other = (1.0 - mix) * other + mix * folded_pdf(guide, leaf, wx, wy,
-                                                                               wz, nx, ny, nz)
                             scale *= power_heuristic(weight * pdf, other)
                         ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
                         sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
@@ -460,6 +458,11 @@ def shading_stage(kind, general=False, mode=LIGHTS_ALL, hemisphere=False, guided
             floats[TMIN, i], floats[TMAX, i] = 0.0, math.inf
             floats[TR, i], floats[TG, i], floats[TB, i] = tr, tg, tb
             floats[PDF, i] = pdf
+            if GUIDED and mix > 0.0:
+                # the MIS weights of the light samples and of this bounce's emission take the
+                # BSDF's pdf (no guide lookup per light sample): the two weights still sum to 1,
+                # and the bounce's estimate still divides by the mixture's pdf
+                floats[PDF, i] = bsdf_pdf
             if GUIDED and guide.record:
                 remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb,
                          mr, mg, mb, bsdf_pdf, nx, ny, nz)

@@ -17,6 +17,7 @@ from ptrace.guiding import (
     RESOLUTION,
     SHARES,
     Trainer,
+    accumulate,
     auto_schedule,
     build_quadtrees,
     learn_share,
@@ -31,6 +32,8 @@ from ptrace.kernel.guide import (
     guide_sample,
     quadtree_pdf,
     quadtree_sample,
+    sphere_to_square,
+    square_to_sphere,
 )
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
@@ -115,6 +118,37 @@ def test_the_solid_angle_pdf_integrates_to_one_over_the_sphere_and_matches_its_s
         assert pdf == pytest.approx(guide_pdf(guide, 0, dx, dy, dz), rel=1e-9)
 
 
+def test_the_guide_s_pdf_finds_each_direction_s_cell_without_an_arctangent():
+    """guide_pdf tells a direction's half of each node's phi interval by a sign, not atan2: it
+    agrees with the quadtree's density at the point numpy's arctan2 and the equal-area map
+    give, on random directions, on the axes, and on directions a hair on either side of cell
+    edges in phi (where a wrong half would show); and square_to_sphere's one-cosine direction
+    maps back to its point."""
+    guide = one_leaf_guide(peaked_grid(seed=8))
+    rng = np.random.default_rng(12)
+    d = rng.normal(size=(20000, 3))
+    edges = 2 * np.pi * (np.arange(RESOLUTION) / RESOLUTION)
+    z = rng.uniform(-0.99, 0.99, 2 * edges.size)
+    phi = np.concatenate([edges + 1e-9, edges - 1e-9])
+    r = np.sqrt(1 - z * z)
+    axes = np.vstack([np.eye(3), -np.eye(3)]) + 0.0   # (zeros of one sign: atan2 of -0 differs)
+    d = np.vstack([d / np.linalg.norm(d, axis=1)[:, None], axes,
+                   np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)])
+    x = np.clip(0.5 * (d[:, 2] + 1), 0, 1 - 1e-16)
+    y = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi) / (2 * np.pi)
+    y = np.clip(y, 0, 1 - 1e-16)
+    expected = np.array([quadtree_pdf(guide.q_child, guide.q_energy, 0, a, b)
+                         for a, b in zip(x, y)]) / (4 * np.pi)
+    got = np.array([guide_pdf(guide, 0, *v) for v in d])
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)   # (same cells)
+    assert len(set(np.round(got, 9).tolist())) > 20     # a divided tree: many different cells
+    for u1, u2 in rng.random((2000, 2)):
+        v = np.array(square_to_sphere(u1, u2))
+        assert np.linalg.norm(v) == pytest.approx(1.0, abs=1e-12)
+        back = np.mod(np.arctan2(v[1], v[0]), 2 * np.pi) / (2 * np.pi)
+        assert (0.5 * (v[2] + 1), back) == pytest.approx((u1, u2), abs=1e-9)
+
+
 def test_the_folded_guide_stays_above_the_surface_and_its_pdf_integrates_to_one_there():
     guide = one_leaf_guide(peaked_grid(seed=6))
     normal = np.array([0.48, -0.6, 0.64])
@@ -167,6 +201,39 @@ def test_a_guide_trained_on_one_small_distant_light_concentrates_toward_it():
             near += d @ light > math.cos(math.radians(15))
         assert near / 2000 > 0.9     # uniform directions: 0.017
         assert guide_pdf(guide, leaf, *light) > 50 / (4 * math.pi)
+
+
+def test_the_box_filter_splats_a_record_into_the_leaves_its_box_overlaps():
+    """Two leaves of the box [-1, 1]^3 split at x = 0: a record at x = -0.25 has a box the
+    size of its leaf (1 x 2 x 2) from x = -0.75 to 0.25, three quarters in its leaf and one in
+    the other; one at the middle of its leaf stays there; one at x = -0.9 has a box partly
+    outside the tree, [-1, -0.4] of it inside and all of that in its leaf (shares of the whole
+    box would lose 0.4 of its energy). Without the filter each stays in its leaf, and the
+    grid's total is the records' energy either way."""
+    axis, split = np.array([0, -1, -1]), np.array([0.0, 0.0, 0.0])
+    child, root = np.array([1, 0, 0]), np.array([0, 0, 1])
+    lower, upper = -np.ones(3), np.ones(3)
+    d = np.array([0.3, -0.4, math.sqrt(0.75)])
+    records = np.zeros((13, 3))
+    records[0] = [-0.25, -0.5, -0.9]
+    records[3:6] = d[:, None]
+    records[6] = [8.0, 4.0, 2.0]
+    records[12] = 1.0
+    x, y = sphere_to_square(*d)
+    cell = int(y * RESOLUTION) * RESOLUTION + int(x * RESOLUTION)
+    for box, expected in ((True, [6.0 + 4.0 + 2.0, 2.0]), (False, [14.0, 0.0])):
+        grid = np.zeros((2, RESOLUTION * RESOLUTION))
+        counts, leaves = np.zeros(2, dtype=np.int64), np.zeros(3, dtype=np.int64)
+        accumulate(axis, split, child, root, lower, upper, records, counts, grid, leaves,
+                   False, box)
+        assert list(leaves) == [0, 0, 0] and list(counts) == [3, 0]
+        assert grid[:, cell] == pytest.approx(expected, rel=1e-12)
+        assert grid.sum() == pytest.approx(14.0, rel=1e-12)
+    # with the cosine, each record's energy times |d . n| (n = +z here)
+    grid = np.zeros((2, RESOLUTION * RESOLUTION))
+    accumulate(axis, split, child, root, lower, upper, records, np.zeros(2, dtype=np.int64),
+               grid, np.zeros(3, dtype=np.int64), True, False)
+    assert grid[0, cell] == pytest.approx(14.0 * math.sqrt(0.75), rel=1e-12)
 
 
 def test_training_is_the_same_whatever_order_blocks_hand_their_records_in():
