@@ -29,7 +29,7 @@ from numba.extending import overload
 
 from .interpreted import interpreted
 
-RAY_BLOCK = 4096   # rays per work item of the batch kernels (each makes its own scratch)
+BLOCKS_PER_THREAD = 8   # work items per thread of a batch (each makes its own scratch)
 
 _FACES = {}      # record class -> (new_scratch, closest_hit, any_hit), numba functions
 
@@ -163,12 +163,14 @@ _pool_lock = threading.Lock()
 
 
 def in_blocks(kernel, n, *args):
-    """kernel(*args, start, end) over rays 0 .. n - 1 in blocks of RAY_BLOCK, handed out to
-    numba's thread count (numba.get_num_threads(), as -t sets it) of threads as they free up;
-    a kernel compiled with nogil runs them side by side. On an interrupt, the blocks not
-    started are cancelled and the running ones awaited, so nothing writes after it returns."""
-    blocks = [(start, min(n, start + RAY_BLOCK)) for start in range(0, n, RAY_BLOCK)]
+    """kernel(*args, start, end) over rays 0 .. n - 1 in BLOCKS_PER_THREAD blocks per thread of
+    numba's thread count (numba.get_num_threads(), as -t sets it), at least 64 rays each,
+    handed out to the threads as they free up; a kernel compiled with nogil runs them side by
+    side. On an interrupt, the blocks not started are cancelled and the running ones awaited,
+    so nothing writes after it returns."""
     threads = numba.get_num_threads()
+    size = max(64, -(-n // (threads * BLOCKS_PER_THREAD)))
+    blocks = [(start, min(n, start + size)) for start in range(0, n, size)]
     if threads == 1 or len(blocks) <= 1:
         for start, end in blocks:
             kernel(*args, start, end)

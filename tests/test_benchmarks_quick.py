@@ -287,7 +287,8 @@ def test_mitsuba_scenes_quick(tmp_path):
     text = output.read_text()
     scenes, loading = text.split("## Loading a large mesh")
     loading, history = loading.split("## Earlier changes measured")   # (a fixed record)
-    assert "| before (commit" in history
+    loading, survey = loading.split("## Public Mitsuba scenes")        # (a fixed record)
+    assert "| before (commit" in history and "| outcome | files |" in survey
     rows = [line.split("|")[1:-1] for line in scenes.splitlines()
             if line.startswith("| ") and not line.startswith("| scene")]
     assert [r[0].strip() for r in rows] == list(mitsuba_scenes.QUICK_SCENES)
