@@ -606,84 +606,33 @@ MIXED = (PLASTIC,)
 EXACT_GLASS = (dielectric_sample, delta_eval, delta_pdf)
 
 
-# -- any kind, by its code -------------------------------------------------------------------------
+# -- any kind, by its code (for tests and studies: a kernel calls its own kind's from BSDFS) ------
 
-@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_eval(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
               wiz):
     """f(wo, wi) for non-delta BSDFs; 0 for delta BSDFs and emitters. (ar, ag, ab), alpha and
-    metallic are material m's albedo, roughness and metallic at the shading point
-    (ptrace.textures)."""
-    if kind == DIFFUSE:
-        return diffuse_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                            wix, wiy, wiz)
-    if kind == MICROFACET:
-        return microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                               wix, wiy, wiz)
-    if kind == GLOSSY:
-        return glossy_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
-                           wiy, wiz)
-    if kind == GLTF_PBR:
-        return pbr_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
-                        wiy, wiz)
-    if kind == PLASTIC:
-        return plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                            wix, wiy, wiz)
-    if kind == ROUGH_PLASTIC:
-        return rough_plastic_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
-                                  woz, wix, wiy, wiz)
-    return 0.0, 0.0, 0.0
+    metallic are material m's albedo, roughness and metallic at the shading point."""
+    if kind not in BSDFS:
+        return 0.0, 0.0, 0.0
+    return BSDFS[kind][1](ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                          wiy, wiz)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_pdf(kind, ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
              wiz):
     """Solid-angle pdf of sample() producing wi (non-delta BSDFs); 0 otherwise. The albedo
     and metallic matter only to GLTF_PBR, whose choice of lobe depends on them."""
-    if kind == DIFFUSE:
-        return diffuse_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                           wix, wiy, wiz)
-    if kind == MICROFACET:
-        return microfacet_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                              wix, wiy, wiz)
-    if kind == GLOSSY:
-        return glossy_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                          wix, wiy, wiz)
-    if kind == GLTF_PBR:
-        return pbr_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                       wix, wiy, wiz)
-    if kind == PLASTIC:
-        return plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-                           wix, wiy, wiz)
-    if kind == ROUGH_PLASTIC:
-        return rough_plastic_pdf(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy,
-                                 woz, wix, wiy, wiz)
-    return 0.0
+    if kind not in BSDFS:
+        return 0.0
+    return BSDFS[kind][2](ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix,
+                          wiy, wiz)
 
 
-@njit(cache=True, _nrt=False, forceinline=True)
 def bsdf_sample(kind, ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox,
                 woy, woz, u1, u2, u3):
     """Sample wi given wo: (wix, wiy, wiz, fr, fg, fb, pdf), as each kind's sample function
     (above); pdf 0 means no sample, and emitters do not scatter."""
-    args = (ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m, wox, woy, woz,
-            u1, u2, u3)
-    if kind == DIFFUSE:
-        return diffuse_sample(*args)
-    if kind == MIRROR:
-        return mirror_sample(*args)
-    if kind == MICROFACET:
-        return microfacet_sample(*args)
-    if kind == GLOSSY:
-        return glossy_sample(*args)
-    if kind == GLTF_PBR:
-        return pbr_sample(*args)
-    if kind == GLASS:
-        return glass_sample(*args)
-    if kind == REFRACTION:
-        return refraction_sample(*args)
-    if kind == PLASTIC:
-        return plastic_sample(*args)
-    if kind == ROUGH_PLASTIC:
-        return rough_plastic_sample(*args)
-    return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering
+    if kind not in BSDFS:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0   # emission and anything else: no scattering
+    return BSDFS[kind][0](ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
+                          wox, woy, woz, u1, u2, u3)

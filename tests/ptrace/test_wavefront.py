@@ -122,8 +122,7 @@ def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for
     plain = lambda kind: shading.shading_stage(kind, False, codes.LIGHTS_ALL, False, False)
     diffuse, mirror = calls(plain(DIFFUSE)), calls(plain(MIRROR))
     own = lambda kind: {f.py_func for f in bsdf.BSDFS[kind]}
-    every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS)) | {
-        f.py_func for f in (bsdf.bsdf_sample, bsdf.bsdf_eval, bsdf.bsdf_pdf)}
+    every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS))
     light_sampling = {f.py_func for f in (lights.sample_area, lights.sample_area_row,
                                           shading.any_light, shading.chosen_light,
                                           shading.any_light_angular,
