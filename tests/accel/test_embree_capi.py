@@ -182,9 +182,15 @@ CACHE_PROBE = textwrap.dedent("""
 """)
 
 
-def test_batch_kernels_load_from_numbas_cache_in_a_fresh_process():
+def test_batch_kernels_load_from_numbas_cache_in_a_fresh_process(tmp_path):
+    # a cache folder of its own: a process that imports accel without ptrace keys accel's
+    # kernels by numba's own stamp, one that imports ptrace by ptrace.jit's, and a save under
+    # either stamp drops the other's index entries, so another worker's save between the two
+    # runs could evict the first run's kernels
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+
     def run():
-        result = subprocess.run([sys.executable, "-c", CACHE_PROBE], cwd=REPO, env=os.environ,
+        result = subprocess.run([sys.executable, "-c", CACHE_PROBE], cwd=REPO, env=env,
                                 capture_output=True, text=True, timeout=600)
         assert result.returncode == 0, result.stderr
         return [tuple(map(int, line.split())) for line in result.stdout.split("\n") if line]
