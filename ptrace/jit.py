@@ -353,20 +353,56 @@ def depend_on_folders(folders, by_imports=()):
             digests[folder] = _folders_digest([folder])
         return digests[folder]
 
+    def digest(path):
+        for folder in _DEPENDENCY_FOLDERS:
+            if path.startswith(folder + os.sep):
+                if folder not in _BY_IMPORTS:
+                    return whole(folder)
+                if path not in digests:
+                    digests[path] = _imports_digest(path, _BY_IMPORTS, whole)
+                return digests[path]
+        return None
+
     def stamp(self):
         base = own_stamp(self)
         path = os.path.abspath(self._py_file)
-        for folder in _DEPENDENCY_FOLDERS:
-            if path.startswith(folder + os.sep):
-                if folder in _BY_IMPORTS:
-                    if path not in digests:
-                        digests[path] = _imports_digest(path, _BY_IMPORTS, whole)
-                    return (base, digests[path])
-                return (base, whole(folder))
-        return base
+        if not any(path.startswith(folder + os.sep) for folder in _DEPENDENCY_FOLDERS):
+            return base
+        return _Later(lambda: (base, digest(path)))
 
     mixin.get_source_stamp = stamp
     mixin._ptrace_stamp = stamp
+    _stamps_read_when_used()
+
+
+class _Later:
+    """A kernel's source stamp to be worked out when numba's cache first reads or writes its
+    index (_stamps_read_when_used), not when the kernel is defined: the digests read and parse
+    the sources, which took about 0.4 s of every process's start, --help and refused files
+    included, though most processes load or compile only a few kernels, or none."""
+
+    def __init__(self, work):
+        self.work = work
+
+
+def _stamps_read_when_used():
+    """numba's index file keeps its kernel's source stamp as _source_stamp, set when the kernel
+    is defined: make it an attribute that works out a _Later stamp on first use."""
+    from numba.core import caching
+    index_file = caching.IndexDataCacheFile
+    if isinstance(getattr(index_file, "_source_stamp", None), property):
+        return
+
+    def get(self):
+        value = self.__dict__["_ptrace_source_stamp"]
+        if isinstance(value, _Later):
+            value = self.__dict__["_ptrace_source_stamp"] = value.work()
+        return value
+
+    def set_(self, value):
+        self.__dict__["_ptrace_source_stamp"] = value
+
+    index_file._source_stamp = property(get, set_)
 
 
 def _cell_key(value):
