@@ -1,4 +1,5 @@
-"""Shared test set-up: where the CS184 course scenes are, and two numba threads at least.
+"""Shared test set-up: where the CS184 course scenes are, two numba threads at least, and cold
+renders compiled in their own process.
 
 PTRACE_SCENES (if set) or <repo>/../shared/scenes/cs184. Tests that need the scenes fail (not
 skip) when neither exists: CI always has ../shared.
@@ -9,6 +10,10 @@ import pathlib
 # Before numba is imported anywhere: at least two threads, even on a one-core machine, so the
 # tests that compare one thread with two really run two (numba allows more threads than cores).
 os.environ.setdefault("NUMBA_NUM_THREADS", str(max(2, os.cpu_count() or 1)))
+# A cold render compiles its kernels in its own process alone (ptrace.kernel.ahead would start
+# one worker process a core): the suite's workers keep every core busy already, and each started
+# process would cost its start-up. tests/ptrace/test_compile_ahead.py runs the workers itself.
+os.environ.setdefault("PTRACE_COMPILE_PROCESSES", "1")
 
 import pytest  # noqa: E402
 

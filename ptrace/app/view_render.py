@@ -366,5 +366,6 @@ class Backends:
         with self.lock:
             if key not in self.built:
                 self.built[key] = RenderJob.build(self.scene, settings, camera, self.notice)
+                self.built[key].compile_ahead()   # what the cache lacks, on every core
             built = self.built[key]
         return built.reused(settings, camera)

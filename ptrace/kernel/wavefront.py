@@ -224,6 +224,59 @@ class Wavefront:
             trainer.add((first_sample, int(rows[0])), np.concatenate(records, axis=1))
         return dropped, rays
 
+    def kernels(self, aovs=False):
+        """Every stage kernel a render of this job may call, each with arguments of the types
+        trace() calls it with (a wave of this job's own, one path): [(dispatcher, args)], the
+        largest kernels first. ptrace.kernel.ahead compiles them before the render, on every
+        core. aovs: the render asks for AOVs (trace's features has rows)."""
+        wave, scratch = self.new_wave(), new_scratch(self.accel)
+        floats, ints, queue, after = wave.floats, wave.ints, wave.queue, wave.next
+        shadow, shadow_path, blocked = wave.shadow, wave.shadow_path, wave.blocked
+        shapes, surfaces, lights, options = self.shapes, self.surfaces, self.lights, self.options
+        accel, one = self.accel, np.zeros(1, dtype=np.int64)
+        sums, feature_sums = np.zeros((1, 5)), np.zeros((1 if aovs else 0, 8))
+        if self.cutouts:
+            closest = (visible_stage, (accel, scratch, shapes, surfaces, options, floats, ints,
+                                       queue, 1))
+        else:
+            closest = (closest_stage, (accel, scratch, floats, ints, queue, 1))
+        calls = [(stage, (shapes, surfaces, lights, options, self.mis, floats, ints, after[0:1],
+                          1, shadow, shadow_path, wave.shadow_key, 0, queue, 0, self.guide,
+                          wave.history, self.depth))
+                 for _kind, stage in self.stages]
+        if not self.normals:
+            calls.append((self.hit_stage, (shapes, surfaces, lights, options, self.mis, floats,
+                                           ints, queue, 1, after, wave.starts)))
+        calls += [closest, (camera_stage, (self.camera, options, one, one, 0, 1, 0, 1, floats,
+                                           ints, queue))]
+        if aovs:
+            calls.append((features_stage, (shapes, self.materials, floats, ints, 1,
+                                           wave.features)))
+        if self.normals:
+            calls.append((normals_stage, (shapes, floats, ints, 1)))
+        elif self.hemisphere:
+            calls.append((visible_probe_stage, (accel, scratch, shapes, surfaces, options, ints,
+                                                shadow, shadow_path, wave.shadow_key, 1,
+                                                wave.probe_prim, wave.probe_uv))
+                         if self.cutouts else
+                         (probe_stage, (accel, scratch, shadow, 1, wave.probe_prim,
+                                        wave.probe_uv)))
+            calls.append((probe_found_stage, (shapes, surfaces, lights, floats, shadow,
+                                              shadow_path, wave.probe_prim, wave.probe_uv, 1)))
+        else:
+            calls.append((shadowed_stage, (accel, scratch, shapes, surfaces, options, ints,
+                                           shadow, shadow_path, wave.shadow_key, 1, blocked))
+                         if self.cutouts else
+                         (any_stage, (accel, scratch, shadow, 1, blocked)))
+            calls.append((shadow_stage, (floats, shadow, shadow_path, blocked, 1)))
+        if self.guided:   # the training passes'
+            calls += [(snapshot_stage, (floats, ints, queue, 1, wave.history, self.depth)),
+                      (record_stage, (floats, 1, wave.history, self.depth, wave.records))]
+        calls += [(fold_stage, (floats, ints, 0, 1, 1, sums, one, wave.features, feature_sums)),
+                  (add_stage, (sums, one, one, np.zeros((1, 3)), np.zeros(1), np.zeros(1), one,
+                               feature_sums, np.zeros((1 if aovs else 0, 8))))]
+        return calls
+
     def _closest(self, wave, scratch, n):
         """The closest hits of the n queued paths' rays (past cut-out surfaces if the scene
         has them)."""

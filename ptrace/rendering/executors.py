@@ -15,7 +15,6 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
     build, records and render phases and the counts of passes and kernel calls. Returns the
     render's figures for stats. features: the AOVs' per-pixel sums, or None (RenderJob.trace)."""
     job = RenderJob.build(scene, settings, camera, notice, phases.enter)
-    phases.enter("render")
     start = time.perf_counter()
     phases.counts.update(passes=0, kernel_calls=0)
 
@@ -27,6 +26,10 @@ def render_in_process(scene, settings, camera, pixel_x, pixel_y, passes, phases,
     interrupted = False
     guiding = None
     try:
+        phases.enter("compile")   # what the cache lacks, on every core, before the first pass
+        job.compile_ahead(features is not None)
+        phases.enter("render")
+        start = time.perf_counter()
         if settings.guiding != "off":   # training passes, then the rest of -s with the guide
             training, guiding, images = train(job, pixel_x, pixel_y, settings.spp,
                                               settings.guiding, on_block)

@@ -19,6 +19,7 @@ import accel
 from ..integrator import camera_record, scene_records
 from ..jit import cold, compile_estimate
 from ..kernel import wavefront
+from ..kernel.ahead import compile_ahead
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # a block's features when no AOVs are asked for
@@ -188,6 +189,12 @@ class RenderJob:
         job.build_seconds, job.records_seconds = build_seconds, time.perf_counter() - start
         job.cold = cold_kernels   # what the cache lacked: ptrace.jit.cold
         return job
+
+    def compile_ahead(self, aovs=False):
+        """Compile, before the first trace, the kernels this job's renders call that numba's
+        cache lacks, on every core (ptrace.kernel.ahead); aovs: the renders ask for AOVs.
+        Returns how many were missing."""
+        return compile_ahead(self.wavefront.kernels(aovs))
 
     def reused(self, settings, camera):
         """A job for other settings of the same backend (kind and options) and another camera,

@@ -210,3 +210,54 @@ def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sample
     assert integrator.every_light_samples.py_func in every
     assert not every & (tree | {integrator.power_samples.py_func})
     assert tree <= calls(integrator.emission_found(codes.LIGHTS_BVH), signature)
+
+
+def _recording(monkeypatch):
+    """Every compiled function the wavefront calls, wrapped to record (dispatcher, argument
+    types) of each call made once the returned set has a None in it (from then on)."""
+    seen = set()
+
+    def wrap(dispatcher):
+        def recorded(*args):
+            if None in seen:
+                seen.add((dispatcher, tuple(dispatcher.typeof_pyval(a) for a in args)))
+            return dispatcher(*args)
+        recorded.dispatcher = dispatcher
+        return recorded
+
+    for name, value in list(vars(wavefront).items()):
+        if isinstance(value, numba.core.registry.CPUDispatcher):
+            monkeypatch.setattr(wavefront, name, wrap(value))
+    for factory in ("shading_stage", "hit_stage"):
+        made = getattr(wavefront, factory)
+        monkeypatch.setattr(wavefront, factory,
+                            lambda *args, made=made, **kw: wrap(made(*args, **kw)))
+    return seen
+
+
+@pytest.mark.parametrize("options", [dict(), dict(hemisphere=True), dict(integrator="normals"),
+                                     dict(light_sampler="power", aovs=True),
+                                     dict(guiding="on", spp=4)],
+                         ids=["path", "hemisphere", "normals", "power-aovs", "guided"])
+def test_the_kernels_compiled_ahead_are_those_a_render_calls(cornell, monkeypatch, options):
+    """Wavefront.kernels (what ptrace.kernel.ahead compiles before a cold render) lists each
+    stage a render calls, with the argument types it calls it with, and nothing else: a kernel
+    missing from the list would compile alone on the render's first call, and one listed but
+    never called would be compiled for nothing."""
+    scene, camera = cornell
+    seen = _recording(monkeypatch)
+    options = dict(SMALL, **options)
+    aovs = {} if options.pop("aovs", False) else None
+    planned = {}
+
+    def compile_ahead(job, with_aovs=False):
+        planned["calls"] = job.wavefront.kernels(with_aovs)
+        seen.add(None)   # the calls of the render's passes (not the job's records)
+        return 0
+
+    monkeypatch.setattr(RenderJob, "compile_ahead", compile_ahead)
+    assert ptrace.render(scene, camera=camera, aovs=aovs, **options).mean() > 0.0
+    listed = {(call.dispatcher, tuple(call.dispatcher.typeof_pyval(a) for a in args))
+              for call, args in planned["calls"]}
+    assert len(listed) == len(planned["calls"])
+    assert seen - {None} == listed
