@@ -213,6 +213,60 @@ def _locked(method, exclusive):
     return locked
 
 
+def _one_compile_of_a_kernel_at_a_time():
+    """Processes that lack the same kernel at the same time (the test suite's workers, two
+    renders started together, a render and its compile-ahead workers sharing a callee) each
+    compiled it. A process about to compile or load a kernel holds a lock named by the
+    kernel's cache key (a file beside its index) until it has the kernel, so a second process
+    waits for the first's save and loads it. The lock is taken inside numba's compiler lock
+    (one thread of a process compiles at a time), so no two threads of a process wait on each
+    other through it; a kernel's lock is held while its callees compile, and a callee never
+    calls its caller, so no two processes wait on each other either. Where no lock can be had
+    (no fcntl, a read-only folder), numba's own way stands."""
+    from numba.core import dispatcher
+    from numba.core.compiler_lock import global_compiler_lock
+    compile_ = dispatcher.Dispatcher.compile
+    if getattr(compile_, "_ptrace_locked", False):
+        return
+
+    def compile(self, sig):
+        with global_compiler_lock:
+            path = _compile_lock_path(self, sig)
+            if path is None:
+                return compile_(self, sig)
+            try:
+                import fcntl
+                handle = open(path, "ab")
+            except (ImportError, OSError):
+                return compile_(self, sig)
+            with handle:
+                try:
+                    fcntl.flock(handle, fcntl.LOCK_EX)
+                except OSError:   # a filesystem without locks
+                    pass
+                return compile_(self, sig)    # closing the file releases the lock
+
+    compile._ptrace_locked = True
+    compile.__wrapped__ = compile_
+    dispatcher.Dispatcher.compile = compile
+
+
+def _compile_lock_path(kernel, sig):
+    """The lock file of kernel's compile for sig, beside its cache index; None without an
+    on-disk cache, or when the kernel is compiled in this process already."""
+    try:
+        if isinstance(sig, tuple) and sig in kernel.overloads:
+            return None
+        index_file = getattr(kernel._cache, "_cache_file", None)
+        if index_file is None:    # caching off (numba's NullCache)
+            return None
+        key = kernel._cache._index_key(sig, kernel.targetctx.codegen())
+        name = hashlib.sha256(repr(key).encode()).hexdigest()[:24]
+        return f"{index_file._index_path}.{name}.compiling"
+    except Exception:   # noqa: BLE001 - numba's internals moved: compile without the lock
+        return None
+
+
 _DEPENDENCY_FOLDERS = []
 _BY_IMPORTS = []   # the folders of _DEPENDENCY_FOLDERS whose kernels depend on their imports
 
@@ -451,6 +505,7 @@ try:
     _guard_cache_files()
     depend_on_folders(_kernel_folders()[1:], by_imports=_kernel_folders()[:1])
     _key_closures_by_their_functions()
+    _one_compile_of_a_kernel_at_a_time()
 except (ImportError, AttributeError):   # numba's internals moved: its own behaviour stays
     pass
 configure_cache()

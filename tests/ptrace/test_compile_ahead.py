@@ -8,6 +8,7 @@ import pickle
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -79,3 +80,43 @@ def test_one_process_compiles_nothing_ahead(tmp_path, monkeypatch):
     assert len(ahead.missing(calls)) == 2
     monkeypatch.setenv(ahead.PROCESSES_VARIABLE, "3")
     assert ahead.processes() == 3
+
+
+WAITER = '''
+import numpy as np
+import ptrace  # noqa: F401 - ptrace.jit's cache behaviour
+import {name} as probe
+print("ready", flush=True)
+probe.second(np.arange(4.0))
+print(sum(probe.second.stats.cache_hits.values()),
+      sum(probe.second.stats.cache_misses.values()), flush=True)
+'''
+
+
+def test_a_process_that_lacks_a_kernel_another_is_compiling_waits_and_loads_it(
+        tmp_path, monkeypatch):
+    """The second of two processes that lack the same kernel at once does not compile it too:
+    it waits on the kernel's lock (ptrace.jit) and loads what the first saves. (Without the
+    lock, the waiter compiles it: 0 hits, 1 miss.)"""
+    import fcntl
+
+    from ptrace import jit
+    module, calls = probe_module(tmp_path, monkeypatch, "ahead_probe_lock")
+    dispatcher, types = ahead.missing(calls)[1]
+    path = jit._compile_lock_path(dispatcher, types)
+    assert path is not None and path.startswith(dispatcher._cache._cache_path)
+    with open(path, "ab") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)     # as if this process were compiling it
+        waiter = subprocess.Popen([sys.executable, "-c", WAITER.format(name=module.__name__)],
+                                  stdout=subprocess.PIPE, text=True)
+        try:
+            assert waiter.stdout.readline().strip() == "ready"
+            time.sleep(2.0)
+            assert waiter.poll() is None     # waiting on the lock, not compiling
+            # compiled and saved while the lock is held (numba's compile, without the lock)
+            type(dispatcher).compile.__wrapped__(dispatcher, types)
+        except BaseException:
+            waiter.kill()
+            raise
+    out, _ = waiter.communicate(timeout=120)
+    assert tuple(map(int, out.split())) == (1, 0), out
