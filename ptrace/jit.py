@@ -448,7 +448,8 @@ def _stamps_read_when_used():
         return
 
     def get(self):
-        value = self.__dict__["_ptrace_source_stamp"]
+        # (an index made before ptrace.jit was imported holds its stamp as numba set it)
+        value = self.__dict__.get("_ptrace_source_stamp", self.__dict__.get("_source_stamp"))
         if isinstance(value, _Later):
             value = self.__dict__["_ptrace_source_stamp"] = value.work()
         return value

@@ -292,3 +292,17 @@ def test_the_cold_notice_quotes_the_compile_measured_here(tmp_path):
     assert compile_estimate("first", stage) == 9.5
     assert [p.name for p in tmp_path.iterdir()] == ["ptrace-compile-seconds.json"]
     remember_compile("first", 1.0, _Index([], tmp_path / "missing"))   # nowhere to keep it
+
+
+def test_a_kernel_defined_before_ptrace_is_imported_is_saved_and_loaded(tiny):
+    """A module whose kernels were defined before ptrace was imported (numba set their stamps,
+    before ptrace.jit made stamps wait until first used) still saves and loads them, with no
+    note (a test worker that imported accel first said "could not be saved ...
+    ('_ptrace_source_stamp')" and compiled the kernel again in every run)."""
+    env, cwd = tiny
+    code = ("import tiny, ptrace; tiny.add_one(1.5); print(tiny.add_one.stats.cache_hits and 1 "
+            "or 0); print('\\n'.join(ptrace.jit.cache_notes()))")
+    first = python(code, env, cwd)      # compiled (a float signature the fixture did not save)
+    assert first.returncode == 0 and first.stdout.split() == ["0"], first.stdout + first.stderr
+    again = python(code, env, cwd)
+    assert again.returncode == 0 and again.stdout.split() == ["1"], again.stdout + again.stderr
