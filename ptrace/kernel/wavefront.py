@@ -15,6 +15,7 @@ import threading
 from collections import namedtuple
 
 import numpy as np
+from numba.core.dispatcher import Dispatcher
 
 from accel.compiled import new_scratch
 from accel.interpreted import sized
@@ -127,9 +128,8 @@ class Entries:
             return kept[1](*args)
         result = stage(*args)
         entry = stage
-        overloads = getattr(stage, "overloads", None)
-        if overloads is not None:
-            cres = overloads.get(tuple(stage.typeof_pyval(a) for a in args))
+        if isinstance(stage, Dispatcher):   # (a wrapper made by functools.wraps is not one)
+            cres = stage.overloads.get(tuple(stage.typeof_pyval(a) for a in args))
             if cres is not None:
                 entry = cres.entry_point
         self._entries[stage] = (tag, entry)
