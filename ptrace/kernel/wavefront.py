@@ -115,9 +115,11 @@ class Entries:
     signature that call's arguments have is kept and called from then on (1.6-2.3 us: the
     arguments are unboxed, not typed). A render's calls of one stage pass arguments of the same
     types (its records, its wave's arrays, Python ints), so the kept entry point is the one the
-    dispatcher would choose; `tag` names an argument that may be replaced between calls (the
-    guide), whose change resolves the entry point again. Anything that is not a numba dispatcher
-    (NUMBA_DISABLE_JIT, a benchmark's wrapper) is called as it is."""
+    dispatcher would choose (the stages that take the caller's arrays, camera_stage and
+    add_stage, once per wave or block, go through their dispatchers); `tag` names an argument
+    that may be replaced between calls (the guide), whose change resolves the entry point
+    again. Anything that is not a numba dispatcher (NUMBA_DISABLE_JIT, a benchmark's wrapper)
+    is called as it is."""
 
     def __init__(self):
         self._entries = {}
@@ -234,8 +236,9 @@ class Wavefront:
         trainer, records = self.trainer, []
         for start in range(0, total, self.wave_paths):
             size = min(self.wave_paths, total - start)
-            call(camera_stage, self.camera, options, pixel_x, pixel_y, first_sample, pass_n,
-                 start, size, floats, ints, queue)
+            # (through the dispatcher, as add_stage: the caller's arrays are typed on each call)
+            camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
+                         size, floats, ints, queue)
             if aovs:   # the camera rays' first hits, before any stage moves on from them
                 self._closest(wave, scratch, size)
                 features_stage(shapes, self.materials, floats, ints, size, wave.features)
@@ -252,8 +255,7 @@ class Wavefront:
                                            counts, wave.features, feature_sums)
             dropped += wave_dropped
             rays += wave_rays
-        call(add_stage, sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums,
-             features)
+        add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features)
         if trainer is not None and rows.shape[0]:
             trainer.add((first_sample, int(rows[0])), np.concatenate(records, axis=1))
         return dropped, rays
