@@ -15,6 +15,7 @@ import threading
 from collections import namedtuple
 
 import numpy as np
+from numba.core.dispatcher import Dispatcher
 
 from accel.compiled import new_scratch
 from accel.interpreted import sized
@@ -106,6 +107,37 @@ def exact_glass(scene):
     return bool(np.any((np.asarray(m.kind) == GLASS) & (np.asarray(m.fresnel) == EXACT)))
 
 
+class Entries:
+    """Stage calls without numba's dispatch: a dispatcher types every argument of every call
+    (18-20 us for the hit and shading stages, whose records hold dozens of arrays; 5 us for a
+    trace stage), holding the GIL, once per stage and bounce of every wave. The first call of
+    a stage goes through its dispatcher (which compiles or loads it); the entry point of the
+    signature that call's arguments have is kept and called from then on (1.6-2.3 us: the
+    arguments are unboxed, not typed). A render's calls of one stage pass arguments of the same
+    types (its records, its wave's arrays, Python ints), so the kept entry point is the one the
+    dispatcher would choose (the stages that take the caller's arrays, camera_stage and
+    add_stage, once per wave or block, go through their dispatchers); `tag` names an argument
+    that may be replaced between calls (the guide), whose change resolves the entry point
+    again. Anything that is not a numba dispatcher (NUMBA_DISABLE_JIT, a benchmark's wrapper)
+    is called as it is."""
+
+    def __init__(self):
+        self._entries = {}
+
+    def __call__(self, stage, *args, tag=None):
+        kept = self._entries.get(stage)
+        if kept is not None and kept[0] is tag:
+            return kept[1](*args)
+        result = stage(*args)
+        entry = stage
+        if isinstance(stage, Dispatcher):   # (a wrapper made by functools.wraps is not one)
+            cres = stage.overloads.get(tuple(stage.typeof_pyval(a) for a in args))
+            if cres is not None:
+                entry = cres.entry_point
+        self._entries[stage] = (tag, entry)
+        return result
+
+
 def used_kinds(scene):
     """The material kinds of the scene's primitives, sorted."""
     used = np.unique(np.asarray(scene.material_index))
@@ -168,6 +200,7 @@ class Wavefront:
         self.wave_paths = int(max(1, min(WAVE_PATHS, SHADOW_RAYS // per_vertex)))
         self.shadow_rays = self.wave_paths * lights.radiance.shape[0] * options.light_samples
         self._local = threading.local()
+        self.call = Entries()
 
     def _wave(self):
         wave = getattr(self._local, "wave", None)
@@ -179,6 +212,7 @@ class Wavefront:
         """A wave's arrays for this render (each thread keeps its own, used again for every
         wave)."""
         wave = Wave(self.wave_paths, self.shadow_rays, self.hemisphere)
+        wave.scratch = new_scratch(self.accel)   # the backend's, for this thread's traces
         columns = self.wave_paths * self.depth if self.guided else 1
         wave.history = np.zeros((HISTORY_ROWS, columns))   # (guided) the vertices to record
         wave.records = np.zeros((RECORD_ROWS, columns))
@@ -189,7 +223,8 @@ class Wavefront:
         """Samples first_sample .. + pass_n - 1 of each pixel added to the sums at rows, and
         their AOVs to features if it has rows ((n, 8), else (0, 8)). Returns (dropped, rays
         traced)."""
-        wave, scratch = self._wave(), new_scratch(self.accel)
+        wave = self._wave()
+        scratch, call = wave.scratch, self.call
         floats, ints, queue = wave.floats, wave.ints, wave.queue
         shapes, options = self.shapes, self.options
         sums = np.zeros((pixel_x.shape[0], 5))
@@ -201,6 +236,7 @@ class Wavefront:
         trainer, records = self.trainer, []
         for start in range(0, total, self.wave_paths):
             size = min(self.wave_paths, total - start)
+            # (through the dispatcher, as add_stage: the caller's arrays are typed on each call)
             camera_stage(self.camera, options, pixel_x, pixel_y, first_sample, pass_n, start,
                          size, floats, ints, queue)
             if aovs:   # the camera rays' first hits, before any stage moves on from them
@@ -215,8 +251,8 @@ class Wavefront:
                 if trainer is not None:
                     kept = record_stage(floats, size, wave.history, self.depth, wave.records)
                     records.append(wave.records[:, :kept].copy())
-            wave_dropped, wave_rays = fold_stage(floats, ints, start, size, pass_n, sums, counts,
-                                                 wave.features, feature_sums)
+            wave_dropped, wave_rays = call(fold_stage, floats, ints, start, size, pass_n, sums,
+                                           counts, wave.features, feature_sums)
             dropped += wave_dropped
             rays += wave_rays
         add_stage(sums, counts, rows, sum_rgb, sum_l, sum_l2, count, feature_sums, features)
@@ -281,10 +317,10 @@ class Wavefront:
         """The closest hits of the n queued paths' rays (past cut-out surfaces if the scene
         has them)."""
         if self.cutouts:
-            visible_stage(self.accel, scratch, self.shapes, self.surfaces, self.options,
-                          wave.floats, wave.ints, wave.queue, n)
+            self.call(visible_stage, self.accel, scratch, self.shapes, self.surfaces,
+                      self.options, wave.floats, wave.ints, wave.queue, n)
         else:
-            closest_stage(self.accel, scratch, wave.floats, wave.ints, wave.queue, n)
+            self.call(closest_stage, self.accel, scratch, wave.floats, wave.ints, wave.queue, n)
 
     def paths(self, wave, scratch, n, traced=False):
         """Carry the wave's n queued paths, whose rays are set (slots as camera_stage leaves
@@ -298,13 +334,14 @@ class Wavefront:
         accel, mis, starts = self.accel, self.mis, wave.starts
         guide, history, depth = self.guide, wave.history, self.depth
         snapshot = self.trainer is not None
+        call = self.call
         while n:
             if not traced:
                 self._closest(wave, scratch, n)
             traced = False
             hits = n
-            n = self.hit_stage(shapes, surfaces, lights, options, mis, floats, ints, queue, n,
-                               after, starts)
+            n = call(self.hit_stage, shapes, surfaces, lights, options, mis, floats, ints, queue,
+                     n, after, starts)
             if snapshot:   # the radiance the bounces' records start from
                 snapshot_stage(floats, ints, queue, hits, history, depth)
             if not n:
@@ -313,9 +350,10 @@ class Wavefront:
             for kind, stage in self.stages:   # each kind's paths, through its kernel
                 first, end = starts[kind], starts[kind + 1]
                 if end > first:
-                    shadows, n = stage(shapes, surfaces, lights, options, mis, floats, ints,
-                                       after[first:end], end - first, shadow, shadow_path,
-                                       shadow_key, shadows, queue, n, guide, history, depth)
+                    shadows, n = call(stage, shapes, surfaces, lights, options, mis, floats,
+                                      ints, after[first:end], end - first, shadow, shadow_path,
+                                      shadow_key, shadows, queue, n, guide, history, depth,
+                                      tag=guide)
             if shadows and self.hemisphere:   # the hemisphere's rays, and what they find
                 if cutouts:
                     visible_probe_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
@@ -330,5 +368,5 @@ class Wavefront:
                     shadowed_stage(accel, scratch, shapes, surfaces, options, ints, shadow,
                                    shadow_path, shadow_key, shadows, blocked)
                 else:
-                    any_stage(accel, scratch, shadow, shadows, blocked)
-                shadow_stage(floats, shadow, shadow_path, blocked, shadows)
+                    call(any_stage, accel, scratch, shadow, shadows, blocked)
+                call(shadow_stage, floats, shadow, shadow_path, blocked, shadows)

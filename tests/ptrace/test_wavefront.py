@@ -3,6 +3,8 @@ size, the threads or the crop, and `bvh` the same as `naive`; its memory does no
 -m or -l; it compiles a shading kernel only for the material kinds a scene has, and none for
 the normals integrator. (What the images should be is checked against analytic answers and
 Mitsuba's references elsewhere: test_estimators, test_light_transport, test_per_pixel.)"""
+import functools
+
 import numba
 import numpy as np
 import pytest
@@ -261,3 +263,27 @@ def test_the_kernels_compiled_ahead_are_those_a_render_calls(cornell, monkeypatc
               for call, args in planned["calls"]}
     assert len(listed) == len(planned["calls"])
     assert seen - {None} == listed
+
+
+def test_stage_calls_after_the_first_go_to_the_entry_point_of_their_arguments_types():
+    """wavefront.Entries: a stage's first call goes through its dispatcher, later calls to the
+    compiled entry point of the signature the first call's arguments have (same results); a
+    new tag (the guide, replaced between passes) resolves it again, and what is not a numba
+    dispatcher is called as it is."""
+    @numba.njit(nogil=True)
+    def accumulate(values, n):
+        values[0] += n
+        return values[0]
+
+    call = wavefront.Entries()
+    values = np.zeros(1)
+    assert call(accumulate, values, 1) == 1.0
+    tag, entry = call._entries[accumulate]
+    assert tag is None and entry is accumulate.overloads[accumulate.signatures[0]].entry_point
+    assert call(accumulate, values, 2) == 3.0 and values[0] == 3.0
+    guide = object()
+    assert call(accumulate, values, 4, tag=guide) == 7.0
+    assert call._entries[accumulate][0] is guide
+    assert call(len, [1, 2]) == 2 and call._entries[len] == (None, len)
+    wrapped = functools.wraps(accumulate)(lambda *args: accumulate(*args))
+    assert call(wrapped, values, 1) == 8.0 and call._entries[wrapped] == (None, wrapped)
