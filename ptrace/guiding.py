@@ -22,6 +22,7 @@ Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most), the quadtr
 """
 import math
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
@@ -52,9 +53,12 @@ SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over
 KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
 TRAIN_SHARE = 0.25       # training passes take at most this share of -s
 CHUNK = 4                # training passes traced in one call, their records merged after it
+PARTS = 2                # runs of a merge's records splatted on threads of their own
+PART_LEAST = 4096        # ... of at least this many records each
 LEARN = True             # learn each spatial leaf's share (else ALPHA everywhere)
 COSINE = False           # learn incident light times the cosine (accumulate)
 BOX = True               # splat records into the leaves a box filter overlaps (accumulate)
+CARRY = True             # a new iteration's grids start from the last one's energy
 # --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
 # the guide is turned off); then, on every SUBSET-th pixel, the BSDF alone renders TRIAL
 # (= PROBE) samples once and the guide they trained twice, under other scrambles of the
@@ -329,7 +333,7 @@ class Trainer:
         self.kept, self.seen, self.count = [], 0, 0
         self.stride = getattr(self, "stride", 1)   # (the last iteration's, a good first guess)
         self.keep = origin is not None   # (the first iteration's guide learns no share)
-        if origin is None:
+        if origin is None or not CARRY:
             self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
         else:
             self.grid = np.array([self.grid[k] * share for k, share in origin])
@@ -341,19 +345,54 @@ class Trainer:
             self._blocks[key] = records
 
     def merge(self):
-        """Sum the blocks handed in so far, in key order, and forget them."""
+        """Sum the blocks handed in so far, in key order, and forget them: their records, in
+        that order, cut into PARTS runs of equal count (by record, not by block, so the cut is
+        the same whatever the blocks), each run counted and splatted by its own thread into
+        its own grid (the first run's into the iteration's grid), the grids then added in run
+        order. The guide is the same whatever the threads or the blocks."""
         with self._lock:
             blocks, self._blocks = self._blocks, {}
+        if not blocks:
+            return
+        ordered = [np.asarray(blocks[key]) for key in sorted(blocks)]
+        total = sum(b.shape[1] for b in ordered)
+        if total == 0:
+            return
+        self.records += total
+        parts = max(1, min(PARTS, total // PART_LEAST))
+        cuts = [total * j // parts for j in range(parts + 1)]
+        runs = []
+        for j in range(parts):   # the records of run j: [cuts[j], cuts[j + 1]) in key order
+            pieces, at = [], 0
+            for b in ordered:
+                n = b.shape[1]
+                lo, hi = max(cuts[j] - at, 0), min(cuts[j + 1] - at, n)
+                if hi > lo:
+                    pieces.append(b[:, lo:hi])
+                at += n
+            runs.append(np.ascontiguousarray(np.concatenate(pieces, axis=1)))
+        leaves = self.grid.shape[0]
+        grids = [self.grid] + [np.zeros_like(self.grid) for _ in range(parts - 1)]
+        counts = [self.counts] + [np.zeros(leaves, dtype=np.int64) for _ in range(parts - 1)]
+        found = [np.empty(r.shape[1], dtype=np.int64) for r in runs]
         axis, split, child, root = self._arrays
-        for key in sorted(blocks):
-            records = np.ascontiguousarray(blocks[key])
-            n = records.shape[1]
-            self.records += n
-            leaves = np.empty(n, dtype=np.int64)
-            accumulate(axis, split, child, root, self.tree.lower[0], self.tree.upper[0],
-                       records, self.counts, self.grid, leaves, COSINE, BOX)
-            if self.learn and self.keep:
-                self._keep(records, leaves)
+        lower, upper = self.tree.lower[0], self.tree.upper[0]
+
+        def splat(j):
+            accumulate(axis, split, child, root, lower, upper, runs[j], counts[j], grids[j],
+                       found[j], COSINE, BOX)
+
+        if parts == 1:
+            splat(0)
+        else:
+            with ThreadPoolExecutor(parts) as pool:
+                list(pool.map(splat, range(parts)))
+        for j in range(1, parts):   # (in run order: the same sums whatever finished first)
+            self.grid += grids[j]
+            self.counts += counts[j]
+        if self.learn and self.keep:
+            for j in range(parts):
+                self._keep(runs[j], found[j])
 
     def _keep(self, records, leaves):
         """Keep every stride-th record of the iteration (by its place in merge order) for
@@ -461,7 +500,6 @@ def trial(job, pixel_x, pixel_y, guide, probe):
                                           index[p[0]:p[1]]), parts))
         return sums[0] / TRIAL, job.rays_traced - before
 
-    from concurrent.futures import ThreadPoolExecutor
     pool = ThreadPoolExecutor(2)
     try:
         u1, ru = render(1000003, 0.0)
