@@ -15,10 +15,14 @@ next iteration; then each leaf that counted more than SPLIT_SAMPLES x sqrt(passe
 iteration) records splits (its children counted as halves, again, up to MAX_LEAVES leaves) for
 the next iteration's records.
 
-Records of each block of a pass are kept by (first sample, first row) and summed in that order
-once the pass is over, so the guide is the same whatever the threads or the order they finish.
-Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most), the quadtrees (at most
-1 + LEVELS / ENERGY_SHARE nodes of 64 bytes a leaf, 39 MB) and one pass's records.
+Records of each block of a chunk of passes are kept by (first sample, first row) and, once the
+chunk is over, put in that order and cut into PARTS runs of equal count, each splatted on a
+thread of its own into a grid of its own, the grids then added in run order: the guide is the
+same whatever the threads, the blocks or the order they finish. Training takes up to
+TRAIN_SHARE of the samples; its images are not lost (ptrace.guiding.combine).
+Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most, and as much again for the
+other runs' grids while a chunk is merged), the quadtrees (at most 1 + LEVELS / ENERGY_SHARE
+nodes of 64 bytes a leaf, 39 MB) and one chunk's records.
 """
 import math
 import threading
@@ -43,15 +47,15 @@ from .kernel.guide import (
 RESOLUTION = 64          # grid cells per side of a leaf's directions: quadtree depth <= 6
 LEVELS = 6               # log2(RESOLUTION)
 MAX_LEAVES = 1024        # spatial leaves at most
-SPLIT_SAMPLES = 4000     # a leaf splits past this many records x sqrt(the iteration's passes)
+SPLIT_SAMPLES = 2000     # a leaf splits past this many records x sqrt(the iteration's passes)
 SPLIT_PIXELS = 4         # ... or past (pixels / SPLIT_PIXELS) x sqrt(passes), if fewer
-SPLIT_LEAST = 2000       #     but at least this many
+SPLIT_LEAST = 1000       #     but at least this many
 ENERGY_SHARE = 0.01      # a quadrant is divided above this share of its leaf's energy
 ALPHA = 0.5              # the guide's share of the bounces where it is fixed (learn=False)
 SHARES = np.linspace(0.0, 0.9, 10)   # the guide's shares a spatial leaf learns from
 SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over all records
 KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
-TRAIN_SHARE = 0.25       # training passes take at most this share of -s
+TRAIN_SHARE = 0.5        # training passes take at most this share of -s
 CHUNK = 4                # training passes traced in one call, their records merged after it
 PARTS = 2                # runs of a merge's records splatted on threads of their own
 PART_LEAST = 4096        # ... of at least this many records each
@@ -67,6 +71,7 @@ CARRY = True             # a new iteration's grids start from the last one's ene
 # BSDF's (against the first iteration's image)
 PROBE = 4
 TRIAL = PROBE
+AUTO_LEAST = 32            # fewer samples than this: no trial, auto is off
 SUBSET = 16
 GUIDED_COST = 1.3          # measured: a guided final pass 1.2-1.3x an unguided one (Zen 1)
 MARGIN = 0.8
@@ -454,7 +459,7 @@ def auto_schedule(spp):
     ... while the total stays within TRAIN_SHARE of spp (none, auto off, below 32 spp: the
     probe's records and the trial cost about as much as 2 unguided samples, too much of
     fewer)."""
-    if 2 * PROBE > TRAIN_SHARE * spp:
+    if spp < AUTO_LEAST:
         return []
     out, total, n = [PROBE], PROBE, PROBE
     while total + n <= TRAIN_SHARE * spp and total + n < spp:

@@ -268,15 +268,16 @@ def test_training_is_the_same_whatever_order_or_cut_blocks_hand_their_records_in
             assert np.array_equal(a, b)
 
 
-def test_the_training_schedule_doubles_within_a_quarter_of_the_samples():
-    assert schedule(64) == [1, 2, 4, 8]
-    assert schedule(16) == [1, 2]
-    assert schedule(3) == []
-    assert schedule(64, first=2) == [2, 4, 8]
-    assert auto_schedule(64) == [4, 4, 8]     # the unguided probe, then guided iterations
-    assert auto_schedule(128) == [4, 4, 8, 16]
-    assert auto_schedule(32) == [4, 4]
-    assert auto_schedule(16) == []            # too few samples to try the guide: off
+def test_the_training_schedule_doubles_within_half_of_the_samples():
+    assert schedule(64) == [1, 2, 4, 8, 16]
+    assert schedule(16) == [1, 2, 4]
+    assert schedule(3) == [1]
+    assert schedule(1) == []
+    assert schedule(64, first=2) == [2, 4, 8, 16]
+    assert auto_schedule(64) == [4, 4, 8, 16]     # the unguided probe, then guided iterations
+    assert auto_schedule(128) == [4, 4, 8, 16, 32]
+    assert auto_schedule(32) == [4, 4, 8]
+    assert auto_schedule(31) == []            # too few samples to try the guide: off
 
 
 def hemisphere_records(rng, n, integrand):
