@@ -268,6 +268,31 @@ def test_training_is_the_same_whatever_order_or_cut_blocks_hand_their_records_in
             assert np.array_equal(a, b)
 
 
+def test_splatting_on_threads_sums_what_one_thread_does(monkeypatch):
+    """The runs a merge splats on threads of their own (PARTS) hold every record once: the
+    counts equal one thread's, and the grids within rounding of its (a run dropped, cut twice
+    or splatted into the wrong grid shows as a difference of a whole record's energy)."""
+    rng = np.random.default_rng(21)
+    light = np.array([0.6, 0.0, 0.8])
+    blocks = [light_records(rng, 7001, light, 0.4) for _ in range(5)]
+    trainers = []
+    for parts in (1, 2, 3):
+        monkeypatch.setattr(guiding_module, "PARTS", parts)
+        trainer = Trainer(-np.ones(3), np.ones(3), split_samples=500)
+        for k, block in enumerate(blocks[:2]):
+            trainer.add((0, k), block)
+        trainer.finish(1)                       # a refined tree: the box filter shares records
+        for k, block in enumerate(blocks[2:]):
+            trainer.add((1, k), block)
+        trainer.merge()
+        trainers.append(trainer)
+    one = trainers[0]
+    assert one.grid.shape[0] > 1 and one.counts.sum() == 3 * 7001
+    for other in trainers[1:]:
+        assert np.array_equal(other.counts, one.counts)
+        assert np.allclose(other.grid, one.grid, rtol=1e-12, atol=0)
+
+
 def test_the_training_schedule_doubles_within_half_of_the_samples():
     assert schedule(64) == [1, 2, 4, 8, 16]
     assert schedule(16) == [1, 2, 4]
