@@ -5,15 +5,18 @@ scene, and unguided against auto on two course Cornell boxes (where next-event e
 the work, so auto must not lose: at most 1.05x the unguided relative MSE x time).
 
     python -m benchmarks.guiding [--quick] [--size N] [--spp 16,32,64] [--reference-spp N]
-                                 [--repeats R]
+                                 [--repeats R] [--pairs SPP]
 
 The reference is ptrace's unguided render at --reference-spp (Mitsuba and ptrace agree on these
 scenes' means: their lamps reflect nothing). Each point is rendered R times on 2 threads after
 warm-up renders (compiled kernels), the modes in turns within each repeat, and its seconds are
 the median (the machine may be shared: the relative MSE at equal samples is the firmer figure;
 the images do not change between repeats); relative MSE is the mean over pixels of the squared
-error over (reference^2 + 1e-3), averaged over R, G, B. Writes benchmarks/results/guiding.md
-and guiding_<scene>.png.
+error over (reference^2 + 1e-3), averaged over R, G, B. With --pairs SPP, each scene is also
+rendered unguided and guided at SPP under R seeds, the modes in turns, and the error of each is
+half the mean squared difference of its seed 1 and seed 2 images (over the reference^2 + 1e-3):
+no reference noise in it, so it holds where SPP is past the reference's reach. Writes
+benchmarks/results/guiding.md and guiding_<scene>.png.
 """
 import argparse
 import os
@@ -71,6 +74,30 @@ def measure(scene, spps, depth, resolution, reference, modes, repeats):
             for key, points in runs.items()}
 
 
+def pairs(scene, spp, depth, resolution, reference, repeats):
+    """(unguided, guided): (median seconds, error from two seeds, median training seconds),
+    the modes in turns within each repeat (seed = repeat + 1)."""
+    import ptrace
+    images, seconds, training = {}, {}, {}
+    for r in range(max(repeats, 2)):
+        for guiding in ("off", "on"):
+            stats = {}
+            start = time.perf_counter()
+            image = ptrace.render(scene, spp=spp, max_depth=depth, resolution=resolution,
+                                  threads=2, guiding=guiding, stats=stats, seed=r + 1)
+            seconds.setdefault(guiding, []).append(time.perf_counter() - start)
+            training.setdefault(guiding, []).append(
+                stats.get("guiding", {}).get("training_seconds", 0.0))
+            images.setdefault(guiding, []).append(image)
+    out = []
+    for guiding in ("off", "on"):
+        a, b = images[guiding][:2]
+        error = float(np.mean((a - b) ** 2 / (reference ** 2 + 1e-3))) / 2.0
+        out.append((statistics.median(seconds[guiding]), error,
+                    statistics.median(training[guiding])))
+    return out
+
+
 def auto_text(figures):
     if not figures.get("decision"):
         return "off (too few samples)"
@@ -85,6 +112,7 @@ def main(argv=None):
     parser.add_argument("--spp", default=None)
     parser.add_argument("--reference-spp", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=None)
+    parser.add_argument("--pairs", type=int, default=0)
     args = parser.parse_args(argv)
     size = args.size or (32 if args.quick else 128)
     spps = [int(s) for s in (args.spp or ("16,32" if args.quick else "16,32,64,128")).split(",")]
@@ -133,6 +161,17 @@ def main(argv=None):
                 f"| {auto_text(auto[2])} | {mit_text} |")
             print(lines[-1], flush=True)
         lines.append("")
+        if args.pairs:
+            off, on = pairs(scene, args.pairs, depth, resolution, reference, repeats)
+            lines += [f"At {args.pairs} spp, error from two seeds (no reference noise), seconds "
+                      f"medians of {max(repeats, 2)} in turns:", "",
+                      "| spp | unguided s | unguided error | guided s (training s) | guided "
+                      "error | guided/unguided error | guided/unguided error x s |",
+                      "|---|---|---|---|---|---|---|",
+                      f"| {args.pairs} | {off[0]:.2f} | {off[1]:.4f} | {on[0]:.2f} ({on[2]:.2f}) "
+                      f"| {on[1]:.4f} | {on[1] / off[1]:.3f} | "
+                      f"{on[0] * on[1] / (off[0] * off[1]):.3f} |", ""]
+            print(lines[-2], flush=True)
         chart(rows, report.destination(f"guiding_{path.stem}.png"), name)
         lines += [f"![{name}](guiding_{path.stem}.png)", ""]
     root = Path(os.environ.get("PTRACE_SCENES", report.RESULTS.parents[2] / "shared" / "scenes"

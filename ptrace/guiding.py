@@ -15,13 +15,18 @@ next iteration; then each leaf that counted more than SPLIT_SAMPLES x sqrt(passe
 iteration) records splits (its children counted as halves, again, up to MAX_LEAVES leaves) for
 the next iteration's records.
 
-Records of each block of a pass are kept by (first sample, first row) and summed in that order
-once the pass is over, so the guide is the same whatever the threads or the order they finish.
-Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most), the quadtrees (at most
-1 + LEVELS / ENERGY_SHARE nodes of 64 bytes a leaf, 39 MB) and one pass's records.
+Records of each block of a chunk of passes are kept by (first sample, first row) and, once the
+chunk is over, put in that order and cut into PARTS runs of equal count, each splatted on a
+thread of its own into a grid of its own, the grids then added in run order: the guide is the
+same whatever the threads, the blocks or the order they finish. Training takes up to
+TRAIN_SHARE of the samples; its images are not lost (ptrace.guiding.combine).
+Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most, and as much again for the
+other runs' grids while a chunk is merged), the quadtrees (at most 1 + LEVELS / ENERGY_SHARE
+nodes of 64 bytes a leaf, 39 MB) and one chunk's records.
 """
 import math
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from numba import njit
@@ -42,19 +47,22 @@ from .kernel.guide import (
 RESOLUTION = 64          # grid cells per side of a leaf's directions: quadtree depth <= 6
 LEVELS = 6               # log2(RESOLUTION)
 MAX_LEAVES = 1024        # spatial leaves at most
-SPLIT_SAMPLES = 4000     # a leaf splits past this many records x sqrt(the iteration's passes)
+SPLIT_SAMPLES = 2000     # a leaf splits past this many records x sqrt(the iteration's passes)
 SPLIT_PIXELS = 4         # ... or past (pixels / SPLIT_PIXELS) x sqrt(passes), if fewer
-SPLIT_LEAST = 2000       #     but at least this many
+SPLIT_LEAST = 1000       #     but at least this many
 ENERGY_SHARE = 0.01      # a quadrant is divided above this share of its leaf's energy
 ALPHA = 0.5              # the guide's share of the bounces where it is fixed (learn=False)
 SHARES = np.linspace(0.0, 0.9, 10)   # the guide's shares a spatial leaf learns from
 SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over all records
 KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
-TRAIN_SHARE = 0.25       # training passes take at most this share of -s
+TRAIN_SHARE = 0.5        # training passes take at most this share of -s
 CHUNK = 4                # training passes traced in one call, their records merged after it
+PARTS = 2                # runs of a merge's records splatted on threads of their own
+PART_LEAST = 4096        # ... of at least this many records each
 LEARN = True             # learn each spatial leaf's share (else ALPHA everywhere)
 COSINE = False           # learn incident light times the cosine (accumulate)
 BOX = True               # splat records into the leaves a box filter overlaps (accumulate)
+CARRY = True             # a new iteration's grids start from the last one's energy
 # --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
 # the guide is turned off); then, on every SUBSET-th pixel, the BSDF alone renders TRIAL
 # (= PROBE) samples once and the guide they trained twice, under other scrambles of the
@@ -63,6 +71,7 @@ BOX = True               # splat records into the leaves a box filter overlaps (
 # BSDF's (against the first iteration's image)
 PROBE = 4
 TRIAL = PROBE
+AUTO_LEAST = 32            # fewer samples than this: no trial, auto is off
 SUBSET = 16
 GUIDED_COST = 1.3          # measured: a guided final pass 1.2-1.3x an unguided one (Zen 1)
 MARGIN = 0.8
@@ -329,7 +338,7 @@ class Trainer:
         self.kept, self.seen, self.count = [], 0, 0
         self.stride = getattr(self, "stride", 1)   # (the last iteration's, a good first guess)
         self.keep = origin is not None   # (the first iteration's guide learns no share)
-        if origin is None:
+        if origin is None or not CARRY:
             self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
         else:
             self.grid = np.array([self.grid[k] * share for k, share in origin])
@@ -341,19 +350,54 @@ class Trainer:
             self._blocks[key] = records
 
     def merge(self):
-        """Sum the blocks handed in so far, in key order, and forget them."""
+        """Sum the blocks handed in so far, in key order, and forget them: their records, in
+        that order, cut into PARTS runs of equal count (by record, not by block, so the cut is
+        the same whatever the blocks), each run counted and splatted by its own thread into
+        its own grid (the first run's into the iteration's grid), the grids then added in run
+        order. The guide is the same whatever the threads or the blocks."""
         with self._lock:
             blocks, self._blocks = self._blocks, {}
+        if not blocks:
+            return
+        ordered = [np.asarray(blocks[key]) for key in sorted(blocks)]
+        total = sum(b.shape[1] for b in ordered)
+        if total == 0:
+            return
+        self.records += total
+        parts = max(1, min(PARTS, total // PART_LEAST))
+        cuts = [total * j // parts for j in range(parts + 1)]
+        runs = []
+        for j in range(parts):   # the records of run j: [cuts[j], cuts[j + 1]) in key order
+            pieces, at = [], 0
+            for b in ordered:
+                n = b.shape[1]
+                lo, hi = max(cuts[j] - at, 0), min(cuts[j + 1] - at, n)
+                if hi > lo:
+                    pieces.append(b[:, lo:hi])
+                at += n
+            runs.append(np.ascontiguousarray(np.concatenate(pieces, axis=1)))
+        leaves = self.grid.shape[0]
+        grids = [self.grid] + [np.zeros_like(self.grid) for _ in range(parts - 1)]
+        counts = [self.counts] + [np.zeros(leaves, dtype=np.int64) for _ in range(parts - 1)]
+        found = [np.empty(r.shape[1], dtype=np.int64) for r in runs]
         axis, split, child, root = self._arrays
-        for key in sorted(blocks):
-            records = np.ascontiguousarray(blocks[key])
-            n = records.shape[1]
-            self.records += n
-            leaves = np.empty(n, dtype=np.int64)
-            accumulate(axis, split, child, root, self.tree.lower[0], self.tree.upper[0],
-                       records, self.counts, self.grid, leaves, COSINE, BOX)
-            if self.learn and self.keep:
-                self._keep(records, leaves)
+        lower, upper = self.tree.lower[0], self.tree.upper[0]
+
+        def splat(j):
+            accumulate(axis, split, child, root, lower, upper, runs[j], counts[j], grids[j],
+                       found[j], COSINE, BOX)
+
+        if parts == 1:
+            splat(0)
+        else:
+            with ThreadPoolExecutor(parts) as pool:
+                list(pool.map(splat, range(parts)))
+        for j in range(1, parts):   # (in run order: the same sums whatever finished first)
+            self.grid += grids[j]
+            self.counts += counts[j]
+        if self.learn and self.keep:
+            for j in range(parts):
+                self._keep(runs[j], found[j])
 
     def _keep(self, records, leaves):
         """Keep every stride-th record of the iteration (by its place in merge order) for
@@ -415,7 +459,7 @@ def auto_schedule(spp):
     ... while the total stays within TRAIN_SHARE of spp (none, auto off, below 32 spp: the
     probe's records and the trial cost about as much as 2 unguided samples, too much of
     fewer)."""
-    if 2 * PROBE > TRAIN_SHARE * spp:
+    if spp < AUTO_LEAST:
         return []
     out, total, n = [PROBE], PROBE, PROBE
     while total + n <= TRAIN_SHARE * spp and total + n < spp:
@@ -461,7 +505,6 @@ def trial(job, pixel_x, pixel_y, guide, probe):
                                           index[p[0]:p[1]]), parts))
         return sums[0] / TRIAL, job.rays_traced - before
 
-    from concurrent.futures import ThreadPoolExecutor
     pool = ThreadPoolExecutor(2)
     try:
         u1, ru = render(1000003, 0.0)

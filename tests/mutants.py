@@ -196,6 +196,17 @@ MUTANTS = {
         "the guide is chosen with probability alpha / 2 while the pdf mixes at alpha",
         [(SHADING, "                if u1 < mix:", "                if u1 < 0.5 * mix:")],
         [GUIDE_TEST, "-k", "means_agree"]),
+    "guide-runs-cut-by-block": (
+        "a merge's records are cut into the splatting threads' runs at a block's edge, not by "
+        "record count, so the guide depends on how the blocks cut the records",
+        [("ptrace/guiding.py", "        cuts = [total * j // parts for j in range(parts + 1)]\n",
+          "        cuts = [total * j // parts for j in range(parts + 1)]\n        if parts == 2:\n"
+          "            cuts[1] = sum(b.shape[1] for b in ordered[:max(1, len(ordered) // 2)])\n")],
+        [GUIDE_TEST, "-k", "order_or_cut"]),
+    "guide-run-grids-dropped": (
+        "the splatting threads' other runs are counted but their energy is never added",
+        [("ptrace/guiding.py", "            self.grid += grids[j]\n", "")],
+        [GUIDE_TEST, "-k", "splatting_on_threads"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "
         "chosen lane's interval",
