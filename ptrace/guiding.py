@@ -55,7 +55,8 @@ ALPHA = 0.5              # the guide's share of the bounces where it is fixed (l
 SHARES = np.linspace(0.0, 0.9, 10)   # the guide's shares a spatial leaf learns from
 SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over all records
 KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
-TRAIN_SHARE = 0.5        # training passes take at most this share of -s
+TRAIN_SHARE = 0.25       # training passes take at most this share of -s (0.5: less error
+#                           per sample, more per second on the door ajar; guiding.md)
 CHUNK = 4                # training passes traced in one call, their records merged after it
 PARTS = 2                # runs of a merge's records splatted on threads of their own
 PART_LEAST = 4096        # ... of at least this many records each

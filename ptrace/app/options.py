@@ -177,7 +177,7 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
              f"a scene of at most {AUTO_EVERY_LIGHT} lights, the emissive primitives counting "
              f"as one; else {many}; the default)")
     add("--guiding", choices=GUIDING, default="off",
-        help="path guiding: on (training passes, up to half of -s, learn where light "
+        help="path guiding: on (training passes, up to a quarter of -s, learn where light "
              "comes from; the rest sample bounces from the guide and the BSDF), auto (on "
              "unless training shows it does not lower the variance) or off (the default); "
              "in-process renders of the path integrator without -H or -a")
