@@ -20,7 +20,7 @@ import tempfile
 # a small render's compile with an empty cache ("first"), and another backend's on the first
 # one's cache ("backend"), on the 2-core development machine, rounded (the commit that last set
 # them gives the command and the runs; re-measure them when the kernels change much).
-COLD_COMPILE_SECONDS = {"first": 30, "backend": 5}
+COLD_COMPILE_SECONDS = {"first": 15, "backend": 5}
 _MEASURED = "ptrace-compile-seconds.json"   # in the cache folder of the stage cold() reads
 
 _NOTES = {}   # kind -> (its first note, the files it concerned), in the order they happened
