@@ -53,4 +53,5 @@ BENCHMARKS = {
 
 # modules of the package that are not benchmarks
 HELPERS = ("__main__", "rays", "report", "synthetic", "templating",
-           "sample_kernel")   # a profiling tool (needs perf), not a benchmark
+           "sample_kernel",        # a profiling tool (needs perf), not a benchmark
+           "guiding_diagnosis")    # a study of the learnt guide that prints only
