@@ -19,7 +19,7 @@ import accel
 from ..integrator import camera_record, scene_records
 from ..jit import cold, compile_estimate
 from ..kernel import wavefront
-from ..kernel.ahead import compile_ahead
+from ..kernel.ahead import compile_ahead, processes
 
 PASS_SAMPLES = 16        # samples per pixel per pass without -a (the unit Ctrl-C waits for)
 NO_FEATURES = np.zeros((0, 8))   # a block's features when no AOVs are asked for
@@ -193,7 +193,10 @@ class RenderJob:
     def compile_ahead(self, aovs=False):
         """Compile, before the first trace, the kernels this job's renders call that numba's
         cache lacks, on every core (ptrace.kernel.ahead); aovs: the renders ask for AOVs.
-        Returns how many were missing."""
+        Returns how many were compiled so (none with one compile process: then the kernels are
+        not even listed)."""
+        if processes() < 2:
+            return 0
         return compile_ahead(self.wavefront.kernels(aovs))
 
     def reused(self, settings, camera):
