@@ -22,7 +22,7 @@ same whatever the threads, the blocks or the order they finish. Training takes u
 TRAIN_SHARE of the samples; its images are not lost (ptrace.guiding.combine).
 Memory: the grids (MAX_LEAVES x RESOLUTION^2 float64, 32 MB at most, and as much again for the
 other runs' grids while a chunk is merged), the quadtrees (at most 1 + LEVELS / ENERGY_SHARE
-nodes of 64 bytes a leaf, 39 MB) and one chunk's records.
+nodes of 48 bytes a leaf, 30 MB) and one chunk's records.
 """
 import math
 import threading
@@ -266,12 +266,13 @@ def learn_share(guide, leaves, kept, shares, least):
 
 @njit(cache=True)
 def build_quadtrees(grid, share):
-    """The quadtrees of each leaf's grid: (q_child, q_energy, roots). A quadrant is divided
-    while its energy is above `share` of its leaf's total and above a grid cell; a leaf
-    without energy gets a root of zeros (uniform)."""
+    """The quadtrees of each leaf's grid: (q_child, q_density, roots). A quadrant is divided
+    while its energy is above `share` of its leaf's total and above a grid cell; its density is
+    4 x its share of its node's energy (ptrace.kernel.guide), and a leaf without energy gets a
+    uniform root (densities 1)."""
     leaves = grid.shape[0]
     capacity = leaves * (1 + int(math.ceil(1.0 / share)) * LEVELS) + 1
-    q_child = np.full((capacity, 4), -1, dtype=np.int64)
+    q_child = np.full((capacity, 4), -1, dtype=np.int32)
     q_energy = np.zeros((capacity, 4))
     roots = np.zeros(leaves, dtype=np.int64)
     offsets = np.zeros(LEVELS + 2, dtype=np.int64)
@@ -313,6 +314,10 @@ def build_quadtrees(grid, share):
                     stack[pending, 2], stack[pending, 3] = x, y
                     pending += 1
                     nodes += 1
+    for node in range(nodes):   # energies to densities (4 x e / total, as the walks used)
+        total = q_energy[node, 0] + q_energy[node, 1] + q_energy[node, 2] + q_energy[node, 3]
+        for q in range(4):
+            q_energy[node, q] = 4.0 * q_energy[node, q] / total if total > 0.0 else 1.0
     return q_child[:nodes].copy(), q_energy[:nodes].copy(), roots
 
 
@@ -421,10 +426,10 @@ class Trainer:
         them (learn_share), or is `alpha` everywhere where there is none (the first iteration)
         or without learning."""
         self.merge()
-        q_child, q_energy, roots = build_quadtrees(self.grid, ENERGY_SHARE)
+        q_child, q_density, roots = build_quadtrees(self.grid, ENERGY_SHARE)
         axis, split, child, root = self.tree.arrays(roots)
         share = np.ones(q_child.shape[0])
-        guide = GuideArrays(axis, split, child, root, q_child, q_energy, share, 1.0, 1)
+        guide = GuideArrays(axis, split, child, root, q_child, q_density, share, 1.0, 1)
         self.shares = np.full(roots.shape[0], float(alpha))
         if self.learn and sampled is not None:
             kept = np.concatenate(self.kept, axis=1) if self.kept else np.zeros((13, 0))

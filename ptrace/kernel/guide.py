@@ -5,12 +5,15 @@ stages that turn a training wave's vertices into records for ptrace.guiding.
 The guide (GuideArrays) is flat arrays. The spatial tree: node j is a leaf where axis[j] < 0,
 else its children are child[j] (below split[j] on that axis) and child[j] + 1; a leaf's root[j]
 is its quadtree's root node (or, in the tree being filled, the leaf's number). The directional
-quadtrees share q_child (N, 4) and q_energy (N, 4): quadrant q = 2 iy + ix of a node covers
-[ix/2, ix/2 + 1/2) x [iy/2, iy/2 + 1/2) of the node's square, q_child -1 where the quadrant is not
-divided. The square maps to the sphere by the equal-area map cos theta = 2 x - 1, phi = 2 pi y,
-so a density on the square is a density in solid angle times 4 pi. A sample warps one 2D
-random point down the quadtree, rescaled at each level, and guide_pdf is exactly the density of
-that warp. No recursion; nothing allocates.
+quadtrees share q_child (N, 4, int32) and q_density (N, 4): quadrant q = 2 iy + ix of a node
+covers [ix/2, ix/2 + 1/2) x [iy/2, iy/2 + 1/2) of the node's square, q_child -1 where the
+quadrant is not divided, and q_density is 4 x the quadrant's share of the node's energy (the
+factor by which it scales the density of the node's square: all 1 for a uniform node), so a
+density lookup is a product of one number per level, without sums or divisions. The square
+maps to the sphere by the equal-area map cos theta = 2 x - 1, phi = 2 pi y, so a density on
+the square is a density in solid angle times 4 pi. A sample warps one 2D random point down the
+quadtree, rescaled at each level, and guide_pdf is exactly the density of that warp. No
+recursion; nothing allocates.
 """
 import math
 from collections import namedtuple
@@ -21,7 +24,7 @@ from numba import njit
 from .layout import MAT, VERTEX, R
 
 GuideArrays = namedtuple("GuideArrays", ["axis", "split", "child", "root", "q_child",
-                                         "q_energy", "share", "alpha", "record"])
+                                         "q_density", "share", "alpha", "record"])
 # share: per quadtree root node (what guide_leaf returns), the guide's learnt share of that
 # spatial leaf's bounces; a vertex draws from the guide with probability alpha * share[leaf],
 # and alpha 0 turns the guide off (the kernels then skip it: no lookup, no pdf).
@@ -45,7 +48,7 @@ INV_FOUR_PI = 0.25 / math.pi
 def uniform_guide(alpha=0.0, record=False):
     """A guide of one spatial leaf whose quadtree is uniform over the sphere."""
     return GuideArrays(np.full(1, -1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=np.int64),
-                       np.zeros(1, dtype=np.int64), np.full((1, 4), -1, dtype=np.int64),
+                       np.zeros(1, dtype=np.int64), np.full((1, 4), -1, dtype=np.int32),
                        np.ones((1, 4)), np.ones(1), float(alpha), int(bool(record)))
 
 
@@ -90,39 +93,36 @@ def _rescale(u, low, share):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def quadtree_sample(q_child, q_energy, node, u1, u2):
+def quadtree_sample(q_child, q_density, node, u1, u2):
     """A point of the unit square drawn from quadtree `node` with the 2D random point (u1, u2):
     (x, y, density on the square). At each node the first number picks the left or right
-    half by their energies, the second the lower or upper quadrant of that half, each then
-    rescaled to [0, 1) for the next level; a quadrant that is not divided is uniform."""
+    half by their densities, the second the lower or upper quadrant of that half, each then
+    rescaled to [0, 1) for the next level; a quadrant that is not divided is uniform. The
+    density is the product of the chosen quadrants' q_density, as quadtree_pdf's."""
     ox = oy = 0.0
     size = 1.0
     pdf = 1.0
     while True:
-        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
-                          q_energy[node, 3])
-        total = e0 + e1 + e2 + e3
-        if not total > 0.0:
-            return ox + size * u1, oy + size * u2, pdf
-        left = (e0 + e2) / total
+        d0, d1, d2, d3 = (q_density[node, 0], q_density[node, 1], q_density[node, 2],
+                          q_density[node, 3])
+        left = (d0 + d2) / (d0 + d1 + d2 + d3)
         if u1 < left:
             ix = 0
             u1 = _rescale(u1, 0.0, left)
-            low, high = e0, e2
+            low, high = d0, d2
         else:
             ix = 1
             u1 = _rescale(u1, left, 1.0 - left)
-            low, high = e1, e3
+            low, high = d1, d3
         lower = low / (low + high)
         if u2 < lower:
             iy = 0
             u2 = _rescale(u2, 0.0, lower)
-            e = low
+            pdf *= low
         else:
             iy = 1
             u2 = _rescale(u2, lower, 1.0 - lower)
-            e = high
-        pdf *= 4.0 * e / total
+            pdf *= high
         size *= 0.5
         ox += ix * size
         oy += iy * size
@@ -132,23 +132,16 @@ def quadtree_sample(q_child, q_energy, node, u1, u2):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def quadtree_pdf(q_child, q_energy, node, x, y):
+def quadtree_pdf(q_child, q_density, node, x, y):
     """The density on the unit square of quadtree_sample at point (x, y)."""
     pdf = 1.0
     while True:
-        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
-                          q_energy[node, 3])
-        total = e0 + e1 + e2 + e3
-        if not total > 0.0:
-            return pdf
         ix = 1 if x >= 0.5 else 0
         iy = 1 if y >= 0.5 else 0
         x = min(2.0 * x - ix, 0.9999999999999999)
         y = min(2.0 * y - iy, 0.9999999999999999)
         q = 2 * iy + ix
-        pdf *= 4.0 * q_energy[node, q] / total
-        if pdf == 0.0:
-            return 0.0
+        pdf *= q_density[node, q]
         node = q_child[node, q]
         if node < 0:
             return pdf
@@ -162,7 +155,7 @@ MID_SIN = np.sin(2.0 * np.pi * np.arange(1 << MID_LEVELS) / (1 << MID_LEVELS))
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def direction_pdf(q_child, q_energy, node, dx, dy, dz):
+def direction_pdf(q_child, q_density, node, dx, dy, dz):
     """quadtree_pdf at the point of the square of direction d (sphere_to_square's), found
     without the arctangent: at level l < MID_LEVELS the y half (phi at or past the middle of
     the node's phi interval) is the sign of the sine of phi minus that middle, dy cos - dx sin
@@ -178,11 +171,6 @@ def direction_pdf(q_child, q_energy, node, dx, dy, dz):
     level = 0
     pdf = 1.0
     while True:
-        e0, e1, e2, e3 = (q_energy[node, 0], q_energy[node, 1], q_energy[node, 2],
-                          q_energy[node, 3])
-        total = e0 + e1 + e2 + e3
-        if not total > 0.0:
-            return pdf
         ix = 1 if x >= 0.5 else 0
         x = min(2.0 * x - ix, 0.9999999999999999)
         if level == 0:
@@ -200,9 +188,7 @@ def direction_pdf(q_child, q_energy, node, dx, dy, dz):
             iy = 1 if y >= 0.5 else 0
             y = min(2.0 * y - iy, 0.9999999999999999)
         q = 2 * iy + ix
-        pdf *= 4.0 * q_energy[node, q] / total
-        if pdf == 0.0:
-            return 0.0
+        pdf *= q_density[node, q]
         node = q_child[node, q]
         if node < 0:
             return pdf
@@ -213,7 +199,7 @@ def direction_pdf(q_child, q_energy, node, dx, dy, dz):
 def guide_sample(guide, node, u1, u2):
     """A unit direction drawn from the guide's quadtree `node`: (dx, dy, dz, pdf in solid
     angle)."""
-    x, y, pdf = quadtree_sample(guide.q_child, guide.q_energy, node, u1, u2)
+    x, y, pdf = quadtree_sample(guide.q_child, guide.q_density, node, u1, u2)
     dx, dy, dz = square_to_sphere(x, y)
     return dx, dy, dz, pdf * INV_FOUR_PI
 
@@ -221,7 +207,57 @@ def guide_sample(guide, node, u1, u2):
 @njit(cache=True, _nrt=False, forceinline=True)
 def guide_pdf(guide, node, dx, dy, dz):
     """The solid-angle density of guide_sample from quadtree `node` at unit direction d."""
-    return direction_pdf(guide.q_child, guide.q_energy, node, dx, dy, dz) * INV_FOUR_PI
+    return direction_pdf(guide.q_child, guide.q_density, node, dx, dy, dz) * INV_FOUR_PI
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def _half(dx, dy, level, low):
+    """direction_pdf's y half at `level` (< MID_LEVELS) of a node whose phi interval starts at
+    2 pi low / 2^MID_LEVELS: (iy, the child's low)."""
+    mids = 1 << MID_LEVELS
+    if level == 0:
+        iy = 1 if (dy < 0.0 or (dy == 0.0 and dx < 0.0)) else 0
+        return iy, iy * (mids >> 1)
+    half = mids >> (level + 1)
+    j = low + half
+    iy = 1 if dy * MID_COS[j] - dx * MID_SIN[j] >= 0.0 else 0
+    return iy, low + iy * half
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def pair_pdf(q_child, q_density, node, ax, ay, az, bx, by, bz):
+    """direction_pdf of quadtree `node` at unit directions a and b, the two walks in one loop
+    (independent loads and compares side by side): (pdf at a, pdf at b), the same numbers."""
+    if ax == 0.0 and ay == 0.0:
+        ax = 1.0
+    if bx == 0.0 and by == 0.0:
+        bx = 1.0
+    xa = min(max(0.5 * (az + 1.0), 0.0), 0.9999999999999999)
+    xb = min(max(0.5 * (bz + 1.0), 0.0), 0.9999999999999999)
+    na = nb = node
+    lowa = lowb = 0
+    pa = pb = 1.0
+    level = 0
+    while na >= 0 or nb >= 0:
+        if level >= MID_LEVELS:   # (deeper than the guides ptrace.guiding builds)
+            return (direction_pdf(q_child, q_density, node, ax, ay, az),
+                    direction_pdf(q_child, q_density, node, bx, by, bz))
+        if na >= 0:
+            ix = 1 if xa >= 0.5 else 0
+            xa = min(2.0 * xa - ix, 0.9999999999999999)
+            iy, lowa = _half(ax, ay, level, lowa)
+            q = 2 * iy + ix
+            pa *= q_density[na, q]
+            na = q_child[na, q]
+        if nb >= 0:
+            ix = 1 if xb >= 0.5 else 0
+            xb = min(2.0 * xb - ix, 0.9999999999999999)
+            iy, lowb = _half(bx, by, level, lowb)
+            q = 2 * iy + ix
+            pb *= q_density[nb, q]
+            nb = q_child[nb, q]
+        level += 1
+    return pa, pb
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -231,8 +267,9 @@ def folded_pdf(guide, node, dx, dy, dz, nx, ny, nz):
     c = dx * nx + dy * ny + dz * nz
     if c < 0.0:
         return 0.0
-    return guide_pdf(guide, node, dx, dy, dz) + guide_pdf(
-        guide, node, dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz)
+    pa, pb = pair_pdf(guide.q_child, guide.q_density, node, dx, dy, dz, dx - 2.0 * c * nx,
+                      dy - 2.0 * c * ny, dz - 2.0 * c * nz)
+    return pa * INV_FOUR_PI + pb * INV_FOUR_PI
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

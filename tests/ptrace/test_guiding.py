@@ -137,7 +137,7 @@ def test_the_guide_s_pdf_finds_each_direction_s_cell_without_an_arctangent():
     x = np.clip(0.5 * (d[:, 2] + 1), 0, 1 - 1e-16)
     y = np.mod(np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi) / (2 * np.pi)
     y = np.clip(y, 0, 1 - 1e-16)
-    expected = np.array([quadtree_pdf(guide.q_child, guide.q_energy, 0, a, b)
+    expected = np.array([quadtree_pdf(guide.q_child, guide.q_density, 0, a, b)
                          for a, b in zip(x, y)]) / (4 * np.pi)
     got = np.array([guide_pdf(guide, 0, *v) for v in d])
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=0)   # (same cells)
@@ -167,6 +167,36 @@ def test_the_folded_guide_stays_above_the_surface_and_its_pdf_integrates_to_one_
     error = values.std() * 4 * np.pi / math.sqrt(values.size)
     assert abs(estimate - 1.0) < 4 * error + 1e-3, (estimate, error)
 
+
+def test_the_folded_pdf_walks_a_direction_and_its_mirror_together_to_the_same_numbers():
+    """folded_pdf walks the quadtree at d and at its mirror image in one loop: the sum of two
+    guide_pdf walks to the last bit, on random directions and normals, the poles, the axes and
+    directions a hair off the cells' phi edges."""
+    guide = one_leaf_guide(peaked_grid(seed=8))
+    rng = np.random.default_rng(21)
+    d = rng.normal(size=(3000, 3))
+    n = rng.normal(size=(3000, 3))
+    edges = 2 * np.pi * (np.arange(RESOLUTION) / RESOLUTION)
+    phi = np.concatenate([edges + 1e-9, edges - 1e-9])
+    z = rng.uniform(-0.99, 0.99, phi.size)
+    r = np.sqrt(1 - z * z)
+    axes = np.vstack([np.eye(3), -np.eye(3)]) + 0.0
+    d = np.vstack([d, np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), axes,
+                   axes[[2, 5]]])
+    n = np.vstack([n, rng.normal(size=(phi.size, 3)), axes[[2, 2, 2, 5, 5, 5]], axes[[2, 2]]])
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    cells = set()
+    for v, m in zip(d, n):
+        c = v @ m
+        got = folded_pdf(guide, 0, *v, *m)
+        if c < 0.0:
+            assert got == 0.0
+            continue
+        mirror = v - 2.0 * c * m
+        assert got == guide_pdf(guide, 0, *v) + guide_pdf(guide, 0, *mirror)
+        cells.add(round(got, 9))
+    assert len(cells) > 20
 
 def light_records(rng, n, light, cone):
     """Records (ptrace.kernel.guide's RECORD_ROWS) at points of the unit box over uniform
