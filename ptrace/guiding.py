@@ -164,12 +164,26 @@ def accumulate(axis, split, child, root, lower, upper, records, counts, grid, le
     incident light times the cosine, where a leaf's surfaces share a normal)."""
     nodes = axis.shape[0]
     stack = np.empty(nodes + 1, dtype=np.int64)
-    bounds = np.empty((nodes + 1, 6))
     hit = np.empty(nodes, dtype=np.int64)
     weight = np.empty(nodes)
+    bounds = np.empty((nodes, 6))   # each node's box (a child's index is past its parent's)
+    for j in range(3):
+        bounds[0, j], bounds[0, 3 + j] = lower[j], upper[j]
+    for node in range(nodes):
+        if axis[node] >= 0:
+            first = child[node]
+            for j in range(6):
+                bounds[first, j] = bounds[first + 1, j] = bounds[node, j]
+            bounds[first, 3 + axis[node]] = split[node]    # the lower child
+            bounds[first + 1, axis[node]] = split[node]    # the upper child
     for k in range(records.shape[1]):
         px, py, pz = records[0, k], records[1, k], records[2, k]
-        leaf = guide_leaf(axis, split, child, root, px, py, pz)
+        node = 0   # (guide_leaf's descent, keeping the leaf's node for its box)
+        while axis[node] >= 0:
+            a = axis[node]
+            c = px if a == 0 else (py if a == 1 else pz)
+            node = child[node] + (0 if c < split[node] else 1)
+        leaf = root[node]
         leaves[k] = leaf
         counts[leaf] += 1
         dx, dy, dz = records[R_DX, k], records[R_DX + 1, k], records[R_DX + 2, k]
@@ -182,31 +196,19 @@ def accumulate(axis, split, child, root, lower, upper, records, counts, grid, le
         if not box:
             grid[leaf, cell] += energy
             continue
-        # the record's leaf's box, then the leaves its box filter overlaps
-        lo0, lo1, lo2, hi0, hi1, hi2 = lower[0], lower[1], lower[2], upper[0], upper[1], upper[2]
-        node = 0
-        while axis[node] >= 0:
-            a, c = axis[node], split[node]
-            below = (px if a == 0 else (py if a == 1 else pz)) < c
-            if a == 0:
-                hi0, lo0 = (c, lo0) if below else (hi0, c)
-            elif a == 1:
-                hi1, lo1 = (c, lo1) if below else (hi1, c)
-            else:
-                hi2, lo2 = (c, lo2) if below else (hi2, c)
-            node = child[node] + (0 if below else 1)
-        h0, h1, h2 = 0.5 * (hi0 - lo0), 0.5 * (hi1 - lo1), 0.5 * (hi2 - lo2)
+        # the box of the record's leaf, centred on the record; the leaves it overlaps
+        h0 = 0.5 * (bounds[node, 3] - bounds[node, 0])
+        h1 = 0.5 * (bounds[node, 4] - bounds[node, 1])
+        h2 = 0.5 * (bounds[node, 5] - bounds[node, 2])
         b = (px - h0, py - h1, pz - h2, px + h0, py + h1, pz + h2)
         stack[0] = 0
-        for j in range(3):
-            bounds[0, j], bounds[0, 3 + j] = lower[j], upper[j]
         top, found, total = 1, 0, 0.0
         while top:
             top -= 1
             node = stack[top]
             w = 1.0
             for j in range(3):
-                w *= max(min(bounds[top, 3 + j], b[3 + j]) - max(bounds[top, j], b[j]), 0.0)
+                w *= max(min(bounds[node, 3 + j], b[3 + j]) - max(bounds[node, j], b[j]), 0.0)
             if not w > 0.0:
                 continue
             if axis[node] < 0:
@@ -214,13 +216,8 @@ def accumulate(axis, split, child, root, lower, upper, records, counts, grid, le
                 found += 1
                 total += w
                 continue
-            a, c = axis[node], split[node]
-            for side in range(2):
-                stack[top + side] = child[node] + side
-                for j in range(6):
-                    bounds[top + side, j] = bounds[top, j]
-            bounds[top, 3 + a] = c          # the lower child
-            bounds[top + 1, a] = c          # the upper child
+            stack[top] = child[node]
+            stack[top + 1] = child[node] + 1
             top += 2
         if not total > 0.0:
             grid[leaf, cell] += energy
