@@ -293,6 +293,8 @@ def check_numbers(args):
     except ValueError:
         return   # a file name
     words = problem(colour)
+    if words is None and min(colour) < 0.0:
+        words = f"{min(colour):g} is negative (a colour is at least 0)"
     if words is not None:
         raise UsageError(f"-e {text}: the environment's colour: {words}")
 
