@@ -401,15 +401,32 @@ def scene_and_camera(args, budget, job=None):
         job.buffers = check_frame(*args.resolution, args.crop,
                                   features=bool(job.aov_names or args.denoise),
                                   max_memory=budget)
+    black = False
     if args.environment is not None:
         from ..environment import load_environment
-        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
+        environment = load_environment(args.environment, max_memory=budget)
+        black = not environment.image.max() > 0.0
+        scene = scene.with_environment(environment)
     width, height = args.resolution
-    camera = camera_from_flags(scene, args, width, height)
+    camera = camera_from_flags(scene, args, width, height)   # (it drops the default light)
+    if black:
+        scene.notes.append(_black_environment_note(scene, args.environment))
     note = sight_note(scene, camera)
     if note is not None:
         scene.notes.append(note)
     return scene, camera
+
+
+def _black_environment_note(scene, spec):
+    """The note for an -e that is black everywhere (-e 0,0,0, or an image of zeros): it lights
+    nothing, and when nothing else does either the image is black (the renderer's own warning
+    for a scene without light does not see it, as the environment is a light)."""
+    from ..scene import ENVIRONMENT
+    emitters = np.isin(scene.material_index, np.nonzero(scene.materials.emits())[0]).any()
+    alone = not (scene.lights.kind != ENVIRONMENT).any() and not emitters
+    return (f"-e {spec}: the environment is black everywhere: it lights nothing"
+            + ("; the scene has no other light and no emissive surface: the image will be "
+               "black" if alone else ""))
 
 
 # how many times the scene's size a camera (or its lens's edge) may be from it: float64 rounds

@@ -284,6 +284,29 @@ def test_a_negative_environment_colour_is_refused_naming_the_flag(tmp_path, caps
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("spec", ["0,0,0", "0", "black.png"])
+def test_a_black_environment_is_noted_and_so_is_a_scene_it_leaves_unlit(tmp_path, capsys, spec):
+    """-e 0,0,0 (or an image of zeros) on a mesh file takes the default light's place and
+    lights nothing: the image was black with exit 0 and no word (the renderer's warning for a
+    scene without light counts the environment as a light). On the Cornell box, whose own
+    light stays, the note says only that the environment lights nothing. (--info: no render.)"""
+    import json
+
+    import PIL.Image
+    PIL.Image.new("RGB", (8, 4)).save(tmp_path / "black.png")
+    path = tmp_path / "square.obj"
+    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")
+    arg = str(tmp_path / spec) if spec.endswith(".png") else spec
+    for scene, alone in ((path, True), (SHIPPED, False)):
+        assert cli.main(["--info", "-e", arg, str(scene)]) == 0
+        notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if n.startswith("-e ")]
+        assert notes == [f"-e {arg}: the environment is black everywhere: it lights nothing"
+                         + ("; the scene has no other light and no emissive surface: the image "
+                            "will be black" if alone else "")], notes
+    assert cli.main(["--info", "-e", "0,0.001,0", str(path)]) == 0
+    assert "black everywhere" not in capsys.readouterr().out
+
+
 def test_an_environment_image_beyond_the_limit_is_refused_naming_it(tmp_path, capsys):
     """A float EXR's 3e38 is finite, but every sample it lights would overflow."""
     import OpenImageIO as oiio
