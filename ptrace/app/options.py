@@ -429,6 +429,8 @@ def _black_environment_note(scene, spec):
                "black" if alone else ""))
 
 
+# a lens radius more than this many times the focal distance gets sight_note's note
+LENS_RATIO = 1e6
 # how many times the scene's size a camera (or its lens's edge) may be from it: float64 rounds
 # a hit point that far away by 1e-4 of the scene's size (its 2^-53 relative precision), beyond
 # which nothing of it can be rendered faithfully
@@ -454,6 +456,15 @@ def sight_note(scene, camera):
         return (f"{what}: {by} {reach:.3g} from the scene's bounds, {reach / size:.2g} times "
                 f"their size (more than {FARTHEST:g} times: float64 cannot place hits that "
                 f"far faithfully)")
+    radius, focus = float(camera.lens_radius), float(camera.focal_distance)
+    if radius > LENS_RATIO * focus:
+        # a ray from the lens at r from its centre through the focus leaves atan(focus / r)
+        # from the lens's plane: more than 1e-3 of it only for r < 1e3 focus, a share of the
+        # disc's area below (1e3 focus / radius)^2 < 1e-6
+        return (f"the lens radius (-b) {radius:g} is more than {LENS_RATIO:g} times the focal "
+                f"distance {focus:g}: all but a millionth of the lens's rays leave within 0.06 "
+                f"degrees of its plane: the image is all but black unless the scene lies in "
+                f"that plane")
     px, py, depth = camera.project(corners)
     if not (depth > 0).any():
         return f"{what}: the scene's bounds are all behind the camera"

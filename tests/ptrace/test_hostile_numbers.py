@@ -406,6 +406,23 @@ def test_a_camera_that_shows_nothing_of_the_scene_is_noted_once(tmp_path, capsys
     assert said[0].startswith("ptrace: note: the camera shows nothing of the scene: ")
 
 
+@pytest.mark.parametrize("focus, noted", [("1e-320", True), ("1e-8", True), ("1e-6", False),
+                                          ("4.7", False)])
+def test_a_lens_far_wider_than_its_focal_distance_is_noted(tmp_path, capsys, focus, noted):
+    """-b 0.1 -d 1e-320 (any -d far below -b) sends every lens ray out nearly in the lens's
+    plane: the render was black with exit 0 and no word. The rule (more than 1e6 times) by
+    hand: -d 1e-8 is 1e7 times below -b 0.1, noted; 1e-6 is 1e5 times, not. (--info: no
+    render.)"""
+    import json
+    code = cli.main(["--info", "-b", "0.1", "-d", focus, str(small_obj(tmp_path))])
+    notes = [n for n in json.loads(capsys.readouterr().out)["notes"]
+             if n.startswith("the lens radius")]
+    assert code == 0 and len(notes) == int(noted), notes
+    if noted:
+        assert "more than 1e+06 times the focal distance" in notes[0] \
+            and "all but black" in notes[0], notes
+
+
 @pytest.mark.parametrize("args", [[], ["--eye", "0,0,5"], ["--eye", "0.5,0,0.5"],
                                   ["-b", "0.1"]])
 def test_a_camera_that_shows_the_scene_has_no_such_note(tmp_path, capsys, args):
