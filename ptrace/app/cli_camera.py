@@ -24,6 +24,13 @@ def _vector(name):
     return parse
 
 
+# The narrowest --fov: a view this narrow frames a scene from about 57.3 / MIN_FOV = 5.7e10
+# times its size away; narrower, from beyond 1e12 times (where float64 cannot place hits
+# faithfully, ptrace.pointing's note) and, for a large scene, beyond ptrace.io.limits.LIMIT,
+# which was refused as a focal distance (-d) that was never given
+MIN_FOV = 1e-9
+
+
 def _fov(text):
     try:
         value = float(text)
@@ -32,20 +39,29 @@ def _fov(text):
     if value is None or not 0 < value < 180:
         raise argparse.ArgumentTypeError(f"--fov must be a number of degrees greater than 0 and "
                                          f"less than 180, got {text!r}")
+    if value < MIN_FOV:
+        raise argparse.ArgumentTypeError(
+            f"--fov {text}: narrower than {MIN_FOV:g} degrees, the camera would stand more than "
+            f"1e10 times the scene's size away to frame it (float64 cannot place hits that far "
+            f"faithfully)")
     return value
 
 
 VECTOR_FLAGS = ("--eye", "--look-at", "--up")
+# flags whose value may start with '-' and is then refused for what it is (`-e -1,0,0` as a
+# negative colour, `--max-memory -1G` as no size), not as argparse's "expected one argument"
+ATTACHED_FLAGS = VECTOR_FLAGS + ("-e", "--environment", "--max-memory")
 POINTING_NAMES = {"eye": "--eye", "target": "--look-at", "up": "--up", "fov": "--fov",
                   "index": "--camera-index"}
 
 
 def attach_negative_vectors(argv):
-    """argv with `--eye -1,2,3` written `--eye=-1,2,3`: argparse takes a value that starts
-    with '-' and is not a plain number for a flag, not for the vector it is."""
+    """argv with `--eye -1,2,3` (or `-e -1,0,0`) written `--eye=-1,2,3`: argparse takes a
+    value that starts with '-' and is not a plain number for a flag, not for the vector it
+    is."""
     out = list(argv)
     for i, token in enumerate(out[:-1]):
-        if token in VECTOR_FLAGS and out[i + 1][:2] in ("-0", "-1", "-2", "-3", "-4", "-5",
+        if token in ATTACHED_FLAGS and out[i + 1][:2] in ("-0", "-1", "-2", "-3", "-4", "-5",
                                                         "-6", "-7", "-8", "-9", "-."):
             out[i] = f"{token}={out[i + 1]}"
             out[i + 1] = None

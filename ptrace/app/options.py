@@ -293,6 +293,8 @@ def check_numbers(args):
     except ValueError:
         return   # a file name
     words = problem(colour)
+    if words is None and min(colour) < 0.0:
+        words = f"{min(colour):g} is negative (a colour is at least 0)"
     if words is not None:
         raise UsageError(f"-e {text}: the environment's colour: {words}")
 
@@ -399,17 +401,36 @@ def scene_and_camera(args, budget, job=None):
         job.buffers = check_frame(*args.resolution, args.crop,
                                   features=bool(job.aov_names or args.denoise),
                                   max_memory=budget)
+    black = False
     if args.environment is not None:
         from ..environment import load_environment
-        scene = scene.with_environment(load_environment(args.environment, max_memory=budget))
+        environment = load_environment(args.environment, max_memory=budget)
+        black = not environment.image.max() > 0.0
+        scene = scene.with_environment(environment)
     width, height = args.resolution
-    camera = camera_from_flags(scene, args, width, height)
+    camera = camera_from_flags(scene, args, width, height)   # (it drops the default light)
+    if black:
+        scene.notes.append(_black_environment_note(scene, args.environment))
     note = sight_note(scene, camera)
     if note is not None:
         scene.notes.append(note)
     return scene, camera
 
 
+def _black_environment_note(scene, spec):
+    """The note for an -e that is black everywhere (-e 0,0,0, or an image of zeros): it lights
+    nothing, and when nothing else does either the image is black (the renderer's own warning
+    for a scene without light does not see it, as the environment is a light)."""
+    from ..scene import ENVIRONMENT
+    emitters = np.isin(scene.material_index, np.nonzero(scene.materials.emits())[0]).any()
+    alone = not (scene.lights.kind != ENVIRONMENT).any() and not emitters
+    return (f"-e {spec}: the environment is black everywhere: it lights nothing"
+            + ("; the scene has no other light and no emissive surface: the image will be "
+               "black" if alone else ""))
+
+
+# a lens radius more than this many times the focal distance gets sight_note's note
+LENS_RATIO = 1e6
 # how many times the scene's size a camera (or its lens's edge) may be from it: float64 rounds
 # a hit point that far away by 1e-4 of the scene's size (its 2^-53 relative precision), beyond
 # which nothing of it can be rendered faithfully
@@ -435,6 +456,15 @@ def sight_note(scene, camera):
         return (f"{what}: {by} {reach:.3g} from the scene's bounds, {reach / size:.2g} times "
                 f"their size (more than {FARTHEST:g} times: float64 cannot place hits that "
                 f"far faithfully)")
+    radius, focus = float(camera.lens_radius), float(camera.focal_distance)
+    if radius > LENS_RATIO * focus:
+        # a ray from the lens at r from its centre through the focus leaves atan(focus / r)
+        # from the lens's plane: more than 1e-3 of it only for r < 1e3 focus, a share of the
+        # disc's area below (1e3 focus / radius)^2 < 1e-6
+        return (f"the lens radius (-b) {radius:g} is more than {LENS_RATIO:g} times the focal "
+                f"distance {focus:g}: all but a millionth of the lens's rays leave within 0.06 "
+                f"degrees of its plane: the image is all but black unless the scene lies in "
+                f"that plane")
     px, py, depth = camera.project(corners)
     if not (depth > 0).any():
         return f"{what}: the scene's bounds are all behind the camera"

@@ -18,6 +18,13 @@ import numpy as np
 LIMIT = 1e30
 LIMIT_WORDS = f"beyond ±{LIMIT:g}, the largest magnitude ptrace takes (so that its arithmetic " \
               f"cannot overflow)"
+# Texture coordinates: a texture lookup turns u x width into a 64-bit integer texel index, which
+# wraps past 9.2e18, so a coordinate of 1e30 (let alone 3e38) reads an arbitrary texel. At 1e12
+# even a 1048576-texel-wide texture's index stays below 1.1e18; and no texture repeats 1e12
+# times across a surface (a float64 coordinate there has no fraction left finer than 1e-4).
+UV_LIMIT = 1e12
+UV_WORDS = f"beyond ±{UV_LIMIT:g}, the largest texture coordinate ptrace takes (beyond it a " \
+           f"texel's index overflows)"
 
 
 def first_outside(values, limit=LIMIT):

@@ -31,7 +31,7 @@ from ..scene import (
 )
 from . import files, gltf, gltf_cameras, gltf_materials, obj, ply
 from .default_light import default_lights
-from .limits import LIMIT, LIMIT_WORDS
+from .limits import LIMIT, LIMIT_WORDS, UV_LIMIT, UV_WORDS, first_outside
 from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
 
 MESH_EXTENSIONS = (".obj", ".ply", ".glb", ".gltf", ".stl")
@@ -74,6 +74,7 @@ def _load_mesh(path, default_light):
     parts = _drop_non_finite(path, parts)
     vertices, faces = parts["vertices"], parts["faces"]
     _check_magnitudes(path, vertices)
+    _check_texture_coordinates(path, parts["uv"])
     if len(faces) == 0:
         why = parts.get("why_empty")
         raise SceneError(path, "the file contains no triangles" + (f": {why}" if why else ""))
@@ -155,6 +156,21 @@ def _check_magnitudes(path, vertices):
             else ""
         raise SceneError(path, f"vertex {k + 1}{placed}: its {'xyz'[axis]} "
                                f"{vertices[k, axis]:g} is {LIMIT_WORDS}")
+
+
+def _check_texture_coordinates(path, uv):
+    """Refuse texture coordinates (as the file's texture transforms leave them) that are NaN,
+    infinite or beyond ptrace.io.limits.UV_LIMIT: a texture lookup there reads an arbitrary
+    texel (or none), and the surface renders black where it should show its texture."""
+    if uv is None or first_outside(uv, UV_LIMIT) is None:
+        return
+    with np.errstate(invalid="ignore"):
+        k, corner, axis = np.argwhere(~(np.abs(uv) <= UV_LIMIT))[0]
+    value = float(uv[k, corner, axis])
+    words = f"{value:g} is not a finite number" if not math.isfinite(value) else \
+        f"{value:g} is {UV_WORDS}"
+    raise SceneError(path, f"triangle {k + 1}: its texture coordinate {'uv'[axis]} at corner "
+                           f"{corner + 1} (after the file's texture transforms): {words}")
 
 
 def _read_with_trimesh(path, extension):

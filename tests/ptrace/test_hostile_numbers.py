@@ -102,17 +102,75 @@ def test_the_default_light_rule_survives_an_overflowing_emission():
     assert lights == [] and "light it" in note, note
 
 
-def test_texture_coordinates_of_1e308_on_an_emitter_load(tmp_path):
-    """The default-light rule reads an emitter's texture at its vt: 1e308 x the width used
-    to overflow (a warning, then an invalid cast); the kernels wrap such coordinates."""
+def _textured_quad_obj(folder, vt, map_line="map_Kd t.png", ke=""):
+    """A textured triangle whose corners' texture coordinates are `vt` (three "u v" words)."""
     import PIL.Image
-    PIL.Image.new("RGB", (8, 8), (255, 255, 255)).save(tmp_path / "t.png")
-    (tmp_path / "glow.mtl").write_text("newmtl m\nKe 1 1 1\nmap_Ke t.png\n")
-    path = tmp_path / "glow.obj"
-    path.write_text("mtllib glow.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nvt 1e308 0\n"
-                    "vt 0 -1e308\nvt 1e308 1e308\nusemtl m\nf 1/1 2/2 3/3\n")
-    scene = ptrace.load(path)
-    assert any("default light" in note for note in scene.notes), scene.notes
+    PIL.Image.new("RGB", (8, 8), (255, 255, 255)).save(folder / "t.png")
+    (folder / "q.mtl").write_text(f"newmtl m\nKd 1 1 1\n{ke}{map_line}\n")
+    path = folder / "q.obj"
+    path.write_text("mtllib q.mtl\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\n"
+                    + "".join(f"vt {c}\n" for c in vt) + "usemtl m\nf 1/1 2/2 3/3\n")
+    return path
+
+
+@pytest.mark.parametrize("vt, words", [
+    (["0 0", "1e308 0", "1 1"], "u at corner 2 (after the file's texture transforms): 1e+308 is "
+                                "beyond ±1e+12"),
+    (["0 0", "0 1", "0 -3e18"], "v at corner 3 (after the file's texture transforms): -3e+18 is "
+                                "beyond ±1e+12"),
+    (["nan 0", "0 1", "1 1"], "u at corner 1 (after the file's texture transforms): nan is not a "
+                              "finite number")])
+def test_texture_coordinates_beyond_the_limit_are_refused_naming_the_file_and_triangle(
+        tmp_path, capsys, vt, words):
+    """A texture lookup makes u x width a 64-bit texel index: past about 9e18 / width it wraps
+    and reads an arbitrary texel (a 3e18 coordinate on an 8-texel texture rendered black), so
+    coordinates beyond ptrace.io.limits.UV_LIMIT are refused where they enter, on an emitter
+    (the default-light rule reads its texture) as on any surface."""
+    for ke in ("", "Ke 1 1 1\nmap_Ke t.png\n"):
+        path = _textured_quad_obj(tmp_path, vt, ke=ke)
+        code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+        assert code == 2 and line == f"ptrace: error: {path}: triangle 1: its texture " \
+                                      f"coordinate {words}" + line.split(words)[1], line
+        assert not (tmp_path / "x.png").exists()
+
+
+def test_gltf_texture_coordinates_beyond_the_limit_are_refused_after_its_transform(tmp_path,
+                                                                                   capsys):
+    """A glTF's TEXCOORD_0 of 3e38 (finite in float32), and coordinates in range that its
+    KHR_texture_transform scales past the limit."""
+    import io
+
+    import PIL.Image
+    stream = io.BytesIO()
+    PIL.Image.new("RGB", (4, 4), (200, 100, 50)).save(stream, "PNG")
+    for name, uv, transform in (("big", np.full((4, 2), 3e38), None),
+                                ("scaled", QUAD_UV_GLTF, {"scale": [1e13, 1.0]})):
+        info = {"index": 0}
+        if transform:
+            info["extensions"] = {"KHR_texture_transform": transform}
+        path = tmp_path / f"{name}.gltf"
+        gltf(path, [dict(positions=QUAD, indices=QUAD_FACES.reshape(-1), uv=uv, material=0)],
+             materials=[{"pbrMetallicRoughness": {"baseColorTexture": info}}],
+             images=[stream.getvalue()],
+             document={"extensionsUsed": ["KHR_texture_transform"]} if transform else None)
+        code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", path)
+        assert code == 2 and line.startswith(f"ptrace: error: {path}: triangle ") \
+            and "texture coordinate u" in line and "beyond ±1e+12" in line, line
+
+
+def test_the_texture_coordinate_limit_keeps_the_texel_index_in_range():
+    """The kernels' lookup of a one-colour texture, by hand: every coordinate up to UV_LIMIT
+    (either sign) reads that colour; 3e18, past it, does not (its index wraps): the limit is
+    where it must be, not merely somewhere."""
+    from ptrace.io.limits import UV_LIMIT
+    from ptrace.textures import texture_lookup
+    texels = np.tile(np.float32([0.25, 0.5, 0.75]), (64, 1))
+    arrays = (texels, np.zeros(1, np.int64), np.full(1, 8, np.int64), np.full(1, 8, np.int64),
+              np.zeros((1, 2), np.int64), 0)
+    for s in (0.3, -0.3, 1e6, UV_LIMIT, -UV_LIMIT, UV_LIMIT * (1 - 2 ** -40)):
+        for tv in (0.6, s):
+            assert texture_lookup(*arrays, s, tv) == pytest.approx((0.25, 0.5, 0.75)), (s, tv)
+    assert texture_lookup(*arrays, 3e18, 0.5) != pytest.approx((0.25, 0.5, 0.75))
 
 
 @pytest.mark.parametrize("coordinate", ["1e308", "-1e308", "1e31"])
@@ -200,6 +258,53 @@ def test_a_flag_beyond_the_limit_is_refused_in_one_line_naming_it(tmp_path, caps
     code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", *args, SHIPPED)
     assert code == 2 and line.startswith("ptrace: error: ") and flag in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--fov", "1e-300"], "--fov 1e-300: narrower than 1e-09 degrees"),   # was about -d
+    (["--max-memory", "-1G"], "got '-1G'")])    # was argparse's "expected one argument"
+def test_a_flag_refused_names_itself_and_its_value(tmp_path, capsys, args, words):
+    """On a mesh file (whose default camera --fov frames): --fov 1e-300 put the framing camera
+    1.1e302 away and was refused as a focal distance (-d) never given."""
+    path = tmp_path / "square.obj"
+    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", *args, path)
+    assert code == 2 and line.startswith("ptrace: error: ") and words in line, line
+    assert "(-d)" not in line and not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("args", [["-e", "-1,0,0"], ["--environment", "-0.5"],
+                                  ["-e=-1,0,0"], ["-e", "1,-.5,1"]])
+def test_a_negative_environment_colour_is_refused_naming_the_flag(tmp_path, capsys, args):
+    """`-e -1,0,0` used to be argparse's "-e: expected one argument" (a value starting with '-'
+    taken for a flag), and `-e=-1,0,0` an error naming "constant (-1.0, 0.0, 0.0)", not -e."""
+    code, line = one_line(capsys, *TINY, "-f", tmp_path / "x.png", *args, SHIPPED)
+    assert code == 2 and line.startswith("ptrace: error: -e ") \
+        and "the environment's colour: " in line and "is negative" in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("spec", ["0,0,0", "0", "black.png"])
+def test_a_black_environment_is_noted_and_so_is_a_scene_it_leaves_unlit(tmp_path, capsys, spec):
+    """-e 0,0,0 (or an image of zeros) on a mesh file takes the default light's place and
+    lights nothing: the image was black with exit 0 and no word (the renderer's warning for a
+    scene without light counts the environment as a light). On the Cornell box, whose own
+    light stays, the note says only that the environment lights nothing. (--info: no render.)"""
+    import json
+
+    import PIL.Image
+    PIL.Image.new("RGB", (8, 4)).save(tmp_path / "black.png")
+    path = tmp_path / "square.obj"
+    path.write_text("v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")
+    arg = str(tmp_path / spec) if spec.endswith(".png") else spec
+    for scene, alone in ((path, True), (SHIPPED, False)):
+        assert cli.main(["--info", "-e", arg, str(scene)]) == 0
+        notes = [n for n in json.loads(capsys.readouterr().out)["notes"] if n.startswith("-e ")]
+        assert notes == [f"-e {arg}: the environment is black everywhere: it lights nothing"
+                         + ("; the scene has no other light and no emissive surface: the image "
+                            "will be black" if alone else "")], notes
+    assert cli.main(["--info", "-e", "0,0.001,0", str(path)]) == 0
+    assert "black everywhere" not in capsys.readouterr().out
 
 
 def test_an_environment_image_beyond_the_limit_is_refused_naming_it(tmp_path, capsys):
@@ -299,6 +404,23 @@ def test_a_camera_that_shows_nothing_of_the_scene_is_noted_once(tmp_path, capsys
     said = [line for line in err if "shows nothing" in line]
     assert code == 0 and len(said) == 1 and words in said[0], err
     assert said[0].startswith("ptrace: note: the camera shows nothing of the scene: ")
+
+
+@pytest.mark.parametrize("focus, noted", [("1e-320", True), ("1e-8", True), ("1e-6", False),
+                                          ("4.7", False)])
+def test_a_lens_far_wider_than_its_focal_distance_is_noted(tmp_path, capsys, focus, noted):
+    """-b 0.1 -d 1e-320 (any -d far below -b) sends every lens ray out nearly in the lens's
+    plane: the render was black with exit 0 and no word. The rule (more than 1e6 times) by
+    hand: -d 1e-8 is 1e7 times below -b 0.1, noted; 1e-6 is 1e5 times, not. (--info: no
+    render.)"""
+    import json
+    code = cli.main(["--info", "-b", "0.1", "-d", focus, str(small_obj(tmp_path))])
+    notes = [n for n in json.loads(capsys.readouterr().out)["notes"]
+             if n.startswith("the lens radius")]
+    assert code == 0 and len(notes) == int(noted), notes
+    if noted:
+        assert "more than 1e+06 times the focal distance" in notes[0] \
+            and "all but black" in notes[0], notes
 
 
 @pytest.mark.parametrize("args", [[], ["--eye", "0,0,5"], ["--eye", "0.5,0,0.5"],
