@@ -144,13 +144,17 @@ class StageClock:
     @contextlib.contextmanager
     def timing(self):
         """Every stage ptrace.kernel.wavefront calls, timed for the length of the block: the
-        module's stage functions, and the hit and shading stages its Wavefront makes."""
+        module's stage functions, and the hit, light and shading stages its Wavefront makes."""
         from ptrace.kernel import wavefront
         from ptrace.scene import BSDF_NAMES
         hit_stage, shading_stage = wavefront.hit_stage, wavefront.shading_stage
+        light_stage = wavefront.light_stage
 
         def hit(*args):
             return self.wrap("hit_stage", hit_stage(*args))
+
+        def light(*args):
+            return self.wrap("light_stage", light_stage(*args))
 
         def shading(kind, *args):
             return self.wrap(f"shading: {BSDF_NAMES[kind]}", shading_stage(kind, *args))
@@ -160,6 +164,7 @@ class StageClock:
                 stack.enter_context(patched(wavefront, name,
                                             self.wrap(name, getattr(wavefront, name))))
             stack.enter_context(patched(wavefront, "hit_stage", hit))
+            stack.enter_context(patched(wavefront, "light_stage", light))
             stack.enter_context(patched(wavefront, "shading_stage", shading))
             yield self
 

@@ -132,14 +132,14 @@ def test_the_stage_clock_times_every_stage_counts_every_ray_and_changes_no_pixel
     stats = {}
     options = dict(TINY, accel="bvh")
     plain = ptrace.render(cow, threads=2, stats=stats, **options)
-    saved = [getattr(wavefront, name) for name in pr.STAGES + ("hit_stage", "shading_stage")]
+    factories = pr.STAGES + ("hit_stage", "light_stage", "shading_stage")
+    saved = [getattr(wavefront, name) for name in factories]
     run = pr.timed_render(cow, 2, stages=pr.StageClock(), **options)
-    assert [getattr(wavefront, name) for name in pr.STAGES + ("hit_stage", "shading_stage")] \
-        == saved
+    assert [getattr(wavefront, name) for name in factories] == saved
     assert np.array_equal(run.image, plain)
     clock = run.stages
-    assert {"camera_stage", "closest_stage", "hit_stage", "shading: diffuse", "any_stage",
-            "shadow_stage", "fold_stage", "add_stage"} <= set(clock.seconds)
+    assert {"camera_stage", "closest_stage", "hit_stage", "light_stage", "shading: diffuse",
+            "any_stage", "shadow_stage", "fold_stage", "add_stage"} <= set(clock.seconds)
     assert clock.items["camera_stage"] == PIXELS * TINY["spp"]
     # every ray traced went through a trace stage: camera and bounce rays the closest hit's,
     # shadow rays the any hit's

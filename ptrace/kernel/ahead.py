@@ -43,8 +43,9 @@ def processes():
 def _reference(dispatcher):
     """How a worker process finds `dispatcher`: a module's function by its name, or a kernel
     made by one of ptrace.kernel's factories by the factory's arguments; None for any other."""
-    from . import shading, stages
+    from . import lighting, shading, stages
     for factory, made in ((shading.shading_stage, shading._STAGES),
+                          (lighting.light_stage, lighting._LIGHT_STAGES),
                           (stages.hit_stage, stages._HIT_STAGES)):
         for key, kernel in made.items():
             if kernel is dispatcher:

@@ -16,13 +16,17 @@ from ..scene import BSDF_NAMES
 FLOATS = 34
 # the int rows: the pixel (y * width + x) and sample, the hit primitive and its material, the
 # vertex the path is at (0: the camera's), the rays it traced, whether its last bounce was a
-# delta BSDF's, and its ray's key (ptrace.cutouts: the random numbers of the surfaces it passes)
-PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA, KEY = range(8)
-INTS = 8
+# delta BSDF's, and its ray's key (ptrace.cutouts: the random numbers of the surfaces it passes);
+# the first shadow row of its light samples at its vertex and their count (the light stage's)
+PIXEL, SAMPLE, PRIM, MAT, VERTEX, RAYS, DELTA, KEY, SFIRST, SCOUNT = range(10)
+INTS = 10
 # the shadow queue's rows: origin, direction, end, and the light it carries if it is clear (with
-# -H: the hemisphere's rays, each with the weight of the emission it finds)
-(SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB) = range(10)
-SHADOW_FLOATS = 10
+# -H: the hemisphere's rays, each with the weight of the emission it finds); for a light sample
+# the light stage leaves the unit direction to the light, its cosine over density and weight,
+# and that density times the weight (negative for a delta light), which the shading kernel
+# turns, with its BSDF, into the light carried (ptrace.kernel.lighting)
+(SOX, SOY, SOZ, SDX, SDY, SDZ, STMAX, SR, SG, SB, SWX, SWY, SWZ, SSCALE, SLPDF) = range(15)
+SHADOW_FLOATS = 15
 
 
 class Wave:

@@ -4,13 +4,13 @@ sample) paths traced as waves of stage calls.
 A block's paths are cut into waves of at most WAVE_PATHS paths (fewer when -l and the lights
 would make a wave's shadow queue longer than SHADOW_RAYS). Each wave: camera rays; then, until
 no path is left, closest hits (the backend's stage), the hit stage (surface, emission found,
-the paths to shade, sorted by material kind), each kind's shading kernel (light samples into
-the shadow queue, bounces; ptrace.kernel.shading), any
-hits over the shadow queue (the backend's) and their light added (with -H: the hemisphere's
-rays, their closest hits and the emission they find). Python calls each stage once
-per bounce of a wave; the stages run without the GIL, so the render's threads overlap. Waves
-are folded into the block's per-pixel sums in path order, which is sample order: the image does
-not depend on the wave size."""
+the paths to shade, sorted by material kind), the light stage (every shading point's light
+samples into the shadow queue; ptrace.kernel.lighting), each kind's shading kernel (its BSDF
+on those samples, bounces; ptrace.kernel.shading), any hits over the shadow queue (the
+backend's) and their light added (with -H: the hemisphere's rays, their closest hits and the
+emission they find). Python calls each stage once per bounce of a wave; the stages run without
+the GIL, so the render's threads overlap. Waves are folded into the block's per-pixel sums in
+path order, which is sample order: the image does not depend on the wave size."""
 import threading
 from collections import namedtuple
 
@@ -21,6 +21,7 @@ from accel.compiled import new_scratch
 from accel.interpreted import sized
 
 from .. import codes
+from ..bsdf import is_delta
 from ..scene import (
     ANGULAR,
     AREA,
@@ -40,6 +41,7 @@ from ..solid_angle import rectangle_axes_table
 from .aovs import features_stage
 from .guide import HISTORY_ROWS, RECORD_ROWS, record_stage, snapshot_stage, uniform_guide
 from .layout import Wave
+from .lighting import light_stage
 from .shading import shading_stage
 from .stages import (
     add_stage,
@@ -62,7 +64,7 @@ from .trace import (
 # paths a wave holds at most (its rows about 1.4 MB): fewer calls from Python than smaller waves,
 # and larger ones gained nothing (benchmarks/results/wavefront_gate.md)
 WAVE_PATHS = 4096
-SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 5.8 MB)
+SHADOW_RAYS = 1 << 16  # shadow rays a wave's queue holds at most (about 9 MB)
 
 GUIDE_DEPTH = 8    # (--guiding) the vertices of a path that training records, at most
 
@@ -183,11 +185,17 @@ class Wavefront:
         # all for the normals integrator)
         self.normals = options.mode == codes.NORMALS
         self.guided = bool(guided) and not self.normals and not self.hemisphere
-        self.stages = [] if self.normals else [(kind, shading_stage(kind, general, mode,
+        self.stages = [] if self.normals else [(kind, shading_stage(kind, general,
                                                                    self.hemisphere,
-                                                                   self.guided,
-                                                                   general and angular, exact))
+                                                                   self.guided, exact))
                                                for kind in kinds if kind in SHADED]
+        # the light samples of every kind's shading points (and, with textures, their bent
+        # normals): one stage, compiled once for the scene's light setup; none when no kind
+        # takes light samples and no normal is bent
+        delta = getattr(is_delta, "py_func", is_delta)   # (its Python: no compile)
+        lit = any(not delta(kind) for kind, _stage in self.stages)
+        self.light_stage = light_stage(general, mode, self.hemisphere, angular) \
+            if self.stages and (lit or general) else None
         self.guide = uniform_guide()
         self.trainer = None
         self.depth = max(1, min(GUIDE_DEPTH, options.max_depth)) if self.guided else 1
@@ -280,6 +288,9 @@ class Wavefront:
                           1, shadow, shadow_path, wave.shadow_key, 0, queue, 0, self.guide,
                           wave.history, self.depth))
                  for _kind, stage in self.stages]
+        if self.light_stage is not None:
+            calls.append((self.light_stage, (shapes, surfaces, lights, options, floats, ints,
+                                             after, 1, shadow, shadow_path, wave.shadow_key, 0)))
         if not self.normals:
             calls.append((self.hit_stage, (shapes, surfaces, lights, options, self.mis, floats,
                                            ints, queue, 1, after, wave.starts)))
@@ -346,7 +357,11 @@ class Wavefront:
                 snapshot_stage(floats, ints, queue, hits, history, depth)
             if not n:
                 break
-            shadows = n = 0
+            shadows = 0
+            if self.light_stage is not None:   # every kind's light samples (bent normals)
+                shadows = call(self.light_stage, shapes, surfaces, lights, options, floats, ints,
+                               after, n, shadow, shadow_path, shadow_key, 0)
+            n = 0
             for kind, stage in self.stages:   # each kind's paths, through its kernel
                 first, end = starts[kind], starts[kind + 1]
                 if end > first:

@@ -168,9 +168,10 @@ def test_bvh_traces_l_shadow_rays_a_vertex():
 
 def test_records_without_the_tree_choose_by_power():
     """Stages asked for bvh with records built without the tree (scene_records' default)
-    choose by power rather than finding no light: the shading kernels and the hit stage are
-    the power sampler's."""
+    choose by power rather than finding no light: the light stage and the hit stage are the
+    power sampler's."""
     from ptrace.codes import LIGHTS_BVH, LIGHTS_POWER
+    from ptrace.kernel.lighting import light_stage
     from ptrace.kernel.shading import shading_stage
     from ptrace.kernel.stages import hit_stage
     from ptrace.kernel.wavefront import Wavefront
@@ -180,7 +181,8 @@ def test_records_without_the_tree_choose_by_power():
     for records, mode in ((scene_records(scene), LIGHTS_POWER),
                           (scene_records(scene)[:2] + (_records(scene),), LIGHTS_BVH)):
         wave = Wavefront(records, options, None, None, [DIFFUSE], False, LIGHTS_BVH)
-        assert wave.stages == [(DIFFUSE, shading_stage(DIFFUSE, True, mode, False, False))]
+        assert wave.stages == [(DIFFUSE, shading_stage(DIFFUSE, True, False, False))]
+        assert wave.light_stage is light_stage(True, mode)
         assert wave.hit_stage is hit_stage(True, mode)
     assert Settings(light_sampler="bvh").uses_light_tree(scene)
 

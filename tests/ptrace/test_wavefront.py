@@ -12,7 +12,7 @@ from numba.core import types
 
 import ptrace
 from ptrace import bsdf, codes, integrator, lights
-from ptrace.kernel import layout, shading, stages, wavefront
+from ptrace.kernel import layout, lighting, shading, stages, wavefront
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import RenderJob
 from ptrace.scene import DIFFUSE, GLASS, MIRROR
@@ -72,7 +72,7 @@ def test_a_wave_holds_the_same_memory_whatever_spp_and_depth_and_bounds_light_sa
     lights = len(cornell.lights)
     assert job.wavefront.shadow_rays <= wavefront.SHADOW_RAYS
     assert job.wavefront.wave_paths * lights * 2 ** 16 == job.wavefront.shadow_rays
-    assert layout.Wave.bytes(job.wavefront.wave_paths, job.wavefront.shadow_rays) < 8 << 20
+    assert layout.Wave.bytes(job.wavefront.wave_paths, job.wavefront.shadow_rays) < 10 << 20
 
 
 def test_the_normals_integrator_compiles_no_shading_kernel(cornell):
@@ -116,24 +116,27 @@ def called_with(dispatcher, callee):
     raise AssertionError(f"{dispatcher.py_func.__qualname__} does not call {callee}")
 
 
-def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for_lights():
+def test_a_shading_kernel_types_no_code_of_other_kinds_and_no_light_sampling():
     """Each kind's kernel calls its own kind's BSDF functions, not the dispatch over every kind
-    (which would compile every kind's code into it); a delta kind's has no light sampling."""
+    (which would compile every kind's code into it), and no light sampling code: that is the
+    light stage's, which calls no BSDF."""
     scene = ptrace.load(str(course_scene("sky/CBspheres.dae")))
     ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=3)
-    plain = lambda kind: shading.shading_stage(kind, False, codes.LIGHTS_ALL, False, False)
+    plain = lambda kind: shading.shading_stage(kind, False, False, False)
     diffuse, mirror = calls(plain(DIFFUSE)), calls(plain(MIRROR))
+    light = calls(lighting.light_stage(False, codes.LIGHTS_ALL))
     own = lambda kind: {f.py_func for f in bsdf.BSDFS[kind]}
     every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS))
     light_sampling = {f.py_func for f in (lights.sample_area, lights.sample_area_row,
-                                          shading.any_light, shading.chosen_light,
-                                          shading.any_light_angular,
-                                          shading.chosen_light_angular)}
-    # what the probe sees: the diffuse kernel's BSDF and its light samples
-    assert own(DIFFUSE) <= diffuse and lights.sample_area_row.py_func in diffuse
-    assert diffuse & every_kind == own(DIFFUSE)
+                                          lighting.any_light, lighting.chosen_light,
+                                          lighting.any_light_angular,
+                                          lighting.chosen_light_angular)}
+    # what the probe sees: the diffuse kernel's BSDF, and the light stage's light samples
+    assert own(DIFFUSE) <= diffuse and diffuse & every_kind == own(DIFFUSE)
+    assert not diffuse & light_sampling
     assert bsdf.mirror_sample.py_func in mirror
     assert mirror & every_kind <= own(MIRROR) and not mirror & light_sampling
+    assert lights.sample_area_row.py_func in light and not light & every_kind
 
 
 def constants(dispatcher):
@@ -143,10 +146,10 @@ def constants(dispatcher):
                     (cell.cell_contents for cell in function.__closure__ or ())))
 
 
-def test_a_shading_kernel_samples_lights_with_its_scenes_spot_falloff_alone(tmp_path):
-    """A scene without Mitsuba's spots (a point light) gets the general kernel, whose light
-    samplers reach glTF's spot falloff and nothing of Mitsuba's; a scene of Mitsuba's spots
-    gets the kernel whose samplers reach Mitsuba's alone."""
+def test_the_light_stage_samples_lights_with_its_scenes_spot_falloff_alone(tmp_path):
+    """A scene without Mitsuba's spots (a point light) gets the general light stage, whose
+    light samplers reach glTF's spot falloff and nothing of Mitsuba's; a scene of Mitsuba's
+    spots gets the stage whose samplers reach Mitsuba's alone."""
     path = tmp_path / "lit.xml"
     path.write_text('<scene version="3.0.0"><shape type="rectangle"><bsdf type="diffuse"/>'
                     '</shape><emitter type="point"><point name="position" x="0" y="0" z="1"/>'
@@ -159,10 +162,11 @@ def test_a_shading_kernel_samples_lights_with_its_scenes_spot_falloff_alone(tmp_
     assert not wavefront.angular_spots(point)
     assert wavefront.angular_spots(ptrace.load(str(path)))
     for angular in (False, True):
-        stage = shading.shading_stage(DIFFUSE, True, codes.LIGHTS_ALL, False, False, angular)
-        assert constants(stage)["ANGULAR"] is angular
-        samplers = (shading.any_light_angular, shading.chosen_light_angular) if angular else \
-            (shading.any_light, shading.chosen_light)
+        stage = lighting.light_stage(True, codes.LIGHTS_ALL, False, angular)
+        samplers = (lighting.any_light_angular, lighting.chosen_light_angular) if angular else \
+            (lighting.any_light, lighting.chosen_light)
+        assert constants(stage)["any_light_"] is samplers[0]
+        assert constants(stage)["chosen_light_"] is samplers[1]
         # both sample a light of its kind through their factory's of_its_kind
         assert all(constants(constants(sampler)["of_its_kind"])["ANGULAR"] is angular
                    for sampler in samplers)
@@ -188,10 +192,10 @@ def test_a_glass_kernel_reflects_with_its_scenes_fresnel_alone(tmp_path):
     assert wavefront.exact_glass(ptrace.load(str(path)))
     assert not wavefront.exact_glass(ptrace.load(str(course_scene("sky/CBspheres.dae"))))
     for exact, sample in ((False, bsdf.glass_sample), (True, bsdf.dielectric_sample)):
-        stage = shading.shading_stage(GLASS, False, codes.LIGHTS_ALL, False, False, False, exact)
+        stage = shading.shading_stage(GLASS, False, False, False, exact)
         assert constants(stage)["BSDF_SAMPLE"] is sample
-    assert shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False, False, True) \
-        is shading.shading_stage(DIFFUSE, False, codes.LIGHTS_ALL, False, False)
+    assert shading.shading_stage(DIFFUSE, False, False, False, True) \
+        is shading.shading_stage(DIFFUSE, False, False, False)
 
 
 def test_the_emission_a_ray_finds_types_the_light_trees_pmfs_only_for_its_sampler(tmp_path):
@@ -230,7 +234,7 @@ def _recording(monkeypatch):
     for name, value in list(vars(wavefront).items()):
         if isinstance(value, numba.core.registry.CPUDispatcher):
             monkeypatch.setattr(wavefront, name, wrap(value))
-    for factory in ("shading_stage", "hit_stage"):
+    for factory in ("shading_stage", "light_stage", "hit_stage"):
         made = getattr(wavefront, factory)
         monkeypatch.setattr(wavefront, factory,
                             lambda *args, made=made, **kw: wrap(made(*args, **kw)))
