@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..bsdf import THIN_GLASS
 from ..budget import BudgetError
 from ..errors import SceneError
 from ..scene import (
@@ -299,20 +300,15 @@ class Materials:
         return self._dielectric(bsdf, rough=True)
 
     def _thindielectric(self, bsdf):
+        """A thin slab of glass (ptrace.bsdf's THIN_GLASS): an EXACT glass that reflects with
+        the slab's reflectance at the angle met, else passes rays straight through; shadow
+        rays stop at it, as in Mitsuba's path integrator."""
         ior = self._ior(bsdf, "int_ior", "bk7") / self._ior(bsdf, "ext_ior", "air")
-        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        reflect = 2.0 * r0 / (1.0 + r0)     # the slab's two faces, inter-reflected
-        tint = self._bounded(bsdf, "specular_transmittance",
-                             bsdf.colour("specular_transmittance", Colour((1.0,) * 3)))
-        if tint != (1.0, 1.0, 1.0):
-            bsdf.fail("a tinted thindielectric is not supported (ptrace passes rays through "
-                      "it unchanged)")
-        self.note(bsdf, "a mirror that rays (shadow rays too, unlike Mitsuba's path "
-                        "integrator) pass through with the slab's transmittance at normal "
-                        "incidence (no change with angle)")
-        return {"kind": MIRROR, "cutoff": BLEND_CUT, "opacity": reflect,
+        return {"kind": GLASS, "ior": ior, "fresnel": EXACT, "k": (THIN_GLASS, 0.0, 0.0),
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
-                    "specular_reflectance", Colour((1.0,) * 3)))}
+                    "specular_reflectance", Colour((1.0,) * 3))),
+                "transmittance": self._bounded(bsdf, "specular_transmittance", bsdf.colour(
+                    "specular_transmittance", Colour((1.0,) * 3)))}
 
     def _plastic(self, bsdf):
         """Mitsuba's smooth plastic as ptrace's PLASTIC (ptrace.bsdf's plastic_*), its
