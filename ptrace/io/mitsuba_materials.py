@@ -45,7 +45,10 @@ CHECKER = 256             # texels a side of a baked checkerboard
 # a filter_type nearest bitmap is stored with each texel repeated up to NEAREST_REPEAT times a
 # side (nearest_texels), as long as the copy has at most NEAREST_TEXELS texels
 NEAREST_REPEAT, NEAREST_TEXELS = 16, 1 << 20
-ROUGH_GLASS_LIMIT = 0.1     # a roughdielectric up to this alpha is drawn smooth (noted)
+# a roughdielectric up to this alpha is drawn smooth (noted), a rougher one refused: Mitsuba's
+# rough glass renders brighter than its smooth glass from some alpha below 0.02
+# (benchmarks/results/mitsuba_scenes.md)
+ROUGH_GLASS_LIMIT = 0.01
 # principled's parameters that ptrace's glTF BRDF lacks, and their Mitsuba defaults
 PRINCIPLED_EXTRAS = {"anisotropic": 0.0, "sheen": 0.0, "sheen_tint": 0.0, "clearcoat": 0.0,
                      "clearcoat_gloss": 0.0, "spec_tint": 0.0, "spec_trans": 0.0,

@@ -749,7 +749,7 @@ def test_a_dielectric_reflects_as_mitsubas(ior):
 
 
 def test_one_note_per_kind_through_the_cli(tmp_path, capsys):
-    plastic = '<bsdf type="roughdielectric"><float name="alpha" value="0.05"/></bsdf>'
+    plastic = '<bsdf type="roughdielectric"><float name="alpha" value="0.01"/></bsdf>'
     path = write(tmp_path, f'<shape type="sphere">{plastic}</shape><shape type="sphere">'
                            f'<point name="center" x="3" y="0" z="0"/>{plastic}</shape>'
                            '<shape type="sphere"><bsdf type="diffuse"><float name="bogus" '
