@@ -350,12 +350,40 @@ def glass_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specul
     return _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, False)
 
 
+# k[m, 0] of an EXACT glass (ptrace.scene's Materials, whose glass reads no k otherwise): 0 for
+# a smooth dielectric boundary, THIN_GLASS for a thin slab of that glass (Mitsuba's
+# thindielectric, _thin_glass)
+THIN_GLASS = -1.0    # (no k of a conductor: those are >= 0)
+
+
+@njit(cache=True, _nrt=False, inline="always")
+def _thin_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3):
+    """A thin slab of glass, as Mitsuba's thindielectric: the slab's reflectance
+    R' = R + T^2 R / (1 - R^2) = 2 R / (1 + R) (R the exact Fresnel reflectance of one face at
+    |cos theta_o|, light bouncing between the two faces), reflected with probability R' (weight
+    the albedo), else passed straight through, -wo, with the transmittance: no refraction."""
+    if woz == 0.0:
+        return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
+    cos_o = abs(woz)
+    reflect = fresnel_dielectric(cos_o, ior[m])
+    reflect *= 2.0 / (1.0 + reflect)
+    if u3 <= reflect:
+        s = reflect / cos_o
+        return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
+    s = (1.0 - reflect) / cos_o
+    return -wox, -woy, -woz, transmittance[m, 0] * s, transmittance[m, 1] * s, \
+        transmittance[m, 2] * s, 1.0 - reflect
+
+
 @njit(cache=True, _nrt=False, forceinline=True)
 def dielectric_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, specular, m,
                       wox, woy, woz, u1, u2, u3):
     """glass_sample with the exact Fresnel reflectance (dielectric_reflectance) in place of
-    Schlick's: Mitsuba's smooth dielectric. The glass kernel of a scene whose glass is EXACT
+    Schlick's: Mitsuba's smooth dielectric; with k[m, 0] == THIN_GLASS, a thin slab of it
+    (_thin_glass: Mitsuba's thindielectric). The glass kernel of a scene whose glass is EXACT
     (ptrace.scene) calls it."""
+    if k[m, 0] == THIN_GLASS:
+        return _thin_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3)
     return _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, True)
 
 

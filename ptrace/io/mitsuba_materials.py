@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ..bsdf import THIN_GLASS
 from ..budget import BudgetError
 from ..errors import SceneError
 from ..scene import (
@@ -44,7 +45,10 @@ CHECKER = 256             # texels a side of a baked checkerboard
 # a filter_type nearest bitmap is stored with each texel repeated up to NEAREST_REPEAT times a
 # side (nearest_texels), as long as the copy has at most NEAREST_TEXELS texels
 NEAREST_REPEAT, NEAREST_TEXELS = 16, 1 << 20
-ROUGH_GLASS_LIMIT = 0.1     # a roughdielectric up to this alpha is drawn smooth (noted)
+# a roughdielectric up to this alpha is drawn smooth (noted), a rougher one refused: Mitsuba's
+# rough glass renders brighter than its smooth glass from some alpha below 0.02
+# (benchmarks/results/mitsuba_scenes.md)
+ROUGH_GLASS_LIMIT = 0.01
 # principled's parameters that ptrace's glTF BRDF lacks, and their Mitsuba defaults
 PRINCIPLED_EXTRAS = {"anisotropic": 0.0, "sheen": 0.0, "sheen_tint": 0.0, "clearcoat": 0.0,
                      "clearcoat_gloss": 0.0, "spec_tint": 0.0, "spec_trans": 0.0,
@@ -299,20 +303,15 @@ class Materials:
         return self._dielectric(bsdf, rough=True)
 
     def _thindielectric(self, bsdf):
+        """A thin slab of glass (ptrace.bsdf's THIN_GLASS): an EXACT glass that reflects with
+        the slab's reflectance at the angle met, else passes rays straight through; shadow
+        rays stop at it, as in Mitsuba's path integrator."""
         ior = self._ior(bsdf, "int_ior", "bk7") / self._ior(bsdf, "ext_ior", "air")
-        r0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        reflect = 2.0 * r0 / (1.0 + r0)     # the slab's two faces, inter-reflected
-        tint = self._bounded(bsdf, "specular_transmittance",
-                             bsdf.colour("specular_transmittance", Colour((1.0,) * 3)))
-        if tint != (1.0, 1.0, 1.0):
-            bsdf.fail("a tinted thindielectric is not supported (ptrace passes rays through "
-                      "it unchanged)")
-        self.note(bsdf, "a mirror that rays (shadow rays too, unlike Mitsuba's path "
-                        "integrator) pass through with the slab's transmittance at normal "
-                        "incidence (no change with angle)")
-        return {"kind": MIRROR, "cutoff": BLEND_CUT, "opacity": reflect,
+        return {"kind": GLASS, "ior": ior, "fresnel": EXACT, "k": (THIN_GLASS, 0.0, 0.0),
                 "albedo": self._bounded(bsdf, "specular_reflectance", bsdf.colour(
-                    "specular_reflectance", Colour((1.0,) * 3)))}
+                    "specular_reflectance", Colour((1.0,) * 3))),
+                "transmittance": self._bounded(bsdf, "specular_transmittance", bsdf.colour(
+                    "specular_transmittance", Colour((1.0,) * 3)))}
 
     def _plastic(self, bsdf):
         """Mitsuba's smooth plastic as ptrace's PLASTIC (ptrace.bsdf's plastic_*), its
