@@ -67,7 +67,8 @@ class Materials:
 
     fresnel says how a glass reflects: SCHLICK (the course's) or EXACT (a smooth dielectric's
     Fresnel reflectance, as Mitsuba's dielectric). A scene's glass reflects one way: its glass
-    kernel is made for one (ptrace.kernel.wavefront.exact_glass).
+    kernel is made for one (ptrace.kernel.wavefront.exact_glass). An EXACT glass whose k[m, 0]
+    is ptrace.bsdf's THIN_GLASS is a thin slab of it (Mitsuba's thindielectric).
     """
     kind: np.ndarray            # (M,) int32
     albedo: np.ndarray          # (M, 3)
