@@ -3,11 +3,13 @@ queued vertex of a kind that is not delta, -l samples of every light (or, with t
 bvh light sampler, -l lights chosen), each a shadow ray in the wave's shadow queue with what
 the shading kernel of its kind needs to weigh it (ptrace.kernel.shading): the light's radiance,
 the sample's direction, its cosine over its density, and that density for multiple importance
-sampling. The light sampling code is compiled once per light setup (light_stage: the scene's
-lights as area lights alone or any, the light sampler, the spots' falloff), not once per
-material kind. With textures (`general`), each vertex's normal is bent by its normal map here,
-for every kind, before any light is sampled. Random numbers are keyed by (pixel, sample,
-dimension), with the dimensions of ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
+sampling. The light sampling code is compiled once per light setup (light_stage: the light
+sampler, the spots' falloff), not once per material kind; each vertex's normal is bent by its
+normal map here, for every kind, before any light is sampled. A scene of area lights alone and
+untextured surfaces (wavefront.simple: the course's) has no light stage: its kinds' kernels
+sample the area lights themselves, with shadow_ray and queue_ray, in one pass. Random numbers
+are keyed by (pixel, sample, dimension), with the dimensions of ptrace.integrator's layout
+(DIM_*, RAY_KEYS)."""
 import math
 
 from numba import njit
@@ -32,7 +34,6 @@ from ..lights import (
     EMITTER,
     choose,
     light_is_delta,
-    sample_area_row,
     sample_emitter,
     sample_light,
     sample_light_angular,
@@ -160,35 +161,53 @@ def queue_ray(shadow, shadow_path, shadow_key, s, ox, oy, oz, dx, dy, dz, tmax, 
     shadow_key[s] = key
 
 
+@njit(cache=True, _nrt=False, inline="always")
+def shadow_ray(px, py, pz, gx, gy, gz, offset, wx, wy, wz, dist):
+    """The shadow ray of a light sample at p (geometric normal g, spawn offset) in unit
+    direction w, its light at distance dist (inf: at infinity): (origin, unit direction, tmax),
+    spawned off the surface and aimed from there at the light's point, stopping just short."""
+    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
+    sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
+    if dist != math.inf:
+        ax = px + dist * wx - ox
+        ay = py + dist * wy - oy
+        az = pz + dist * wz - oz
+        length = math.sqrt(ax * ax + ay * ay + az * az)
+        if length > 0.0:
+            sdx, sdy, sdz = ax / length, ay / length, az / length
+        tmax = length * (1.0 - SHADOW_SHORTEN)
+    return ox, oy, oz, sdx, sdy, sdz, tmax
+
+
 _LIGHT_STAGES = {}
 
 
-def light_stage(general=False, mode=LIGHTS_ALL, hemisphere=False, angular=False):
-    """The light stage of one light setup, made once per process and cached on disk per setup:
+def light_stage(mode=LIGHTS_ALL, hemisphere=False, angular=False):
+    """The light stage of one light setup (a scene whose lights are not area lights alone, or
+    whose surfaces are textured: wavefront.simple's other scenes, whose kinds' kernels sample
+    their area lights themselves), made once per process and cached on disk per setup:
 
         shadows = stage(shapes, materials, lights, options, floats, ints, queue, n, shadow,
                         shadow_path, shadow_key, shadows)
 
-    For each of the n queued vertices (a wave's shading points, sorted by kind): with `general`
-    (textures), its shading normal bent by the normal map (when the bent normal keeps the
-    incoming ray on its side), written back to its NX, NY, NZ rows; then, unless its kind is
-    delta or -H is on (`hemisphere`: the hemisphere's rays are its kind's kernel's), its light
-    samples appended to the shadow queue from row `shadows` on, their first row and count in
-    its SFIRST and SCOUNT rows. A row holds the shadow ray, its light's radiance (SR, SG, SB),
-    the unit direction to the light (SWX, SWY, SWZ), its cosine over its density and weight
-    (SSCALE) and that density times the weight for multiple importance sampling (SLPDF; negated
-    for a delta light, which is not weighed). Returns the new count. Without `general` the
-    lights are area lights (wavefront.AreaLights); with it, any of ptrace.integrator's lights and
-    emissive geometry. mode: the light sampler (ptrace.codes: LIGHTS_ALL, or LIGHTS_POWER or
-    LIGHTS_BVH, which need `general`); with `angular`, spots fall off as Mitsuba's
-    (ptrace.lights.sample_light_angular), else as glTF's."""
-    angular = bool(angular) and general
+    For each of the n queued vertices (a wave's shading points, sorted by kind): its shading
+    normal bent by its normal map (when the bent normal keeps the incoming ray on its side),
+    written back to its NX, NY, NZ rows; then, unless its kind is delta or -H is on
+    (`hemisphere`: the hemisphere's rays are its kind's kernel's), its light samples appended to
+    the shadow queue from row `shadows` on, their first row and count in its SFIRST and SCOUNT
+    rows. A row holds the shadow ray, its light's radiance (SR, SG, SB), the unit direction to
+    the light (SWX, SWY, SWZ), its cosine over its density and weight (SSCALE) and that density
+    times the weight for multiple importance sampling (SLPDF; negated for a delta light, which
+    is not weighed). Returns the new count. The lights are any of ptrace.integrator's lights and
+    emissive geometry; mode: the light sampler (ptrace.codes' LIGHTS_*); with `angular`, spots
+    fall off as Mitsuba's (ptrace.lights.sample_light_angular), else as glTF's."""
+    angular = bool(angular)
     if hemisphere:   # normals alone: no light sampling code
         mode, angular = LIGHTS_ALL, False
-    key = (general, mode, hemisphere, angular)
+    key = (mode, hemisphere, angular)
     if key in _LIGHT_STAGES:
         return _LIGHT_STAGES[key]
-    GENERAL, MODE, HEMI, ANGULAR = general, mode, hemisphere, angular
+    MODE, HEMI, ANGULAR = mode, hemisphere, angular
     CHOOSE = mode != LIGHTS_ALL   # one light per light sample, by power or by the tree
     any_light_, chosen_light_ = ((any_light_angular, chosen_light_angular) if ANGULAR else
                                  (any_light, chosen_light))
@@ -202,14 +221,14 @@ def light_stage(general=False, mode=LIGHTS_ALL, hemisphere=False, angular=False)
             i = queue[k]
             m = ints[MAT, i]
             nx, ny, nz = floats[NX, i], floats[NY, i], floats[NZ, i]
-            if GENERAL:     # a bent normal that keeps the incoming ray on its side
-                dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
-                sx, sy, sz = mapped_normal(shapes, materials, m, ints[PRIM, i], floats[U, i],
-                                           floats[V, i], nx, ny, nz)
-                if (sx != nx or sy != ny or sz != nz) and \
-                        (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
-                    nx, ny, nz = sx, sy, sz
-                    floats[NX, i], floats[NY, i], floats[NZ, i] = nx, ny, nz
+            # a bent normal that keeps the incoming ray on its side
+            dx, dy, dz = floats[DX, i], floats[DY, i], floats[DZ, i]
+            sx, sy, sz = mapped_normal(shapes, materials, m, ints[PRIM, i], floats[U, i],
+                                       floats[V, i], nx, ny, nz)
+            if (sx != nx or sy != ny or sz != nz) and \
+                    (dx * sx + dy * sy + dz * sz) * (dx * nx + dy * ny + dz * nz) > 0.0:
+                nx, ny, nz = sx, sy, sz
+                floats[NX, i], floats[NY, i], floats[NZ, i] = nx, ny, nz
             ints[SFIRST, i] = shadows
             ints[SCOUNT, i] = 0
             if HEMI or is_delta(materials.kind[m]):
@@ -237,52 +256,33 @@ def light_stage(general=False, mode=LIGHTS_ALL, hemisphere=False, angular=False)
                         light = choose(lights.select_cdf, u0)
                         chosen = lights.select_pmf[light]
                 count = samples
-                delta_light = False
-                if GENERAL:
-                    delta_light = light_is_delta(lights.kind[light], lights.model[light])
-                    if delta_light or CHOOSE:
-                        count = 1
+                delta_light = light_is_delta(lights.kind[light], lights.model[light])
+                if delta_light or CHOOSE:
+                    count = 1
                 for s in range(count):
                     if CHOOSE:   # weight: the light's expected samples at this vertex
                         weight = samples * chosen
                         lr, lg, lb, wx, wy, wz, dist, pdf = chosen_light_(
                             shapes, materials, lights, options, pixel, sample, index, base,
                             light, light_prim, outer, px, py, pz)
-                    elif GENERAL:
+                    else:
                         weight = count
                         index = sample * count + s
                         lr, lg, lb, wx, wy, wz, dist, pdf = any_light_(
                             shapes, materials, lights, options, pixel, sample, index, base,
                             light, j, px, py, pz)
-                    else:
-                        weight = count
-                        index = sample * count + s
-                        u1, u2 = sample_2d(options, pixel, sample, index,
-                                           base + DIM_LIGHT + 2 * light, base + DIM_LIGHT + 2 * j)
-                        lr, lg, lb, wx, wy, wz, dist, pdf = sample_area_row(lights, light, px, py,
-                                                                            pz, u1, u2)
                     j += 1
                     if pdf < 1e-11:
                         continue
-                    if GENERAL:
-                        if lights.kind[light] == EMITTER and dist <= offset:
-                            # a point of p's own emissive surface: within rounding of p its
-                            # direction is noise, and no light leaves a surface into itself
-                            continue
+                    if lights.kind[light] == EMITTER and dist <= offset:
+                        # a point of p's own emissive surface: within rounding of p its
+                        # direction is noise, and no light leaves a surface into itself
+                        continue
                     wiz = wx * nx + wy * ny + wz * nz
                     if wiz <= 0.0:
                         continue
-                    ox, oy, oz = spawn(px, py, pz, gx, gy, gz, offset, wx, wy, wz)
-                    sdx, sdy, sdz, tmax = wx, wy, wz, math.inf   # a light at infinity
-                    if dist != math.inf:
-                        # aim from the spawned origin at the light's point, stopping just short
-                        ax = px + dist * wx - ox
-                        ay = py + dist * wy - oy
-                        az = pz + dist * wz - oz
-                        length = math.sqrt(ax * ax + ay * ay + az * az)
-                        if length > 0.0:
-                            sdx, sdy, sdz = ax / length, ay / length, az / length
-                        tmax = length * (1.0 - SHADOW_SHORTEN)
+                    ox, oy, oz, sdx, sdy, sdz, tmax = shadow_ray(px, py, pz, gx, gy, gz, offset,
+                                                                 wx, wy, wz, dist)
                     rays += 1
                     queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, sdx, sdy, sdz,
                               tmax, lr, lg, lb, i, base + RAY_KEYS * j)

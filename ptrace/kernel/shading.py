@@ -3,9 +3,11 @@ the kinds a scene has: at each queued vertex, the light samples the light stage 
 (ptrace.kernel.lighting; none for a delta kind) weighed by the kind's BSDF, with the power
 heuristic against the BSDF's sample (multiple importance sampling), then the BSDF's sample,
 roulette, and the next ray. A kernel calls its own kind's BSDF functions (ptrace.bsdf.BSDFS),
-so no other kind's code is compiled into it, and no light sampling code: that is the light
-stage's, compiled once for every kind. Random numbers are keyed by (pixel, sample, dimension),
-with the dimensions of ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
+so no other kind's code is compiled into it, and no code of the general lights: that is the
+light stage's, compiled once for every kind. A scene of area lights alone and untextured
+surfaces has no light stage: its kernels sample the area lights themselves, in the same pass.
+Random numbers are keyed by (pixel, sample, dimension), with the dimensions of
+ptrace.integrator's layout (DIM_*, RAY_KEYS)."""
 import math
 
 from numba import njit
@@ -24,7 +26,7 @@ from ..integrator import (
     sample_2d,
     spawn,
 )
-from ..lights import EMITTER
+from ..lights import EMITTER, sample_area_row
 from ..scene import GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC
 from ..textures import surface_albedo
 from .guide import folded_pdf, folded_sample, guide_leaf, remember
@@ -78,7 +80,7 @@ from .layout import (
     U,
     V,
 )
-from .lighting import queue_ray
+from .lighting import queue_ray, shadow_ray
 
 _STAGES = {}
 
@@ -94,8 +96,10 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
     shades the n queued vertices, whose light samples the light stage has queued (the shadow
     rows each vertex's SFIRST and SCOUNT name: each row's light is multiplied by the BSDF, its
     MIS weight and the path's throughput), and appends the paths that bounce to out from `kept`
-    on; returns the shadow queue's count and the new kept count. Without `general` the surfaces
-    are untextured (wavefront.SurfaceArrays); with it, textured albedo, roughness and metallic
+    on; returns the shadow queue's count and the new kept count. Without `general` the lights
+    are area lights and the surfaces untextured (wavefront.AreaLights and SurfaceArrays), and the
+    kernel takes -l samples of each area light itself, appending them to the shadow queue from
+    row `shadows` on (there is no light stage); with it, textured albedo, roughness and metallic
     from the full records (shapes, materials, lights). With `hemisphere` (-H, which needs
     `general`), it appends to the shadow queue, from row `shadows` on, the course's uniform
     hemisphere rays instead: -l for each light that is not emissive geometry (at least -l),
@@ -184,6 +188,39 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                               math.inf, tr * (fr * scale), tg * (fg * scale), tb * (fb * scale),
                               i, base + RAY_KEYS * (1 + j))
                     shadows += 1
+            elif LIT and not GENERAL:   # area lights alone: -l samples of each, taken here
+                j = 0
+                for light in range(light_count):
+                    for s in range(samples):
+                        index = sample * samples + s
+                        u1, u2 = sample_2d(options, pixel, sample, index,
+                                           base + DIM_LIGHT + 2 * light, base + DIM_LIGHT + 2 * j)
+                        lr, lg, lb, wx, wy, wz, dist, pdf = sample_area_row(lights, light, px, py,
+                                                                            pz, u1, u2)
+                        j += 1
+                        if pdf < 1e-11:
+                            continue
+                        wiz = wx * nx + wy * ny + wz * nz
+                        if wiz <= 0.0:
+                            continue
+                        wix = wx * xx + wy * xy + wz * xz
+                        wiy = wx * yx + wy * yy + wz * yz
+                        fr, fg, fb = BSDF_EVAL(ar, ag, ab, alpha, metallic, materials.eta,
+                                               materials.k, materials.specular, m, wox, woy, woz,
+                                               wix, wiy, wiz)
+                        scale = wiz / (samples * pdf)
+                        if options.mis:
+                            other = BSDF_PDF(ar, ag, ab, alpha, metallic, materials.eta,
+                                             materials.k, materials.specular, m, wox, woy, woz,
+                                             wix, wiy, wiz)
+                            scale *= power_heuristic(samples * pdf, other)
+                        ox, oy, oz, sdx, sdy, sdz, tmax = shadow_ray(px, py, pz, gx, gy, gz,
+                                                                     offset, wx, wy, wz, dist)
+                        rays += 1
+                        queue_ray(shadow, shadow_path, shadow_key, shadows, ox, oy, oz, sdx, sdy,
+                                  sdz, tmax, tr * (lr * fr * scale), tg * (lg * fg * scale),
+                                  tb * (lb * fb * scale), i, base + RAY_KEYS * j)
+                        shadows += 1
             elif LIT:   # the light samples the light stage took here, weighed by the BSDF
                 first = ints[SFIRST, i]
                 for s in range(first, first + ints[SCOUNT, i]):

@@ -21,7 +21,6 @@ from accel.compiled import new_scratch
 from accel.interpreted import sized
 
 from .. import codes
-from ..bsdf import is_delta
 from ..scene import (
     ANGULAR,
     AREA,
@@ -189,13 +188,11 @@ class Wavefront:
                                                                    self.hemisphere,
                                                                    self.guided, exact))
                                                for kind in kinds if kind in SHADED]
-        # the light samples of every kind's shading points (and, with textures, their bent
-        # normals): one stage, compiled once for the scene's light setup; none when no kind
-        # takes light samples and no normal is bent
-        delta = getattr(is_delta, "py_func", is_delta)   # (its Python: no compile)
-        lit = any(not delta(kind) for kind, _stage in self.stages)
-        self.light_stage = light_stage(general, mode, self.hemisphere, angular) \
-            if self.stages and (lit or general) else None
+        # the general lights' samples of every kind's shading points and their bent normals:
+        # one stage, compiled once for the scene's light setup (area lights alone and untextured
+        # surfaces: none, the kinds' kernels sample their lights in the same pass)
+        self.light_stage = light_stage(mode, self.hemisphere, angular) \
+            if self.stages and general else None
         self.guide = uniform_guide()
         self.trainer = None
         self.depth = max(1, min(GUIDE_DEPTH, options.max_depth)) if self.guided else 1

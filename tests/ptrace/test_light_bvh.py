@@ -182,7 +182,7 @@ def test_records_without_the_tree_choose_by_power():
                           (scene_records(scene)[:2] + (_records(scene),), LIGHTS_BVH)):
         wave = Wavefront(records, options, None, None, [DIFFUSE], False, LIGHTS_BVH)
         assert wave.stages == [(DIFFUSE, shading_stage(DIFFUSE, True, False, False))]
-        assert wave.light_stage is light_stage(True, mode)
+        assert wave.light_stage is light_stage(mode)
         assert wave.hit_stage is hit_stage(True, mode)
     assert Settings(light_sampler="bvh").uses_light_tree(scene)
 

@@ -116,27 +116,24 @@ def called_with(dispatcher, callee):
     raise AssertionError(f"{dispatcher.py_func.__qualname__} does not call {callee}")
 
 
-def test_a_shading_kernel_types_no_code_of_other_kinds_and_no_light_sampling():
+def test_a_shading_kernel_types_no_code_of_other_kinds_and_a_delta_kind_none_for_lights():
     """Each kind's kernel calls its own kind's BSDF functions, not the dispatch over every kind
-    (which would compile every kind's code into it), and no light sampling code: that is the
-    light stage's, which calls no BSDF."""
+    (which would compile every kind's code into it); a delta kind's has no light sampling, and
+    no kind's has the general lights' samplers (the light stage's)."""
     scene = ptrace.load(str(course_scene("sky/CBspheres.dae")))
     ptrace.render(scene, spp=1, resolution=(8, 6), max_depth=3)
     plain = lambda kind: shading.shading_stage(kind, False, False, False)
     diffuse, mirror = calls(plain(DIFFUSE)), calls(plain(MIRROR))
-    light = calls(lighting.light_stage(False, codes.LIGHTS_ALL))
     own = lambda kind: {f.py_func for f in bsdf.BSDFS[kind]}
     every_kind = set().union(*(own(kind) for kind in bsdf.BSDFS))
-    light_sampling = {f.py_func for f in (lights.sample_area, lights.sample_area_row,
-                                          lighting.any_light, lighting.chosen_light,
-                                          lighting.any_light_angular,
-                                          lighting.chosen_light_angular)}
-    # what the probe sees: the diffuse kernel's BSDF, and the light stage's light samples
-    assert own(DIFFUSE) <= diffuse and diffuse & every_kind == own(DIFFUSE)
-    assert not diffuse & light_sampling
+    general = {f.py_func for f in (lighting.any_light, lighting.chosen_light,
+                                   lighting.any_light_angular, lighting.chosen_light_angular)}
+    light_sampling = general | {f.py_func for f in (lights.sample_area, lights.sample_area_row)}
+    # what the probe sees: the diffuse kernel's BSDF and its area lights' samples
+    assert own(DIFFUSE) <= diffuse and lights.sample_area_row.py_func in diffuse
+    assert diffuse & every_kind == own(DIFFUSE) and not diffuse & general
     assert bsdf.mirror_sample.py_func in mirror
     assert mirror & every_kind <= own(MIRROR) and not mirror & light_sampling
-    assert lights.sample_area_row.py_func in light and not light & every_kind
 
 
 def constants(dispatcher):
@@ -162,7 +159,7 @@ def test_the_light_stage_samples_lights_with_its_scenes_spot_falloff_alone(tmp_p
     assert not wavefront.angular_spots(point)
     assert wavefront.angular_spots(ptrace.load(str(path)))
     for angular in (False, True):
-        stage = lighting.light_stage(True, codes.LIGHTS_ALL, False, angular)
+        stage = lighting.light_stage(codes.LIGHTS_ALL, False, angular)
         samplers = (lighting.any_light_angular, lighting.chosen_light_angular) if angular else \
             (lighting.any_light, lighting.chosen_light)
         assert constants(stage)["any_light_"] is samplers[0]
