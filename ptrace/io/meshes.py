@@ -158,19 +158,27 @@ def _check_magnitudes(path, vertices):
                                f"{vertices[k, axis]:g} is {LIMIT_WORDS}")
 
 
-def _check_texture_coordinates(path, uv):
-    """Refuse texture coordinates (as the file's texture transforms leave them) that are NaN,
-    infinite or beyond ptrace.io.limits.UV_LIMIT: a texture lookup there reads an arbitrary
+def texture_coordinate_problem(uv):
+    """What is wrong with texture coordinates (F, 3, 2) (as the file's texture transforms leave
+    them) that are NaN, infinite or beyond ptrace.io.limits.UV_LIMIT, in words naming the
+    first such triangle; None if nothing (or no uv). A texture lookup there reads an arbitrary
     texel (or none), and the surface renders black where it should show its texture."""
     if uv is None or first_outside(uv, UV_LIMIT) is None:
-        return
+        return None
     with np.errstate(invalid="ignore"):
         k, corner, axis = np.argwhere(~(np.abs(uv) <= UV_LIMIT))[0]
     value = float(uv[k, corner, axis])
     words = f"{value:g} is not a finite number" if not math.isfinite(value) else \
         f"{value:g} is {UV_WORDS}"
-    raise SceneError(path, f"triangle {k + 1}: its texture coordinate {'uv'[axis]} at corner "
-                           f"{corner + 1} (after the file's texture transforms): {words}")
+    return (f"triangle {k + 1}: its texture coordinate {'uv'[axis]} at corner {corner + 1} "
+            f"(after the file's texture transforms): {words}")
+
+
+def _check_texture_coordinates(path, uv):
+    """Refuse the file's texture coordinates if texture_coordinate_problem finds one."""
+    wrong = texture_coordinate_problem(uv)
+    if wrong is not None:
+        raise SceneError(path, wrong)
 
 
 def _read_with_trimesh(path, extension):

@@ -15,7 +15,7 @@ from .. import budget
 from ..errors import SceneError
 from . import obj, ply
 from .limits import problem
-from .meshes import _drop_non_finite, _read_with_trimesh
+from .meshes import _drop_non_finite, _read_with_trimesh, texture_coordinate_problem
 from .mitsuba_serialized import serialized_triangles
 
 DISK_SIDES = 128
@@ -216,6 +216,9 @@ def placed(shape, vertices, faces, uv):
         shape.fail(f"to_world places a vertex where a coordinate is out of range: {wrong}")
     faces = np.array(faces, dtype=np.int64)
     if uv is not None:
+        wrong = texture_coordinate_problem(uv)
+        if wrong is not None:
+            shape.fail(wrong)
         uv = np.array(uv, dtype=np.float64)
         uv[..., 1] = 1.0 - uv[..., 1]
     if np.linalg.det(transform.matrix[:3, :3]) < 0:     # a mirror turns the winding

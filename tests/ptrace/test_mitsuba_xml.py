@@ -323,6 +323,30 @@ def test_obj_and_ply_shapes_are_read_by_ptrace_readers(tmp_path):
     assert len(np.unique(faces[-2:])) == 6
 
 
+@pytest.mark.parametrize("far", [0.5, 3e18])
+def test_mesh_texture_coordinates_beyond_the_limit_are_refused_naming_the_shape(tmp_path, far):
+    """An OBJ's vt or a serialized mesh's uv beyond ptrace.io.limits.UV_LIMIT (where a texel's
+    index overflows and the lookup reads an arbitrary texel) is refused in one line naming the
+    scene file, the shape's line and the triangle, as the mesh files' own loader refuses it;
+    in range, the same files load."""
+    (tmp_path / "quad.obj").write_text(f"v 0 0 0\nv 1 0 0\nv 1 1 0\nvt 0 0\nvt 1 0\n"
+                                       f"vt 1 {far}\nf 1/1 2/2 3/3\n")
+    (tmp_path / "tri.serialized").write_bytes(serialized([([[0, 0, 0], [1, 0, 0], [1, 1, 0]],
+                                                           [[0, 1, 2]],
+                                                           [[0, 0], [1, 0], [far, 1]])]))
+    for shape in ('<shape type="obj"><string name="filename" value="quad.obj"/></shape>',
+                  '<shape type="serialized"><string name="filename" value="tri.serialized"/>'
+                  '</shape>'):
+        path = write(tmp_path, shape)
+        if far < 1.0:
+            assert len(front(ptrace.load(path))[1]) == 1
+            continue
+        with pytest.raises(ptrace.SceneError,
+                           match=r"scene.xml:2: .*triangle 1: its texture coordinate [uv] at "
+                                 r"corner 3 .*3e\+18 is beyond"):
+            ptrace.load(path)
+
+
 def test_texture_coordinates_follow_mitsuba(tmp_path):
     """Mitsuba's v runs down the image, ptrace's up: a rectangle's corner (-1, -1) has
     Mitsuba's (u, v) = (0, 0), so ptrace's (0, 1), and so has a PLY's or a serialized mesh's
