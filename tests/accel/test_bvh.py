@@ -8,31 +8,50 @@ from accel import raygen
 from accel.bvh import MEAN_SPLIT_DEPTH, STACK_SIZE, WIDTH, _wide_rows
 
 
+def ranges(starts, counts):
+    """The ranges [start, start + count) laid end to end, and which range each index came from."""
+    counts = np.asarray(counts, dtype=np.int64)
+    which = np.repeat(np.arange(len(counts)), counts)
+    offsets = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    return np.repeat(np.asarray(starts, dtype=np.int64), counts) + offsets, which
+
+
+def depths(parent, limit):
+    """Each node's depth below the root (parent -1) from its parent's index, in at most `limit`
+    rounds; fails on a cycle or a chain deeper than that."""
+    depth = np.zeros(len(parent), dtype=int)
+    for _ in range(limit + 1):
+        deeper = np.where(parent >= 0, depth[np.maximum(parent, 0)] + 1, 0)
+        if (deeper == depth).all():
+            return depth
+        depth = deeper
+    pytest.fail(f"a chain of parents deeper than {limit} (or a cycle)")
+
+
 def check_invariants(bvh):
     geometry = bvh.geometry
     n = geometry.primitive_count
     nodes = bvh.lower.shape[0]
     assert nodes <= max(2 * n - 1, 0)
     prim_lower, prim_upper = geometry.primitive_bounds()
-    seen = np.zeros(n, dtype=int)
-    depth = np.zeros(nodes, dtype=int)
-    for node in range(nodes):   # children always come after their parent
-        assert (bvh.lower[node] <= bvh.upper[node]).all()
-        if bvh.count[node] > 0:
-            first, count = bvh.child_or_first[node], bvh.count[node]
-            assert count <= bvh.max_leaf_size
-            prims = bvh.order[first:first + count]
-            seen[prims] += 1
-            assert (bvh.lower[node] <= prim_lower[prims]).all()
-            assert (prim_upper[prims] <= bvh.upper[node]).all()
-        else:
-            left = bvh.child_or_first[node]
-            assert node < left and left + 1 < nodes
-            for child in (left, left + 1):
-                assert (bvh.lower[node] <= bvh.lower[child]).all()
-                assert (bvh.upper[child] <= bvh.upper[node]).all()
-                depth[child] = depth[node] + 1
-    np.testing.assert_array_equal(seen, 1)   # every primitive in exactly one leaf
+    child, count = bvh.child_or_first, bvh.count
+    assert (bvh.lower <= bvh.upper).all()
+    leaf = np.flatnonzero(count > 0)
+    assert (count[leaf] <= bvh.max_leaf_size).all()
+    index, which = ranges(child[leaf], count[leaf])
+    prims, owner = bvh.order[index], leaf[which]
+    np.testing.assert_array_equal(np.bincount(prims, minlength=n), 1)  # each in exactly one leaf
+    assert (bvh.lower[owner] <= prim_lower[prims]).all()
+    assert (prim_upper[prims] <= bvh.upper[owner]).all()
+    inner = np.flatnonzero(count <= 0)
+    left = child[inner]
+    assert (inner < left).all() and (left + 1 < nodes).all()   # children after their parent
+    parent = np.full(nodes, -1)
+    for kid in (left, left + 1):
+        assert (bvh.lower[inner] <= bvh.lower[kid]).all()
+        assert (bvh.upper[kid] <= bvh.upper[inner]).all()
+        parent[kid] = inner
+    depth = depths(parent, STACK_SIZE)
     assert depth.max(initial=0) == bvh.max_depth
     assert bvh.max_depth < STACK_SIZE - 1
     stats = bvh.stats()
@@ -49,56 +68,69 @@ def check_wide_invariants(bvh):
     holds its row's boxes, and unused slots are empty boxes after the used ones; and which
     binary nodes became rows is the least-cost choice (check_least_cost)."""
     lower, upper, payloads = bvh.wide_tree()
-    assert bvh.stats()["wide_nodes"] == lower.shape[0]
+    rows = lower.shape[0]
+    assert bvh.stats()["wide_nodes"] == rows
     if bvh.lower.shape[0] == 0:
-        assert lower.shape[0] == 0
+        assert rows == 0
         return
     geometry, blocks, prims = bvh.geometry, bvh._blocks, bvh._prims
-    leaves = {frozenset(bvh.order[bvh.child_or_first[b]:bvh.child_or_first[b] + bvh.count[b]]
-                        .tolist()): b for b in np.flatnonzero(bvh.count > 0)}
-    boxes = {}   # binary node -> its box, reached through the collapse
-    reached_rows = np.zeros(lower.shape[0], dtype=int)
-    reached_leaves = []
-    todo = [(0, 0)]
-    while todo:
-        row, depth = todo.pop()
-        assert depth <= bvh.max_depth
-        reached_rows[row] += 1
-        used = np.isfinite(lower[row, 0])
-        n_used = int(used.sum())
-        assert used[:n_used].all() and n_used >= 1
-        assert (lower[row, :, ~used] == np.inf).all() and (upper[row, :, ~used] == -np.inf).all()
-        for c in range(n_used):
-            payload = int(payloads[row, c])
-            if payload >> 32:
-                first, n_tri, n_sph = payload & 0xffffffff, (payload >> 32) & 0xffff, payload >> 48
-                lanes = prims[4 * first:4 * first + n_tri]
-                tri_blocks = -(-n_tri // 4)
-                assert (prims[4 * first + n_tri:4 * (first + tri_blocks)] == -1).all()
-                spheres = prims[4 * (first + tri_blocks):4 * (first + tri_blocks) + n_sph]
-                assert (lanes < geometry.triangle_count).all()
-                assert (spheres >= geometry.triangle_count).all()
-                b = leaves[frozenset(lanes.tolist() + spheres.tolist())]
-                assert n_tri + n_sph == bvh.count[b]
-                coordinates = blocks[first:first + tri_blocks].reshape(-1, 3, 3, 4)
-                coordinates = coordinates.transpose(0, 3, 1, 2).reshape(-1, 3, 3)
-                np.testing.assert_array_equal(coordinates[:n_tri],
-                                              geometry.vertices[geometry.faces[lanes]])
-                assert np.isnan(coordinates[n_tri:]).all()
-                reached_leaves.append(b)
-                boxes[row, c] = b
-            else:
-                child_used = np.isfinite(lower[payload, 0])
-                assert (lower[row, :, c, None] <= lower[payload][:, child_used]).all()
-                assert (upper[payload][:, child_used] <= upper[row, :, c, None]).all()
-                todo.append((payload, depth + 1))
-    np.testing.assert_array_equal(reached_rows, 1)
-    assert sorted(reached_leaves) == sorted(leaves.values())
-    for (row, c), b in boxes.items():   # float32 planes: outward, by less than an ulp
-        low, high = lower[row, :, c], upper[row, :, c]
-        assert (low <= bvh.lower[b]).all() and (bvh.upper[b] <= high).all()
-        assert (np.nextafter(low.astype(np.float32), np.float32(np.inf)) > bvh.lower[b]).all()
-        assert (np.nextafter(high.astype(np.float32), -np.float32(np.inf)) < bvh.upper[b]).all()
+    used = np.isfinite(lower[:, 0])                            # (rows, WIDTH)
+    n_used = used.sum(axis=1)
+    assert (n_used >= 1).all()
+    np.testing.assert_array_equal(used, np.arange(WIDTH) < n_used[:, None])   # used ones first
+    assert (np.where(used[:, None], True, lower == np.inf)).all()
+    assert (np.where(used[:, None], True, upper == -np.inf)).all()
+    payloads = payloads.astype(np.int64)
+    # interior slots: every row but row 0 is the child of exactly one slot, row 0 of none, and
+    # the chain of parents ends at row 0 (so the walk from row 0 reaches each row once)
+    row, slot = np.nonzero(used & (payloads >> 32 == 0))
+    kids = payloads[row, slot]
+    references = np.bincount(kids, minlength=rows)
+    assert references[0] == 0 and (references[1:] == 1).all()
+    parent = np.full(rows, -1)
+    parent[kids] = row
+    assert depths(parent, bvh.max_depth).max() <= bvh.max_depth
+    kid_lower = np.where(used[kids][:, None], lower[kids], np.inf).min(axis=2)
+    kid_upper = np.where(used[kids][:, None], upper[kids], -np.inf).max(axis=2)
+    assert (lower[row, :, slot] <= kid_lower).all() and (kid_upper <= upper[row, :, slot]).all()
+    # leaf slots: payload = first block | triangles << 32 | spheres << 48
+    row, slot = np.nonzero(used & (payloads >> 32 != 0))
+    payload = payloads[row, slot]
+    first, n_tri, n_sph = payload & 0xffffffff, (payload >> 32) & 0xffff, payload >> 48
+    tri_blocks = -(-n_tri // 4)
+    lane_index, lane_slot = ranges(4 * first, n_tri)
+    lanes = prims[lane_index]
+    assert (lanes < geometry.triangle_count).all()
+    assert (prims[ranges(4 * first + n_tri, 4 * tri_blocks - n_tri)[0]] == -1).all()
+    sphere_index, sphere_slot = ranges(4 * (first + tri_blocks), n_sph)
+    spheres = prims[sphere_index]
+    assert (spheres >= geometry.triangle_count).all()
+    # each slot holds exactly one binary leaf's primitives, and each binary leaf is one slot's
+    leaf = np.flatnonzero(bvh.count > 0)
+    index, which = ranges(bvh.child_or_first[leaf], bvh.count[leaf])
+    leaf_of = np.full(geometry.primitive_count, -1)
+    leaf_of[bvh.order[index]] = leaf[which]
+    slot_prims = np.concatenate([lanes, spheres])
+    of_slot = np.concatenate([lane_slot, sphere_slot])
+    binary = np.full(len(payload), -1)
+    binary[of_slot] = leaf_of[slot_prims]
+    np.testing.assert_array_equal(leaf_of[slot_prims], binary[of_slot])
+    np.testing.assert_array_equal(np.bincount(slot_prims, minlength=geometry.primitive_count), 1)
+    np.testing.assert_array_equal(n_tri + n_sph, bvh.count[binary])
+    np.testing.assert_array_equal(np.sort(binary), leaf)
+    # triangle j of a slot is lane j % 4 of its block first + j // 4; the lanes past the last
+    # triangle of a slot's last block are NaN
+    lane_block = blocks.reshape(-1, 3, 3, 4)
+    j = lane_index - 4 * first[lane_slot]
+    coordinates = lane_block[first[lane_slot] + j // 4, :, :, j % 4]
+    np.testing.assert_array_equal(coordinates, geometry.vertices[geometry.faces[lanes]])
+    pad, pad_slot = ranges(4 * first + n_tri, 4 * tri_blocks - n_tri)
+    assert np.isnan(lane_block[pad // 4, :, :, pad % 4]).all()
+    # float32 planes: outward, by less than an ulp
+    low, high = lower[row, :, slot], upper[row, :, slot]
+    assert (low <= bvh.lower[binary]).all() and (bvh.upper[binary] <= high).all()
+    assert (np.nextafter(low.astype(np.float32), np.float32(np.inf)) > bvh.lower[binary]).all()
+    assert (np.nextafter(high.astype(np.float32), -np.float32(np.inf)) < bvh.upper[binary]).all()
     check_least_cost(bvh)
 
 
