@@ -28,7 +28,8 @@ AUTO_MANY = LIGHTS_BVH
 # (ptrace.integrator.sample_1d and sample_2d).
 Options = namedtuple("Options", ["mode", "seed", "spp", "light_samples", "max_depth",
                                  "hemisphere", "roulette", "rr_cap", "rr_depth", "mis",
-                                 "light_sampler"], defaults=[LIGHTS_AUTO])
+                                 "light_sampler", "hide_emitters"],
+                     defaults=[LIGHTS_AUTO, False])
 
 
 class IndependentOptions(Options):

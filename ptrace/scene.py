@@ -334,7 +334,7 @@ class Scene:
     textures: Textures = None
     file_cameras: tuple = ()        # FileCamera records of the file's own cameras (glTF)
     # what the file asks of a render where the caller does not say (a Mitsuba scene's film,
-    # sampler and integrator): any of resolution (W, H), spp, max_depth, rr_depth
+    # sampler and integrator): any of resolution (W, H), spp, max_depth, rr_depth, hide_emitters
     render_defaults: dict = field(default_factory=dict)
 
     def __post_init__(self):

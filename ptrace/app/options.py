@@ -324,6 +324,7 @@ def settings_of(args):
         hemisphere=args.hemisphere, direct=args.direct, sampler=args.sampler,
         light_sampler=args.light_sampler, bvh_split=args.bvh_split,
         guiding=getattr(args, "guiding", "off"),
+        hide_emitters=getattr(args, "hide_emitters", False),
         **({"rr_depth": args.rr_depth} if getattr(args, "rr_depth", None) else {}))
 
 
@@ -378,6 +379,9 @@ def scene_defaults(args, scene):
             setattr(args, name, tuple(defaults[name]) if name == "resolution" else
                     defaults[name])
             taken = True
+    if defaults.get("hide_emitters"):       # (no flag: the file's own)
+        args.hide_emitters = True
+        taken = True
     for name in ("lens_radius", "focal_distance"):     # a Mitsuba thinlens's, for -b and -d
         if name in defaults and getattr(args, name, None) is None:
             setattr(args, name, defaults[name])

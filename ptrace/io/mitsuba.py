@@ -74,7 +74,6 @@ class Builder:
         self.count = 0
         self.lights, self.cameras, self.environment = [], [], None
         self.settings = {}
-        self.hide_emitters = None   # the <integrator> that asks for it
         self.delta_scale = 1        # of point, spot and directional lights (_integrator)
 
     def build(self):
@@ -438,7 +437,7 @@ class Builder:
                               f"path tracer")
         self.settings["max_depth"] = depth
         if integrator.boolean("hide_emitters", False):
-            self.hide_emitters = integrator
+            self.settings["hide_emitters"] = True   # (Settings.hide_emitters)
         integrator._read.update(integrator.params)
 
     def _unread(self, plugin):
@@ -461,13 +460,6 @@ class Builder:
             self.materials.rough_glass[0].fail(
                 "rough glass drawn smooth would miss the highlights of the scene's point, "
                 "spot or directional lights (ptrace has no rough glass)")
-        if self.hide_emitters is not None:
-            if self.environment is not None or self._glowing():
-                self.hide_emitters.fail("hide_emitters is not supported: ptrace's camera sees "
-                                        "the environment and the area emitters, so the image "
-                                        "would be wrong")
-            self.notes.append("<integrator>: hide_emitters: no emitter the camera could see "
-                              "(point, spot and directional lights are unseen anyway)")
         if self.delta_scale != 1 and self.lights:
             for light in self.lights:
                 light["radiance"] = tuple(self.delta_scale * v for v in light["radiance"])
@@ -526,6 +518,8 @@ class Builder:
             flags.append(f"-b {settings['lens_radius']:g} -d {settings['focal_distance']:g}")
         if "rr_depth" in settings:
             flags.append(f"roulette from depth {settings['rr_depth']}")
+        if settings.get("hide_emitters"):
+            flags.append("the emitters and the environment the camera meets hidden")
         self.notes.append(f"the file's sensor and integrator render with {', '.join(flags)} "
                           f"where the command line does not say")
         return settings

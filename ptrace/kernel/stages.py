@@ -174,7 +174,9 @@ def hit_stage(general=False, mode=LIGHTS_ALL):
                                                                     dx, dy, dz, t, prim, u, v)
             vertex = ints[VERTEX, i]
             if vertex == 0:
-                if GENERAL:
+                if options.hide_emitters:   # (what the camera meets directly is not seen)
+                    pass
+                elif GENERAL:
                     r = g = b = 0.0
                     if m < 0:
                         if lights.env_image.shape[0] > 0:   # the environment is the background

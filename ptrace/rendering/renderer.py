@@ -136,7 +136,8 @@ def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, 
     flags of ptrace.rendering.settings.Settings: light_samples (-l, default 1), max_depth (-m,
     default 1), adaptive (-a, (batch, tolerance) or None), hemisphere (-H) and roulette
     (default True; False runs every path to max_depth, for comparisons: the course has no such
-    flag), direct, sampler, rr_depth, and bvh_split ("mean" or "sah", with accel="bvh"). stats,
+    flag), direct, sampler, rr_depth, hide_emitters (a Mitsuba scene's own unless given) and
+    bvh_split ("mean" or "sah", with accel="bvh"). stats,
     if a dict, receives build and render seconds, rays traced, per-pixel sample counts
     ("samples", (H, W)), the number of non-finite samples dropped, whether Ctrl-C interrupted
     the render, "phases" ({phase: wall seconds} of ptrace.rendering.timing.IN_PROCESS_PHASES, or
@@ -156,7 +157,7 @@ def render(scene, *, spp=None, accel="bvh", integrator="path", resolution=None, 
     try:
         defaults = getattr(scene, "render_defaults", None) or {}
         spp = defaults.get("spp", 1) if spp is None else spp
-        for name in ("max_depth", "rr_depth"):
+        for name in ("max_depth", "rr_depth", "hide_emitters"):
             if name in defaults:
                 options.setdefault(name, defaults[name])
         settings = Settings.from_options(spp=spp, accel=accel, integrator=integrator, seed=seed,

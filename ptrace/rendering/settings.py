@@ -70,6 +70,9 @@ class Settings:
     ptrace.guiding: training passes of -s learn where light comes from, and the rest sample
     bounces from the guide and the BSDF) or "auto" (on, unless training shows the guide does
     not lower the variance); with the path integrator, in-process, without -H or -a.
+    hide_emitters: the camera does not see the emitters and the environment it meets directly
+    (their light still reaches every surface, and mirrors and glass still show them), as Mitsuba's
+    integrators' hide_emitters; a Mitsuba scene's own setting unless given.
     """
     spp: int = 1
     accel: str = "bvh"
@@ -87,6 +90,7 @@ class Settings:
     bvh_split: str = "mean"
     light_sampler: str = "auto"
     guiding: str = "off"
+    hide_emitters: bool = False
 
     def __post_init__(self):
         for name in ("spp", "seed", "light_samples", "max_depth", "rr_depth"):
@@ -121,6 +125,7 @@ class Settings:
             set_(self, name, int(getattr(self, name)))
         set_(self, "hemisphere", bool(self.hemisphere))
         set_(self, "roulette", bool(self.roulette))
+        set_(self, "hide_emitters", bool(self.hide_emitters))
         set_(self, "rr_cap", float(self.rr_cap))
         if self.adaptive is not None:
             try:
@@ -143,7 +148,8 @@ class Settings:
     def from_options(cls, spp=1, accel="bvh", integrator="path", seed=0, **options):
         """Settings from render()'s keywords; an unknown option is an error, not ignored."""
         known = {"light_samples", "max_depth", "adaptive", "hemisphere", "roulette", "rr_cap",
-                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler", "guiding"}
+                 "rr_depth", "direct", "sampler", "bvh_split", "light_sampler", "guiding",
+                 "hide_emitters"}
         unknown = set(options) - known
         if unknown:
             raise PtraceError(f"unknown render option(s): {', '.join(sorted(unknown))}")
@@ -160,7 +166,8 @@ class Settings:
         options = codes.Options if self.sampler == "sobol" else codes.IndependentOptions
         return options(mode, self.seed, self.spp, self.light_samples, self.max_depth,
                        self.hemisphere, self.roulette, self.rr_cap, self.rr_depth,
-                       self.direct == "mis", LIGHT_SAMPLER_CODES[self.light_sampler])
+                       self.direct == "mis", LIGHT_SAMPLER_CODES[self.light_sampler],
+                       self.hide_emitters)
 
     def rays_per_path(self, scene):
         """Rays a path traces at its first vertex: the camera ray and its direct-light rays (the
