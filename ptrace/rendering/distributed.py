@@ -114,12 +114,33 @@ def connect(address, timeout=CONNECT_TIMEOUT):
     """A client of the scheduler at `address` (tcp:// or tls://); one-line error if it does not
     answer within `timeout` seconds."""
     dd = _dask()
+    refused = _refused(address, timeout)
+    if refused:     # nothing listens there: said now, not after Dask's retries until timeout
+        raise PtraceError(f"cannot reach the Dask scheduler at {address}: {refused}")
     try:
         return dd.Client(address, timeout=f"{timeout}s")
     except (OSError, TimeoutError, ValueError) as error:
         detail = str(error).splitlines()[0] if str(error) else type(error).__name__
         raise PtraceError(f"cannot reach the Dask scheduler at {address} within {timeout} s "
                           f"({detail})") from None
+
+
+def _refused(address, timeout):
+    """Why a tcp:// scheduler address refuses a connection outright (nothing listens at its
+    port, or its host is unknown), else None (reached, another scheme, or slower to answer:
+    Dask's own connect decides)."""
+    if not address.startswith("tcp://"):
+        return None
+    host, _, port = address[len("tcp://"):].rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=min(timeout, 2)):
+            return None
+    except ConnectionRefusedError:
+        return "connection refused (is the scheduler running, and on that port?)"
+    except socket.gaierror as error:
+        return f"unknown host {host!r} ({error.strerror})"
+    except (OSError, ValueError):
+        return None
 
 
 def default_worker_threads(client):

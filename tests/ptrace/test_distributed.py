@@ -251,7 +251,13 @@ def test_unreachable_scheduler_is_one_line_and_exit_2(tmp_path):
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in lines[0]
+    assert "connection refused" in lines[0]     # said at once, not after Dask's retries
     assert not (tmp_path / "x.png").exists()
+
+
+def test_an_unknown_scheduler_host_is_said_at_once():
+    with pytest.raises(PtraceError, match="unknown host 'no-such-host.invalid'"):
+        distributed.connect("tcp://no-such-host.invalid:8786")
 
 
 def test_cli_workers_writes_the_in_process_image(tmp_path):
