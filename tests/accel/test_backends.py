@@ -69,7 +69,8 @@ def compare_to_float32(geometry, rays, reference, other, label, ties=False):
 @pytest.mark.parametrize("relpath", COURSE_MESHES)
 def test_backends_agree_on_course_meshes(course_geometry, relpath):
     geometry = course_geometry(relpath)
-    n = 4000 if geometry.triangle_count > 20000 else 10000
+    large = geometry.triangle_count > 20000
+    n = 4000 if large else 10000
     naive = accel.build("naive", geometry)
     bvh = accel.build("bvh", geometry)
     embree = accel.build("embree", geometry)
@@ -80,7 +81,8 @@ def test_backends_agree_on_course_meshes(course_geometry, relpath):
         assert (reference.prim >= 0).mean() > 0.05, \
             "a ray batch that misses everything tests nothing"
         compare_to_float32(geometry, rays, ours, embree.intersect(rays), f"{relpath} {label}")
-        for backend in (naive, bvh, embree):
+        # naive's occluded (a brute force, rays x triangles) on a large mesh's first batch only
+        for backend in (naive, bvh, embree) if label == "sphere" or not large else (bvh, embree):
             hits = reference if backend is naive else backend.intersect(rays)
             np.testing.assert_array_equal(backend.occluded(rays),
                                           np.isfinite(hits.t) & (hits.t <= rays.tmax))
