@@ -14,7 +14,7 @@ import warnings
 import numba
 import numpy as np
 
-from ..budget import Budget, check_render
+from ..budget import Budget, check_render, size_text
 from ..camera import BASE_HEIGHT, BASE_WIDTH
 from ..errors import PtraceError
 from ..features import FEATURES, aov_images
@@ -52,7 +52,7 @@ def check_frame(width, height, crop=None, features=False, max_memory=None):
     budget = Budget.of(max_memory)
     if need > budget.limit:
         raise PtraceError(f"a {pixels}-pixel render: the image buffers would need "
-                          f"{need / 2 ** 30:.1f} GiB, more than {budget.describe()}; render a "
+                          f"{size_text(need)}, more than {budget.describe()}; render a "
                           f"smaller -r or a crop (-p), or raise --max-memory")
     return need
 

@@ -91,6 +91,14 @@ def test_a_resolution_beyond_memory_says_how_much_it_would_need(tmp_path, capsys
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_tiny_memory_budget_says_the_buffers_in_a_unit_that_shows_them(tmp_path, capsys):
+    """--max-memory 1: the buffers of a 48-pixel image are a few KiB, not "0.0 GiB"."""
+    code, line = one_line(capsys, "-q", "-f", tmp_path / "x.png", "-r", 8, 6, "--max-memory", 1,
+                          SHIPPED)
+    assert code == 2 and "48-pixel" in line and "KiB" in line and "0.0 " not in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_range_is_in_the_help():
     text = cli.build_parser().format_help()
     for low, high in (RANGES["seed"], RANGES["max_depth"], RANGES["light_samples"]):
