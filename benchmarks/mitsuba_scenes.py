@@ -51,19 +51,6 @@ P_VALUE, BINOMIAL = 0.01, 0.001
 ROUNDING = 1e-5       # z_test's least standard error, relative to the mean
 
 
-def cpu_detail():
-    """'family F model M' of /proc/cpuinfo's first processor, or '' where it has none."""
-    values = {}
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() in ("cpu family", "model") and key.strip() not in values:
-                values[key.strip()] = value.strip()
-    except OSError:
-        return ""
-    return f"family {values['cpu family']} model {values['model']}" if len(values) == 2 else ""
-
-
 def defines(width, height, spp):
     return {"width": str(width), "height": str(height), "spp": str(spp)}
 
@@ -219,7 +206,7 @@ def main(argv=None):
     width, height = args.resolution
     z_width, z_height = args.z_resolution
     lines = [report.header("Mitsuba scenes: ptrace and Mitsuba 3 on the same files"),
-             fill(text["intro"], cpu=f"{report.cpu_model()} {cpu_detail()}".strip(),
+             fill(text["intro"], cpu=report.cpu_model(),
                   vectors=report.vector_extensions() or "vector extensions unknown",
                   cores=os.cpu_count(), mitsuba_version=mi.__version__, variant=args.variant,
                   threads=args.threads, width=width, height=height, spp=args.spp,
