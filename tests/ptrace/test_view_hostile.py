@@ -293,7 +293,7 @@ def test_resolution_samples_and_path_rays_are_bounded_at_start(tmp_path, capsys,
     buffers pass half the memory, samples beyond the sampler's, a seed beyond 64 bits and
     paths of more rays than one kernel call may trace; a resolution of which fewer than
     MAX_SESSIONS sessions fit in memory lowers the cap."""
-    for argv, text in ((["-r", "100000", "100000"], "buffers would need 1490.1 GiB"),
+    for argv, text in ((["-r", "100000", "100000"], "buffers would need 1.5 TiB"),
                        (["-r", "9223372036854775807", "1"], "from 1 to 1048576"),
                        (["-s", str(2 ** 64)], "from 1 to 4294967296"),
                        (["--seed", str(10 ** 20)], "seed (--seed) must be an integer from 0 to"),
