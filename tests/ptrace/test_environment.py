@@ -20,7 +20,7 @@ from ptrace.environment import (
     environment_sample,
     load_environment,
 )
-from ptrace.scene import DIFFUSE
+from ptrace.scene import DIFFUSE, EXACT, GLASS, SCHLICK
 
 from scenes_by_hand import make_scene
 
@@ -65,6 +65,25 @@ def test_white_furnace_a_convex_diffuse_object_shows_its_albedo(options):
     print(f"{options}: sphere mean {on_sphere.mean():.4f} (albedo {albedo}), stderr {stderr:.4f}")
     assert abs(on_sphere.mean() - albedo) < 4 * stderr + 1e-6
     assert stderr < 0.01
+
+
+@pytest.mark.parametrize("fresnel", [SCHLICK, EXACT], ids=["schlick", "exact"])
+def test_white_furnace_a_clear_glass_sphere_vanishes(fresnel):
+    """Under a uniform environment of radiance 1 a sphere of clear glass (white reflectance and
+    transmittance, no absorption) sends back exactly the radiance it receives whatever its
+    Fresnel weights: each path enters and leaves the glass any number of times, the radiance
+    it carries scaled by 1/eta^2 on the way in and eta^2 on the way out, and finds the sky.
+    So every pixel is 1 (the sphere does not show), with no roulette and depth enough that no
+    path inside is cut off."""
+    scene = make_scene(centers=[[0.0, 0.0, 0.0]], radii=[1.0],
+                       materials=[dict(kind=GLASS, albedo=(1.0,) * 3, transmittance=(1.0,) * 3,
+                                       ior=1.5, fresnel=fresnel)],
+                       material_index=[0])
+    scene = scene.with_environment(Environment.constant((1.0, 1.0, 1.0)))
+    size = 32
+    image = ptrace.render(scene, camera=front_camera(size), resolution=(size, size), spp=8,
+                          max_depth=64, roulette=False)
+    np.testing.assert_allclose(image, 1.0, rtol=1e-12)
 
 
 def bright_sun(rows=32, columns=64):
