@@ -337,7 +337,7 @@ def _import_statements(text):
     for match in _STATEMENT.finditer(text.replace("\\\n", " ")):
         body = re.sub(r"#[^\n]*", "", match.group(3) if match.group(3) is not None
                       else match.group(2)).strip().strip("()")
-        names = [part.split(" as ")[0].strip() for part in body.split(",")]
+        names = [re.split(r"\s+as\s+", part.strip())[0] for part in body.split(",")]
         found.append((match.group(1), [name for name in names if name]))
     return found
 

@@ -196,16 +196,17 @@ def test_a_kernel_depends_on_the_modules_it_imports_and_on_no_other(tmp_path):
 
 
 STATEMENTS = ("import a.b as c, d  # a comment\nfrom .e import (f,\n    g as h,  # why\n    i)\n"
-              "def j():\n    from ..k import l; import m\nfrom n import \\\n    o\n")
+              "def j():\n    from ..k import l; import m\nfrom n import \\\n    o\n"
+              "from p import q\tas\tr, s\n")
 
 
 def test_the_import_scan_finds_every_import_the_parser_finds():
     """A kernel's dependencies are read from its modules' import statements by a regular
     expression (ptrace.jit._import_statements), not by parsing them: on a sample of every form
-    (aliases, parentheses over lines with comments, imports inside functions and after a `;`,
-    a continued line) and on every module of ptrace, accel, the tests and the benchmarks, it
-    finds every (module, name) that Python's own parser finds (at most a few more, from
-    strings that read as imports)."""
+    (aliases, tabs among them, parentheses over lines with comments, imports inside functions
+    and after a `;`, a continued line) and on every module of ptrace, accel, the tests and the
+    benchmarks, it finds every (module, name) that Python's own parser finds (at most a few
+    more, from strings that read as imports)."""
     import ast
 
     def parsed(text):
@@ -223,7 +224,7 @@ def test_the_import_scan_finds_every_import_the_parser_finds():
 
     assert scanned(STATEMENTS) == parsed(STATEMENTS) == {
         (None, "a.b"), (None, "d"), (".e", "f"), (".e", "g"), (".e", "i"), ("..k", "l"),
-        (None, "m"), ("n", "o")}
+        (None, "m"), ("n", "o"), ("p", "q"), ("p", "s")}
     sources = [path for folder in ("ptrace", "accel", "tests", "benchmarks")
                for path in (REPO / folder).rglob("*.py")]
     assert len(sources) > 100
