@@ -15,7 +15,7 @@ import math
 
 from numba import njit
 
-from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample
+from .gltf_brdf import INV_PI, gltf_eval, gltf_pdf, gltf_sample, half_vector
 from .scene import (
     DIFFUSE,
     GLASS,
@@ -87,22 +87,9 @@ def conductor_fresnel(eta, k, cos_i):
     return 0.5 * (rs + rp)
 
 
-@njit(cache=True, inline="always")
-def reflection_half_vector(wox, woy, woz, wix, wiy, wiz):
-    """The unit half vector of wo and wi for reflection, and whether it is defined: both must
-    be above the surface (z > 0), and not opposite."""
-    if woz <= 0.0 or wiz <= 0.0:
-        return 0.0, 0.0, 1.0, False
-    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
-    norm = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if norm == 0.0:
-        return 0.0, 0.0, 1.0, False
-    return hx / norm, hy / norm, hz / norm, True
-
-
 @njit(cache=True, _nrt=False, forceinline=True)
 def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
-    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0, 0.0, 0.0
     d = beckmann_d(alpha, hz)
@@ -115,7 +102,7 @@ def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _microfacet_pdf(alpha, wox, woy, woz, wix, wiy, wiz):
-    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0
     # p(h) = D(h) cos(theta_h): the Beckmann distribution of normals, then the reflection Jacobian
@@ -140,7 +127,7 @@ def _glossy_f(ar, ag, ab, alpha, specular, m, wox, woy, woz, wix, wiy, wiz):
     max(cos_i, cos_o)), over a diffuse base of albedo Rd that gets what the coat lets through,
     28 Rd (1 - Rs) / (23 pi) (1 - (1 - cos_i / 2)^5)(1 - (1 - cos_o / 2)^5): reciprocal, and
     its directional albedo at most 1 for Rd, Rs in [0, 1] (tested)."""
-    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0, 0.0, 0.0
     cos_d = wix * hx + wiy * hy + wiz * hz
@@ -334,7 +321,7 @@ def _smooth_glass(ar, ag, ab, transmittance, ior, m, wox, woy, woz, u3, exact):
     else:
         r0 = (1.0 - ior[m]) / (1.0 + ior[m])
         r0 = r0 * r0
-        reflect = r0 + (1.0 - r0) * (1.0 - cos_o) ** 5
+        reflect = schlick(r0, cos_o)
     if u3 < reflect:
         s = reflect / cos_o
         return -wox, -woy, woz, ar * s, ag * s, ab * s, reflect
@@ -551,7 +538,7 @@ def _rough_plastic_diffuse_probability(eta, specular, m, woz):
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
-    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0, 0.0, 0.0
     ggx = k[m, 1] != 0.0
@@ -568,7 +555,7 @@ def _rough_plastic_f(ar, ag, ab, alpha, eta, k, specular, m, wox, woy, woz, wix,
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def _rough_plastic_pdf(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
-    hx, hy, hz, defined = reflection_half_vector(wox, woy, woz, wix, wiy, wiz)
+    hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0
     diffuse = _rough_plastic_diffuse_probability(eta, specular, m, woz)
