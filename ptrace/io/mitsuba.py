@@ -172,7 +172,7 @@ class Builder:
             front = self.materials.glowing(material, radiance)
             self._add_triangles(vertices, faces, uv, self.materials.emitter(radiance)
                                 if front is None else front)
-            vertices, faces, uv = shapes.backing(vertices, faces, uv)
+            vertices, faces, uv = self._backing(shape, vertices, faces, uv)
             self.notes.append(f"<shape type=\"{shape.type}\">: an area emitter: its shape "
                               f"emits from its front only, as Mitsuba's, and "
                               + ("is black from its back (its BSDF is one-sided)" if one_sided
@@ -185,8 +185,17 @@ class Builder:
             return
         self._add_triangles(vertices, faces, uv, material)
         if open_back:
-            self._add_triangles(*shapes.backing(vertices, faces, uv), self.materials.black())
+            self._add_triangles(*self._backing(shape, vertices, faces, uv),
+                                self.materials.black())
         self._unread(shape)
+
+    def _backing(self, shape, vertices, faces, uv):
+        """shapes.backing of a placed shape, its triangles charged to the memory budget first
+        (the count before reading, _count_meshes, has only the files' own triangles: whether a
+        mesh is open is known once it is read)."""
+        budget.current().triangles(shape.path, len(faces),
+                                   f"the back of {shape.where} ({len(faces):,} triangles)")
+        return shapes.backing(vertices, faces, uv)
 
     def _add_triangles(self, vertices, faces, uv, material):
         self.vertices.append(vertices)

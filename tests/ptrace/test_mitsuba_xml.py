@@ -540,13 +540,41 @@ def test_a_serialized_file_that_lies_about_its_sizes(tmp_path, capsys, lie, frag
 
 
 def test_the_memory_budget_counts_every_mesh_placed(tmp_path):
+    """Each placement of a mesh file is charged, and so is the black back each open quad of
+    Mitsuba's default (one-sided) diffuse gets: three quads and their backs, 12 triangles."""
     (tmp_path / "quad.obj").write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n")
     one = '<shape type="obj"><string name="filename" value="quad.obj"/></shape>'
     path = write(tmp_path, one * 3)
     per_quad = ptrace.budget.LOAD_BYTES_PER_TRIANGLE * 2
-    assert len(front(ptrace.load(path, max_memory=3 * per_quad))[1]) == 6
-    with pytest.raises(ptrace.budget.BudgetError, match="memory budget"):
-        ptrace.load(path, max_memory=3 * per_quad - 1)
+    scene = ptrace.load(path, max_memory=6 * per_quad)
+    assert len(front(scene)[1]) == 6 and scene.triangle_count == 12
+    with pytest.raises(ptrace.budget.BudgetError, match="memory budget") as caught:
+        ptrace.load(path, max_memory=6 * per_quad - 1)
+    assert 'the back of <shape type="obj">' in caught.value.message
+
+
+def test_the_memory_budget_counts_a_black_back_before_it_is_made(tmp_path):
+    """A one-sided open mesh's back doubles its triangles: a budget that holds the file's
+    triangles but not their back refuses the scene, naming the back, before making it; the same
+    mesh under a two-sided BSDF (no back) fits that budget."""
+    n = 20
+    rows = ["v %d 0 0\nv %d 1 0" % (i, i) for i in range(n + 1)]
+    strip = "\n".join(rows) + "\n" + "\n".join(
+        f"f {2 * i + 1} {2 * i + 3} {2 * i + 4} {2 * i + 2}" for i in range(n)) + "\n"
+    (tmp_path / "strip.obj").write_text(strip)
+    path = write(tmp_path, '<shape type="obj"><string name="filename" value="strip.obj"/>'
+                           '<bsdf type="diffuse"/></shape>')
+    per = ptrace.budget.LOAD_BYTES_PER_TRIANGLE
+    assert ptrace.load(path, max_memory=4 * n * per).triangle_count == 4 * n
+    with pytest.raises(ptrace.budget.BudgetError) as caught:
+        ptrace.load(path, max_memory=3 * n * per)
+    assert caught.value.path == str(path)
+    assert f"the back of <shape type=\"obj\">" in caught.value.message
+    assert f"({2 * n:,} triangles)" in caught.value.message
+    two_sided = write(tmp_path, '<shape type="obj"><string name="filename" '
+                                'value="strip.obj"/><bsdf type="twosided"><bsdf '
+                                'type="diffuse"/></bsdf></shape>')
+    assert ptrace.load(two_sided, max_memory=3 * n * per).triangle_count == 2 * n
 
 
 def test_the_memory_budget_counts_the_meshes_before_reading_any(tmp_path):
