@@ -40,6 +40,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ptrace.scene import LUMINANCE
+
 from . import report
 from .rays import scenes_dir
 
@@ -51,7 +53,6 @@ DEPTH = 5
 THREADS = 2
 REFERENCE_SPP = 1024   # volpath at 0.7 M paths/s here: 4 min a scene (4096 would be 17)
 CACHE = Path(__file__).resolve().parent / ".cache"
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 DEFAULT = "ptrace mis sobol (default)"
 DENOISED = "ptrace mis sobol + Open Image Denoise (biased)"
 PTRACE_METHODS = {

@@ -59,11 +59,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ptrace.scene import LUMINANCE
+
 from . import report
 from .rays import scenes_dir
 
 REFERENCES = Path(__file__).resolve().parents[1] / "tests" / "references"   # test fixtures
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_GAP = 1e-4     # world units between an emissive triangle and its reversed copy
 
 # per-pixel references: the course's 480x360 view at a fifth of its resolution. (A 96x72

@@ -52,7 +52,7 @@ import time
 
 import numpy as np
 
-from ptrace.integrator import RR_DEPTH
+from ptrace.codes import RR_DEPTH
 
 from . import report
 from .rays import scenes_dir
@@ -377,7 +377,7 @@ def main(argv=None):
              + "); Mitsuba builds its BVH when the scene is loaded, before the clock.",
              "- rays/path (ptrace's own count of camera, bounce and shadow rays) measures the "
              "work per path. Mitsuba's Russian roulette starts at its default rr_depth 5, "
-             f"ptrace's at vertex {RR_DEPTH} (ptrace.integrator.RR_DEPTH), so where these "
+             f"ptrace's at vertex {RR_DEPTH} (ptrace.codes.RR_DEPTH), so where these "
              "differ the paths differ in length: the rates compare camera paths, not rays.",
              "- Mapping: " + (" | ".join(mappings) or "not run") + ". The lamp is therefore "
              "black in Mitsuba's images, which ptrace shows at its emission: 'mean' is over "

@@ -1,8 +1,6 @@
 """The integrator's integer codes and defaults that the settings need, in a module without
 numba: ptrace.rendering.settings (read by both commands, pickled to Dask workers) imports them from
-here, and ptrace.integrator (the kernels' shared part, which compiles them in as constants)
-imports and re-exports them, so `from ptrace.integrator import SOBOL` still names the same
-value."""
+here, and the kernels compile them in as constants."""
 from collections import namedtuple
 
 RR_CAP = 0.95           # default Russian roulette cap: continue with min(cap, max(throughput))

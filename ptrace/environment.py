@@ -33,8 +33,8 @@ from .errors import PtraceError, require_regular_file
 from .io.bands import band_rows, read_bands
 from .io.limits import problem
 from .io.quiet import library_output
+from .scene import LUMINANCE
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 FLOOR = 1e-3          # of the table's mean: the density's lower bound (see the docstring)
 CONSTANT_SIZE = (32, 64)   # rows, columns of the image a constant environment is made of
 

@@ -25,20 +25,8 @@ from numba import njit
 
 from accel.compiled import by_class
 
-from .codes import (  # noqa: F401 - re-exported: the kernel's codes, named here as before
-    AUTO_EVERY_LIGHT,
-    AUTO_MANY,
-    LIGHTS_ALL,
-    LIGHTS_AUTO,
-    LIGHTS_BVH,
-    LIGHTS_POWER,
-    NORMALS,
-    PATH,
-    RR_CAP,
-    RR_DEPTH,
-    IndependentOptions,
-    Options,
-)
+from .codes import LIGHTS_ALL, LIGHTS_BVH, LIGHTS_POWER, IndependentOptions
+from .emitters import EMITTER, emitter_arrays
 from .environment import (
     environment_arrays,
     environment_pdf,
@@ -47,10 +35,8 @@ from .environment import (
 from .light_bvh import bvh_arrays, bvh_light_pmf, bvh_prim_pmf, no_bvh_arrays
 from .light_hits import build_light_hits, next_light, no_light_hits
 from .lights import (
-    EMITTER,
     area_light_hit,
     area_light_pdf,
-    emitter_arrays,
     emitter_pdf,
     light_selection,
     primitive_pdf,

@@ -27,10 +27,10 @@ import math
 import numpy as np
 from numba import njit
 
-from .environment import LUMINANCE
-from .light_tree import ONE_MINUS_EPSILON, build_light_tree, tree_pmf, tree_sample
+from .light_tree import tree_pmf, tree_sample
+from .light_tree_build import ONE_MINUS_EPSILON, build_light_tree
 from .lights import choose
-from .scene import AREA, PHYSICAL, POINT, SPOT
+from .scene import AREA, LUMINANCE, PHYSICAL, POINT, SPOT
 
 
 def _entries(scene, prims, prim_power):

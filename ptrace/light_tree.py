@@ -18,8 +18,8 @@ Lights at infinity are not entries: the caller chooses between them and the tree
 (lights below p's tangent plane get nothing, as light sampling there counts nothing); pass a zero
 normal where light may come from every side (a medium, a surface lit through).
 
-Build with build_light_tree (ptrace.light_tree_build, re-exported here: numpy arrays in, a
-LightTree of flat arrays out); sample with
+Build with ptrace.light_tree_build's build_light_tree (numpy arrays in, a LightTree of flat
+arrays out); sample with
 tree_sample and evaluate with tree_pmf from numba code (or Python): both compile with
 _nrt=False and allocate nothing, and tree_pmf returns exactly the product of probabilities that
 tree_sample multiplied to reach the entry.
@@ -31,7 +31,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from .light_tree_build import (  # noqa: F401 - LightTree and build_light_tree, re-exported
+from .light_tree_build import (
     F_AXIS,
     F_CENTER,
     F_COS_E,
@@ -45,8 +45,6 @@ from .light_tree_build import (  # noqa: F401 - LightTree and build_light_tree, 
     F_TWO,
     LANES,
     ONE_MINUS_EPSILON,
-    LightTree,
-    build_light_tree,
 )
 
 # -- importance and traversal ------------------------------------------------------------------

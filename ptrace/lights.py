@@ -8,7 +8,7 @@ them. The course's spot lights are parsed and, like the course's Sp19 stub, cont
 Lights of the PHYSICAL model (glTF's KHR_lights_punctual) fall off with the squared distance,
 and a spot's cone shapes its light (ptrace.scene.Lights).
 Emissive primitives are a light of their own unless they are a file light's visible face
-(ptrace.emitters, whose emitter_arrays and EMITTER are re-exported here); the course samples
+(ptrace.emitters); the course samples
 only its <light>s, so a scene lit by emissive geometry alone is black there.
 """
 import math
@@ -16,8 +16,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .emitters import EMITTER, _emitters, emitter_arrays  # noqa: F401 - re-exported
-from .scene import AMBIENT, AREA, DIRECTIONAL, PHYSICAL, POINT, SPOT
+from .emitters import _emitters
+from .scene import AMBIENT, AREA, DIRECTIONAL, LUMINANCE, PHYSICAL, POINT, SPOT
 from .solid_angle import (
     rectangle_pdf,
     rectangle_sample,
@@ -201,7 +201,6 @@ def selection_weights(scene):
     for the ambient light and the environment (a hemisphere of that radiance). A light that can
     give light gets a weight above zero (so choosing by it is unbiased); the course's spot
     lights, which give none, get zero."""
-    from .environment import LUMINANCE
     from .scene import ENVIRONMENT
     lights = scene.lights
     _, prims, _, _, power = _emitters(scene)

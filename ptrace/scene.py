@@ -5,6 +5,8 @@ import numpy as np
 
 import accel
 
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])   # of linear RGB (Rec. 709 / sRGB primaries)
+
 # BSDF kinds (Materials.kind). The codes index BSDF_NAMES.
 (DIFFUSE, EMISSION, MIRROR, GLASS, REFRACTION, MICROFACET, GLOSSY, GLTF_PBR, PLASTIC,
  ROUGH_PLASTIC) = range(10)

@@ -12,8 +12,7 @@ light sampler would have given it.
 - Triangles: Arvo 1995, "Stratified Sampling of Spherical Triangles", with his q rewritten so
   that 1 - q, and the arcs from A and from B, come without cancelling.
 - Spheres: uniform over the cone of directions the sphere subtends (as pbrt-v4's Sphere::Sample);
-  from inside the sphere, uniform over its area. They live in ptrace.solid_angle_sphere and are
-  re-exported here.
+  from inside the sphere, uniform over its area. They live in ptrace.solid_angle_sphere.
 
 Solid angles come from Van Oosterom and Strackee's formula (tan of half a triangle's solid angle
 from a triple product), which keeps its relative precision for tiny and distant shapes, where a
@@ -34,7 +33,6 @@ import math
 import numpy as np
 from numba import njit
 
-from .solid_angle_sphere import sphere_pdf, sphere_sample  # noqa: F401 - re-exported
 from .trig import sincos
 
 # Below these solid angles (steradians) the spherical maps give way to area sampling ...

@@ -5,7 +5,7 @@ over its area.
 Separate from ptrace.solid_angle, which holds the flat shapes (rectangles and triangles) and the
 spherical-polygon maps they share; a sphere's visible cone shares none of that, only the
 conventions stated there (scalar float64 components, a density per unit solid angle, a pdf of 0
-for no sample). ptrace.solid_angle re-exports both functions.
+for no sample).
 """
 import math
 

@@ -43,9 +43,8 @@ import ptrace
 from benchmarks import templating
 from benchmarks.rays import scenes_dir
 from benchmarks.templating import blocks, fill, join, pinned_ids, plain
-from ptrace import integrator
+from ptrace import codes
 from ptrace.camera import Camera, course_camera
-from ptrace.environment import LUMINANCE
 from ptrace.rendering import tiles
 from ptrace.rendering.settings import Settings
 from ptrace.rendering.tiles import TileWork, new_sums
@@ -53,6 +52,7 @@ from ptrace.scene import (
     AREA,
     DIFFUSE,
     EMISSION,
+    LUMINANCE,
     POINT,
     CameraSpec,
     Lights,
@@ -78,7 +78,7 @@ PINS = {claim: (TEST, name) for claim, name in {
     "replay": "test_replay_matches_an_adaptive_render",
     "unbiased": "test_roulette_is_unbiased",
     "biased_low": "test_fixed_depth_without_roulette_is_biased_low",
-    "default_cap": "test_default_cap_is_integrator_rr_cap",
+    "default_cap": "test_default_cap_is_codes_rr_cap",
     "low_cap": "test_low_cap_changes_the_image_but_stays_unbiased",
     "vanishing_cap": "test_a_vanishing_cap_stops_every_path_at_the_second_bounce",
     "caustics": "test_caustic_fireflies",
@@ -562,12 +562,12 @@ def chart_adaptive(chart_dir, data):
 
 
 # -- 3. Russian roulette and depth; fireflies --------------------------------------------------
-CAPS = (integrator.RR_CAP, 0.8, 0.5, 0.25)   # the continuation caps compared at m=100
+CAPS = (codes.RR_CAP, 0.8, 0.5, 0.25)   # the continuation caps compared at m=100
 
 
 def roulette_options(rule):
     """render() options of a roulette rule. None: ptrace as is (the default cap,
-    ptrace.integrator.RR_CAP); "off": no Russian roulette at all (`roulette=False`: paths run to
+    ptrace.codes.RR_CAP); "off": no Russian roulette at all (`roulette=False`: paths run to
     max_depth); a float: continue with min(cap, max throughput) (`rr_cap=cap`). The cap is a
     setting (ptrace.rendering.settings.Settings.rr_cap), passed to the compiled path loop with the
     other options, so every rule runs the same kernel."""
@@ -614,7 +614,7 @@ def roulette_study(quick, options=RR):
     mask = unlit_by_camera(scene, camera, spp, **options)
     rules = [(f"no RR, m={depth}", "off", depth)
              for depth in ((1, 2, 4, 8, 16) if quick else (1, 2, 4, 8, 16, 32))]
-    rules += [(f"RR (ptrace, cap {integrator.RR_CAP:g}), m={depth}", "ptrace", depth)
+    rules += [(f"RR (ptrace, cap {codes.RR_CAP:g}), m={depth}", "ptrace", depth)
               for depth in (100, 5)]
     # the first cap is ptrace's default, given explicitly as rr_cap
     rules += [(f"RR cap {cap:g}, m=100", cap, 100) for cap in CAPS]
@@ -628,7 +628,7 @@ def roulette_study(quick, options=RR):
 def measure_roulette(quick):
     runs, size, spp, kept = roulette_study(quick)
     return plain(dict(quick=quick, width=size[0], height=size[1], spp=spp, kept=kept,
-                      options=RR, default_cap=integrator.RR_CAP, runs=runs))
+                      options=RR, default_cap=codes.RR_CAP, runs=runs))
 
 
 def efficiency(run):

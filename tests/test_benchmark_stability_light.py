@@ -20,7 +20,7 @@ import pytest
 
 import ptrace
 from benchmarks import report
-from ptrace import integrator
+from ptrace import codes
 from ptrace.environment import LUMINANCE
 from studies import stability_light as study
 
@@ -168,15 +168,15 @@ def test_fixed_depth_without_roulette_is_biased_low(cornell):
     assert means[1] < 0.9 * means[-1]
 
 
-def test_default_cap_is_integrator_rr_cap(cornell):
-    """The cap is a setting whose default is ptrace.integrator.RR_CAP: giving that value
+def test_default_cap_is_codes_rr_cap(cornell):
+    """The cap is a setting whose default is ptrace.codes.RR_CAP: giving that value
     explicitly changes nothing, to the bit (through render() and through the study's runs)."""
     scene, camera, mask = cornell
     kwargs = dict(camera=camera, resolution=SIZE, spp=4, max_depth=100)
-    np.testing.assert_array_equal(ptrace.render(scene, rr_cap=integrator.RR_CAP, **kwargs),
+    np.testing.assert_array_equal(ptrace.render(scene, rr_cap=codes.RR_CAP, **kwargs),
                                   ptrace.render(scene, **kwargs))
     default = study.depth_run(scene, camera, 4, 100, mask=mask, **study.RR)
-    given = study.depth_run(scene, camera, 4, 100, integrator.RR_CAP, mask=mask, **study.RR)
+    given = study.depth_run(scene, camera, 4, 100, codes.RR_CAP, mask=mask, **study.RR)
     assert {k: v for k, v in given.items() if k != "seconds"} == \
         {k: v for k, v in default.items() if k != "seconds"}
 

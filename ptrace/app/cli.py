@@ -13,11 +13,8 @@ import sys
 
 import numpy as np
 
-from .options import (  # noqa: F401 - EXIT_* and build_parser: named here as before
-    EXIT_BROKEN_PIPE,
-    EXIT_INTERNAL,
+from .options import (
     EXIT_INTERRUPTED,
-    EXIT_USAGE,
     build_parser,
     guarded,
     parse,

@@ -29,13 +29,12 @@ import math
 
 import numpy as np
 
-from ..scene import AMBIENT, CLAMP, MIRROR_REPEAT
+from ..scene import AMBIENT, CLAMP, LUMINANCE, MIRROR_REPEAT
 
 AMBIENT_RADIANCE = 1.0
 # emitters whose power landing on the scene is at least this share of the default light's
 # onto the bounding box light the file alone (chosen from real files: see docs/usage.md)
 EMITTER_SHARE = 0.01
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])     # Rec. 709 / sRGB primaries
 # texture samples per emissive triangle (fewer on big meshes: at most MAX_LOOKUPS in all)
 SAMPLES, MAX_LOOKUPS = 16, 1 << 20
 # rays traced from the emitters (the landed share's standard error: at most 1/256)

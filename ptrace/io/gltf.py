@@ -21,13 +21,7 @@ from .. import budget
 from ..errors import SceneError
 from . import files
 from .gltf_materials import material_values
-from .gltf_scene import (  # noqa: F401 - the scene graph's and lights' names, re-exported
-    _dict,
-    _list,
-    gltf_lights,
-    local_matrix,
-    node_matrices,
-)
+from .gltf_scene import _dict, _list, node_matrices
 
 TAG = "ptrace-material-"      # the names trimesh sees: TAG + the material's index
 JSON_CHUNK, BIN_CHUNK = 0x4E4F534A, 0x004E4942

@@ -29,7 +29,7 @@ from ..scene import (
     Textures,
     area_weighted_normals,
 )
-from . import files, gltf, gltf_cameras, gltf_materials, obj, ply
+from . import files, gltf, gltf_cameras, gltf_materials, gltf_scene, obj, ply
 from .default_light import default_lights
 from .limits import LIMIT, LIMIT_WORDS, UV_LIMIT, UV_WORDS, first_outside
 from .materials import DEFAULT_ALBEDO, TexturePool, linear_rgb
@@ -359,9 +359,9 @@ def _assemble(path, scene, document, missing, notes, untextured):
                      "a diffuse material"))
     lights, cameras = [], ()
     if document is not None:
-        lights = gltf.gltf_lights(path, document, notes)
-        cameras = gltf_cameras.gltf_cameras(path, document, gltf.node_matrices(path, document),
-                                            notes)
+        lights = gltf_scene.gltf_lights(path, document, notes)
+        matrices = gltf_scene.node_matrices(path, document)
+        cameras = gltf_cameras.gltf_cameras(path, document, matrices, notes)
     if not vertices:
         return {"vertices": np.zeros((0, 3)), "faces": np.zeros((0, 3), np.int32),
                 "material_index": np.zeros(0, np.int32), "materials": [],

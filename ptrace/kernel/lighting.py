@@ -16,6 +16,7 @@ from numba import njit
 
 from ..bsdf import is_delta
 from ..codes import LIGHTS_ALL, LIGHTS_BVH
+from ..emitters import EMITTER
 from ..environment import environment_radiance, environment_sample
 from ..integrator import (
     DIM_CHOOSE,
@@ -31,7 +32,6 @@ from ..integrator import (
 )
 from ..light_bvh import bvh_choose
 from ..lights import (
-    EMITTER,
     choose,
     light_is_delta,
     sample_emitter,

@@ -13,6 +13,7 @@ import math
 from numba import njit
 
 from ..bsdf import BSDFS, EXACT_GLASS, MIXED, is_delta, uniform_hemisphere
+from ..emitters import EMITTER
 from ..integrator import (
     DIM_BSDF,
     DIM_GLASS,
@@ -26,7 +27,7 @@ from ..integrator import (
     sample_2d,
     spawn,
 )
-from ..lights import EMITTER, sample_area_row
+from ..lights import sample_area_row
 from ..scene import GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC
 from ..textures import surface_albedo
 from .guide import folded_pdf, folded_sample, guide_leaf, remember

@@ -11,7 +11,7 @@ import numpy as np
 from numba import njit
 
 from ..codes import LIGHTS_ALL
-from ..environment import LUMINANCE, environment_radiance
+from ..environment import environment_radiance
 from ..integrator import (
     SHADOW_SHORTEN,
     area_light_crossed,
@@ -24,7 +24,7 @@ from ..integrator import (
 )
 from ..light_hits import next_light
 from ..lights import area_light_pdf
-from ..scene import EMISSION
+from ..scene import EMISSION, LUMINANCE
 from ..textures import surface_emission
 from .layout import (
     DELTA,

@@ -65,8 +65,8 @@ class Settings:
     directional light: the course's estimator), "power" (-l samples at each vertex, each of one
     light chosen by its estimated power), "bvh" (-l samples at each vertex, each of one light or
     emissive primitive chosen by a light BVH for that vertex, ptrace.light_bvh) or "auto" (all
-    while a scene has at most ptrace.integrator.AUTO_EVERY_LIGHT lights, the emissive primitives
-    counting as one, else ptrace.integrator.AUTO_MANY). guiding: "off", "on" (path guiding,
+    while a scene has at most ptrace.codes.AUTO_EVERY_LIGHT lights, the emissive primitives
+    counting as one, else ptrace.codes.AUTO_MANY). guiding: "off", "on" (path guiding,
     ptrace.guiding: training passes of -s learn where light comes from, and the rest sample
     bounces from the guide and the BSDF) or "auto" (on, unless training shows the guide does
     not lower the variance); with the path integrator, in-process, without -H or -a.
@@ -214,7 +214,7 @@ class Settings:
 
 def _emitters(scene):
     """How many emissive primitives make one more light (those that are no file light's face):
-    ptrace.lights.emitter_arrays decides, imported here when a render's work is sized rather
+    ptrace.emitters.emitter_arrays decides, imported here when a render's work is sized rather
     than when the settings are read, since ptrace.lights is compiled code."""
-    from ..lights import emitter_arrays
+    from ..emitters import emitter_arrays
     return emitter_arrays(scene)[1].shape[0]

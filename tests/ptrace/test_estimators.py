@@ -9,8 +9,8 @@ import pytest
 
 import ptrace
 from ptrace.codes import IndependentOptions, Options
+from ptrace.emitters import EMITTER, emitter_arrays
 from ptrace.integrator import scene_records
-from ptrace.lights import EMITTER, emitter_arrays
 from ptrace.scene import DIFFUSE, EMISSION, Lights
 
 from scenes_by_hand import looking_down, make_scene, pixel_hits_on_floor

@@ -11,9 +11,9 @@ from numba import njit
 
 import ptrace
 from ptrace.camera import Camera
+from ptrace.emitters import emitter_arrays
 from ptrace.environment import Environment
 from ptrace.integrator import scene_records
-from ptrace.lights import emitter_arrays
 from ptrace.scene import EMISSION, GLTF_PBR
 from ptrace.textures import surface_albedo
 

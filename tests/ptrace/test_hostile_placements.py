@@ -1,4 +1,5 @@
-"""Numbers that are each in range but whose products are not (issue 43, item 1's edges).
+"""Numbers that are each in range but whose products are not: placements, clip distances and
+triangle sizes at the edges of what the loaders and backends accept.
 
 A glTF light or camera under nested nodes, each matrix finite and within ptrace.io.limits.LIMIT,
 can be placed beyond the limit (or its axes' lengths overflow): it is refused in one line naming

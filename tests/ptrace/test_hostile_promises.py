@@ -16,7 +16,7 @@ import pytest
 import accel
 import ptrace
 from accel import embree, raygen
-from ptrace.lights import emitter_arrays
+from ptrace.emitters import emitter_arrays
 from ptrace.scene import AREA, DIRECTIONAL, EMISSION, GLASS, MIRROR, POINT
 
 from scenes_by_hand import looking_down, make_scene

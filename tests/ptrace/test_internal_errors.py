@@ -10,6 +10,7 @@ import sys
 import pytest
 
 from ptrace.app import cli
+from ptrace.app.options import EXIT_INTERNAL, EXIT_USAGE
 from ptrace.errors import PtraceError
 from ptrace.rendering import tiles
 
@@ -26,7 +27,7 @@ def test_a_bug_in_the_render_is_an_internal_error_with_its_traceback(tmp_path, m
     output = tmp_path / "out.png"
     code = cli.main(["-q", "-r", "8", "6", "-f", str(output), str(SHIPPED)])
     err = capsys.readouterr().err
-    assert code == cli.EXIT_INTERNAL == 1, err
+    assert code == EXIT_INTERNAL == 1, err
     lines = err.strip().splitlines()
     assert lines[0] == "ptrace: internal error: RuntimeError: planted bug in the tile work"
     assert "Traceback (most recent call last):" in err
@@ -42,7 +43,7 @@ def test_a_user_error_from_the_same_place_stays_one_line(tmp_path, monkeypatch, 
     monkeypatch.setattr(tiles.TileWork, "trace", refuse)
     code = cli.main(["-q", "-r", "8", "6", "-f", str(tmp_path / "out.png"), str(SHIPPED)])
     err = capsys.readouterr().err
-    assert code == cli.EXIT_USAGE == 2
+    assert code == EXIT_USAGE == 2
     assert err.strip().splitlines() == ["ptrace: error: something the user can fix"]
 
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 import ptrace
-from ptrace.integrator import AUTO_EVERY_LIGHT, scene_records
+from ptrace.codes import AUTO_EVERY_LIGHT
+from ptrace.integrator import scene_records
 from ptrace.lights import light_selection
 from ptrace.scene import AREA, DIFFUSE, EMISSION, PHYSICAL, POINT, SPOT
 

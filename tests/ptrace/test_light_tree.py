@@ -17,7 +17,8 @@ import pytest
 from numba import njit
 from scipy import stats
 
-from ptrace.light_tree import build_light_tree, tree_pmf, tree_sample
+from ptrace.light_tree import tree_pmf, tree_sample
+from ptrace.light_tree_build import build_light_tree
 
 RECT, TRI, SPHERE, SPOT, POINT = range(5)
 

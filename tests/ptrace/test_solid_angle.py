@@ -17,12 +17,11 @@ from ptrace.solid_angle import (
     rectangle_sample,
     rectangle_sample_row,
     rectangle_solid_angle,
-    sphere_pdf,
-    sphere_sample,
     triangle_pdf,
     triangle_sample,
     triangle_solid_angle,
 )
+from ptrace.solid_angle_sphere import sphere_pdf, sphere_sample
 
 # a Cornell-box-like light: 0.8 x 0.6, centre at height 1.49, facing down
 CENTRE = np.array([0.0, 1.49, 0.0])

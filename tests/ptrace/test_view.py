@@ -20,6 +20,7 @@ import tornado.websocket
 
 import ptrace
 from ptrace.app import cli, view, view_render, view_session
+from ptrace.app.options import EXIT_USAGE
 from ptrace.camera import course_camera
 from ptrace.features import denoise
 from ptrace.image import course_8bit, read_image
@@ -274,7 +275,7 @@ def test_errors_of_the_view_command_are_one_line(tmp_path, capsys):
                        (["view", str(SHIPPED), "--aov", "albedo"], "no --aov"),
                        (["view", str(SHIPPED), "-f", str(tmp_path / "a.jpg")], "must end in"),
                        (["view", str(SHIPPED), "-s", "0"], "samples per pixel")):
-        assert cli.main(argv) == cli.EXIT_USAGE
+        assert cli.main(argv) == EXIT_USAGE
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("ptrace: error: ") and text in err, err
 

@@ -16,6 +16,7 @@ from test_view import SHIPPED, Frames, H, W, next_frame, preview, socket_url
 
 import ptrace
 from ptrace.app import cli, view, view_messages, view_render
+from ptrace.app.options import EXIT_USAGE
 from ptrace.camera import course_camera
 from ptrace.image import read_image
 from ptrace.rendering import tiles
@@ -299,7 +300,7 @@ def test_resolution_samples_and_path_rays_are_bounded_at_start(tmp_path, capsys,
                        (["--seed", str(10 ** 20)], "seed (--seed) must be an integer from 0 to"),
                        (["-l", "1000000000"], "from 1 to 65536, got 1000000000"),
                        (["-l", "65536", "-m", "100"], "-l 65,536 and -m 100: one path may trace")):
-        assert cli.main(["view", str(SHIPPED), "--no-browser"] + argv) == cli.EXIT_USAGE
+        assert cli.main(["view", str(SHIPPED), "--no-browser"] + argv) == EXIT_USAGE
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and err.startswith("ptrace: error: ") and text in err, err
     scene = ptrace.load(SHIPPED)
