@@ -2,7 +2,7 @@
 
     python studies/light_sampling.py --before [LABEL=]CHECKOUT [--before ...] [--label LABEL]
         [--scenes CBspheres_lambertian CBbunny CBsphere_light]
-        [--spp 16 64] [--seeds 3] [--depth 5] [--output light_sampling.md]
+        [--spp 16 64] [--seeds 3] [--depth 5] [--output light_sampling.md] [--title TITLE]
 
 Each CHECKOUT is a checkout of ptrace before a change (a git worktree of an earlier commit);
 this tree is the last. Each ptrace render runs in a fresh process of its tree (so every tree's
@@ -120,6 +120,8 @@ def main(argv=None):
     parser.add_argument("--spp", type=int, nargs="+", default=[16, 64])
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--output", default="light_sampling.md")
+    parser.add_argument("--title", default="Area lights by solid angle against by area, beside "
+                                           "Mitsuba 3", help="the report's title")
     args = parser.parse_args(argv)
     evt.DEPTH = args.depth      # the references' and Mitsuba's depth (read at call time)
     trees = {}
@@ -149,7 +151,7 @@ def main(argv=None):
                     seconds = statistics.median(r[1] for r in runs)
                     rows.append((name, spp, label, mse, seconds))
                     print(name, spp, label, f"{mse:.5f}", f"{seconds:.2f}", flush=True)
-    lines = [report.header("Area lights by solid angle against by area, beside Mitsuba 3"),
+    lines = [report.header(args.title),
              f"480x360, `-m {args.depth} -l 1`, 2 threads; trees: "
              + ", ".join(f"{label} `{tree}`" for label, tree in trees.items()) + "; mean "
              f"relative MSE over {args.seeds} seeds against the cached {evt.REFERENCE_SPP}-spp "
