@@ -19,6 +19,7 @@ import sys
 import tempfile
 
 import numba
+from numba.core.dispatcher import Dispatcher
 
 # PTRACE_COMPILE_PROCESSES: how many processes compile a cold render's kernels (this one
 # included); default: the cores this process may run on
@@ -77,9 +78,13 @@ def _cached(dispatcher, types):
 
 def missing(calls):
     """Of calls ([(dispatcher, args)]), the kernels neither compiled in this process nor in
-    numba's cache: [(dispatcher, argument types)], in the order given, each once."""
+    numba's cache: [(dispatcher, argument types)], in the order given, each once. A call of
+    anything but a numba dispatcher (a benchmark's timing wrapper, NUMBA_DISABLE_JIT's plain
+    functions) has nothing to compile ahead: it is left to the render's first call."""
     found, seen = [], set()
     for dispatcher, args in calls:
+        if not isinstance(dispatcher, Dispatcher):
+            continue
         types = tuple(dispatcher.typeof_pyval(value) for value in args)
         if (id(dispatcher), types) in seen or types in dispatcher.overloads:
             continue

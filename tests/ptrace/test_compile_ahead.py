@@ -73,6 +73,18 @@ def test_compile_ahead_leaves_every_kernel_compiled_here_or_cached_and_no_proces
     assert ahead.compile_ahead(calls, workers=2) == 0
 
 
+def test_a_call_of_a_plain_function_is_left_to_the_render(tmp_path, monkeypatch):
+    """A stage wrapped in a plain function (as benchmarks.profile_render times them) has no
+    kernel of its own to compile ahead: it is skipped, and the dispatchers beside it are not."""
+    module, calls = probe_module(tmp_path, monkeypatch, "ahead_probe_wrapped")
+
+    def wrapper(*args):
+        return module.first(*args)
+
+    kernels = ahead.missing([(wrapper, (1.5,))] + calls[1:])
+    assert [dispatcher for dispatcher, _ in kernels] == [module.second]
+
+
 def test_one_process_compiles_nothing_ahead(tmp_path, monkeypatch):
     module, calls = probe_module(tmp_path, monkeypatch, "ahead_probe_one")
     monkeypatch.setenv(ahead.PROCESSES_VARIABLE, "1")
