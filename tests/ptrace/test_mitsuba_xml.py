@@ -569,7 +569,7 @@ def test_the_memory_budget_counts_a_black_back_before_it_is_made(tmp_path):
     with pytest.raises(ptrace.budget.BudgetError) as caught:
         ptrace.load(path, max_memory=3 * n * per)
     assert caught.value.path == str(path)
-    assert f"the back of <shape type=\"obj\">" in caught.value.message
+    assert "the back of <shape type=\"obj\">" in caught.value.message
     assert f"({2 * n:,} triangles)" in caught.value.message
     two_sided = write(tmp_path, '<shape type="obj"><string name="filename" '
                                 'value="strip.obj"/><bsdf type="twosided"><bsdf '
