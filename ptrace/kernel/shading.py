@@ -296,7 +296,8 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
             tr *= mr
             tg *= mg
             tb *= mb
-            if options.roulette and vertex >= options.rr_depth:
+            if options.roulette and vertex >= options.rr_depth and not (
+                    delta and vertex == max_depth):
                 q = min(options.rr_cap, max(tr, tg, tb))
                 if not sample_1d(options, pixel, sample, sample, base + DIM_RR,
                                  base + DIM_RR) < q:
