@@ -9,7 +9,7 @@ Then, from each point, traces --paths unguided paths through each of 32 x 32 equ
 of directions (depth -m minus 1: the point is a path's first vertex) and prints the relative
 variance of a one-sample estimate of the light the point reflects diffusely (the integral of
 L cos, the later path's noise included) under: cosine sampling; the learnt mixture (the leaf's
-share of its folded guide, the rest cosine); the ideal guide (density proportional to the
+share of its guide, the rest cosine); the ideal guide (density proportional to the
 brute-forced L above the surface, half and half with the cosine); and the product L cos (what
 the later path's noise alone leaves). Also: the share of the light in the top 2% of the cells,
 and the learnt guide's mass there. Prints only; nothing is written.
@@ -74,7 +74,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     import ptrace
     import ptrace.rendering.executors as executors
-    from ptrace.kernel.guide import folded_pdf, guide_leaf, uniform_guide
+    from ptrace.kernel.guide import guide_node, guide_pdf, guide_turn, normal_bucket, uniform_guide
     name = f"guiding_{args.scene}.xml"
     depth = dict(CASES)[name]
     kept = {}
@@ -123,9 +123,11 @@ def main(argv=None):
             return (square[up] * cos[up] ** 2 / np.maximum(pdf[up], 1e-30)).sum() * solid \
                 / light ** 2 - 1
 
-        leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, *point)
+        node = guide_node(guide.axis, guide.split, guide.child, *point,
+                          normal_bucket(*normal))
+        leaf, turned = guide.root[node], guide_turn(guide, node, *point)
         share = guide.alpha * guide.share[leaf]
-        learnt = np.array([folded_pdf(guide, leaf, *centres[k], *normal) for k in range(cells)])
+        learnt = np.array([guide_pdf(guide, leaf, *centres[k], *turned) for k in range(cells)])
         ideal = mean * up / ((mean * up).sum() * solid)
         top = np.argsort(-(mean * cos))[:cells // 50]
         print(f"| {point} | {relvar(cos / np.pi):.1f} | "

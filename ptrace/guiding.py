@@ -2,12 +2,18 @@
 the training passes, after Müller, Gross and Novák 2017 ("Practical Path Guiding").
 
 A spatial binary tree over the scene's box made cubic, each split at the middle of a node's box
-on x, y, z in turn, and a directional quadtree per leaf over the equal-area square of the
+on x, y, z in turn (below first levels that split by which way the surface's normal faces,
+NORMALS), and a directional quadtree per leaf over the equal-area square of the
 sphere. While an iteration renders, the records (position, direction, luminance of the radiance
 the bounce brought back over its pdf) are counted per leaf of the tree being filled and their
 energy summed into a fixed RESOLUTION x RESOLUTION grid of directions per leaf (with BOX, the
 2019 course's box filter: shared among the leaves that a box the size of the record's leaf,
-centred on it, overlaps, by volume). At the end of an
+centred on it, overlaps, by volume). Each leaf has a parallax frame (leaf_frames): the point
+its records' rays reached, weighted by their energy (the spot its light mostly comes from), from
+the records so far; a record's direction is turned into the frame of each leaf it goes to, as
+if seen from the leaf's centre, and the guide turns it back toward the focus from the shading
+point (ptrace.kernel.guide.frame_turn), so a leaf's light is not smeared over the views of it
+from across the leaf. At the end of an
 iteration each leaf's quadtree is made from its grid (the energy of every iteration so far:
 each record is an unbiased estimate whatever pdf drew it) (a quadrant is divided while it holds more
 than ENERGY_SHARE of the leaf's energy, down to the grid's cells), and that guide samples the
@@ -32,24 +38,31 @@ import numpy as np
 from numba import njit
 
 from .kernel.guide import (
+    BUCKETS,
     R_BSDF,
     R_DX,
     R_ENERGY,
     R_F,
     R_NX,
+    R_PDF,
+    R_T,
     GuideArrays,
-    folded_pdf,
-    guide_leaf,
+    frame_turn,
+    guide_node,
+    guide_pdf,
+    guide_turn,
+    normal_bucket,
     sphere_to_square,
+    turn,
     uniform_guide,
 )
 
 RESOLUTION = 64          # grid cells per side of a leaf's directions: quadtree depth <= 6
 LEVELS = 6               # log2(RESOLUTION)
 MAX_LEAVES = 1024        # spatial leaves at most
-SPLIT_SAMPLES = 2000     # a leaf splits past this many records x sqrt(the iteration's passes)
+SPLIT_SAMPLES = 1000     # a leaf splits past this many records x sqrt(the iteration's passes)
 SPLIT_PIXELS = 4         # ... or past (pixels / SPLIT_PIXELS) x sqrt(passes), if fewer
-SPLIT_LEAST = 1000       #     but at least this many
+SPLIT_LEAST = 500        #     but at least this many
 ENERGY_SHARE = 0.01      # a quadrant is divided above this share of its leaf's energy
 ALPHA = 0.5              # the guide's share of the bounces where it is fixed (learn=False)
 SHARES = np.linspace(0.0, 0.9, 10)   # the guide's shares a spatial leaf learns from
@@ -64,6 +77,9 @@ LEARN = True             # learn each spatial leaf's share (else ALPHA everywher
 COSINE = False           # learn incident light times the cosine (accumulate)
 BOX = True               # splat records into the leaves a box filter overlaps (accumulate)
 CARRY = True             # a new iteration's grids start from the last one's energy
+PARALLAX = True          # turn each leaf's directions toward its focus point (leaf_frames)
+FOCUS_LEAST = 1.0        # ... where the focus is this many half diagonals from its centre
+NORMALS = True           # the spatial tree's first levels split by the normal's bucket
 # --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
 # the guide is turned off); then, on every SUBSET-th pixel, the BSDF alone renders TRIAL
 # (= PROBE) samples once and the guide they trained twice, under other scrambles of the
@@ -96,14 +112,34 @@ def schedule(spp, first=1):
 
 class SpatialTree:
     """The spatial binary tree as growing lists: axis (-1 for a leaf), split, first child, and
-    each leaf's number (in leaf order) with its box."""
+    each leaf's number (in leaf order) with its box. With `normals` (NORMALS), its first levels
+    split on the normal's bucket (axis 3, ptrace.kernel.guide.normal_bucket): a tree over the
+    whole box for each of the six, so that a leaf's surfaces face one way (a floor's guide
+    does not learn a wall's light, much of which would point below the floor)."""
 
-    def __init__(self, lower, upper):
+    def __init__(self, lower, upper, normals=None):
         lower, upper = np.asarray(lower, float), np.asarray(upper, float)
         centre = 0.5 * (lower + upper)
         half = 0.5 * float(np.max(upper - lower)) * 1.001 + 1e-9 * (1.0 + np.abs(centre).max())
         self.axis, self.split, self.child = [-1], [0.0], [0]
         self.lower, self.upper, self.depth = [centre - half], [centre + half], [0]
+        if NORMALS if normals is None else normals:
+            pending = [(0, 0, BUCKETS)]   # (node, its buckets [low, high))
+            while pending:
+                j, low, high = pending.pop(0)
+                if high - low < 2:
+                    continue
+                middle = (low + high) // 2
+                first = len(self.axis)
+                for side in (0, 1):
+                    self.axis.append(-1)
+                    self.split.append(0.0)
+                    self.child.append(0)
+                    self.lower.append(self.lower[j].copy())
+                    self.upper.append(self.upper[j].copy())
+                    self.depth.append(0)
+                self.axis[j], self.split[j], self.child[j] = 3, middle - 0.5, first
+                pending += [(first, low, middle), (first + 1, middle, high)]
 
     def leaves(self):
         """The leaf nodes, in node order (leaf number k is leaves()[k])."""
@@ -153,15 +189,29 @@ class SpatialTree:
         return [origin[j] for j in self.leaves()]
 
 
+@njit(cache=True, nogil=True, forceinline=True)
+def frame_cell(frames, leaf, px, py, pz, dx, dy, dz):
+    """The grid cell of direction d from point p in leaf's parallax frame (d turned back)."""
+    vx, vy, vz, c = frame_turn(frames, leaf, px, py, pz)
+    dx, dy, dz = turn(vx, vy, vz, c, -1.0, dx, dy, dz)
+    x, y = sphere_to_square(dx, dy, dz)
+    return int(y * RESOLUTION) * RESOLUTION + int(x * RESOLUTION)
+
+
 @njit(cache=True, nogil=True)
 def accumulate(axis, split, child, root, lower, upper, records, counts, grid, leaves, cosine,
-               box):
+               box, frames, focus):
     """Each record (column of records) counted in its leaf (written to leaves) and its energy
     added to the grid cell of its direction, in column order: to its leaf's, or with `box` (the
     2019 course's box filter) to every leaf that a box the size of its own leaf centred on the
     record overlaps, each its share of the box's volume within the tree's (lower, upper). With
     `cosine`, its energy times the cosine of its direction to its normal (the guide then learns
-    incident light times the cosine, where a leaf's surfaces share a normal)."""
+    incident light times the cosine, where a leaf's surfaces share a normal). A record's
+    direction is turned, for each leaf it goes to, into that leaf's parallax frame (frames, per
+    leaf number: ptrace.kernel.guide's frame rows; the inverse of the turn at the record's
+    position). Each record's energy, and its energy times the point its ray reached, are added
+    to its own leaf's row of focus (x, y, z, energy of points reached, energy of rays that left
+    the scene)."""
     nodes = axis.shape[0]
     stack = np.empty(nodes + 1, dtype=np.int64)
     hit = np.empty(nodes, dtype=np.int64)
@@ -174,27 +224,33 @@ def accumulate(axis, split, child, root, lower, upper, records, counts, grid, le
             first = child[node]
             for j in range(6):
                 bounds[first, j] = bounds[first + 1, j] = bounds[node, j]
-            bounds[first, 3 + axis[node]] = split[node]    # the lower child
-            bounds[first + 1, axis[node]] = split[node]    # the upper child
+            if axis[node] < 3:   # (a split on the normal's bucket keeps the box)
+                bounds[first, 3 + axis[node]] = split[node]    # the lower child
+                bounds[first + 1, axis[node]] = split[node]    # the upper child
     for k in range(records.shape[1]):
         px, py, pz = records[0, k], records[1, k], records[2, k]
-        node = 0   # (guide_leaf's descent, keeping the leaf's node for its box)
-        while axis[node] >= 0:
-            a = axis[node]
-            c = px if a == 0 else (py if a == 1 else pz)
-            node = child[node] + (0 if c < split[node] else 1)
+        bucket = normal_bucket(records[R_NX, k], records[R_NX + 1, k], records[R_NX + 2, k])
+        node = guide_node(axis, split, child, px, py, pz, bucket)
         leaf = root[node]
         leaves[k] = leaf
         counts[leaf] += 1
-        dx, dy, dz = records[R_DX, k], records[R_DX + 1, k], records[R_DX + 2, k]
-        x, y = sphere_to_square(dx, dy, dz)
-        cell = int(y * RESOLUTION) * RESOLUTION + int(x * RESOLUTION)
         energy = records[R_ENERGY, k]
+        if energy == 0.0:   # (most records: counted, with nothing to add)
+            continue
+        dx, dy, dz = records[R_DX, k], records[R_DX + 1, k], records[R_DX + 2, k]
+        t = records[R_T, k]
+        if t < math.inf:
+            focus[leaf, 0] += energy * (px + t * dx)
+            focus[leaf, 1] += energy * (py + t * dy)
+            focus[leaf, 2] += energy * (pz + t * dz)
+            focus[leaf, 3] += energy
+        else:
+            focus[leaf, 4] += energy
         if cosine:
             energy *= abs(dx * records[R_NX, k] + dy * records[R_NX + 1, k]
                           + dz * records[R_NX + 2, k])
         if not box:
-            grid[leaf, cell] += energy
+            grid[leaf, frame_cell(frames, leaf, px, py, pz, dx, dy, dz)] += energy
             continue
         # the box of the record's leaf, centred on the record; the leaves it overlaps
         h0 = 0.5 * (bounds[node, 3] - bounds[node, 0])
@@ -216,14 +272,36 @@ def accumulate(axis, split, child, root, lower, upper, records, counts, grid, le
                 found += 1
                 total += w
                 continue
+            if axis[node] == 3:   # (the record's own bucket only)
+                stack[top] = child[node] + (0 if bucket < split[node] else 1)
+                top += 1
+                continue
             stack[top] = child[node]
             stack[top + 1] = child[node] + 1
             top += 2
         if not total > 0.0:
-            grid[leaf, cell] += energy
+            grid[leaf, frame_cell(frames, leaf, px, py, pz, dx, dy, dz)] += energy
             continue
         for j in range(found):
+            cell = frame_cell(frames, hit[j], px, py, pz, dx, dy, dz)
             grid[hit[j], cell] += energy * (weight[j] / total)
+
+
+@njit(cache=True, nogil=True)
+def keep_rows(records, leaves, first, stride):
+    """learn_share's rows (leaf, F / p, p, the BSDF's pdf, direction, normal, position) of
+    every stride-th record from `first`."""
+    count = max(0, (records.shape[1] - first + stride - 1) // stride)
+    out = np.empty((13, count))
+    for j in range(count):
+        k = first + j * stride
+        out[0, j] = leaves[k]
+        out[1, j], out[2, j], out[3, j] = records[R_F, k], records[R_PDF, k], records[R_BSDF, k]
+        for c in range(3):
+            out[4 + c, j] = records[R_DX + c, k]
+            out[7 + c, j] = records[R_NX + c, k]
+            out[10 + c, j] = records[c, k]
+    return out
 
 
 @njit(cache=True)
@@ -231,7 +309,7 @@ def learn_share(guide, leaves, kept, shares, least):
     """Each of `leaves` spatial leaves' share of the guide: of `shares`, the one whose mixture
     share g + (1 - share) b has the least estimated second moment of the bounce's estimate F / p
     over the leaf's kept records (rows: leaf, F / p under the pdf p that drew it, p, the BSDF's
-    pdf b, direction, normal, position), mean of (F / p)^2 p / mixture; g is the folded pdf of
+    pdf b, direction, normal, position), mean of (F / p)^2 p / mixture; g is the pdf of
     `guide`, the guide that drew the records (so the records did not make it: no in-sample
     optimism). A leaf of fewer than `least` records takes the choice over all records."""
     k = shares.shape[0]
@@ -244,10 +322,11 @@ def learn_share(guide, leaves, kept, shares, least):
         x = kept[1, r]
         if not x > 0.0:
             continue
-        node = guide_leaf(guide.axis, guide.split, guide.child, guide.root, kept[10, r],
-                          kept[11, r], kept[12, r])
-        g = folded_pdf(guide, node, kept[4, r], kept[5, r], kept[6, r], kept[7, r], kept[8, r],
-                       kept[9, r])
+        node = guide_node(guide.axis, guide.split, guide.child, kept[10, r], kept[11, r],
+                          kept[12, r], normal_bucket(kept[7, r], kept[8, r], kept[9, r]))
+        vx, vy, vz, c = guide_turn(guide, node, kept[10, r], kept[11, r], kept[12, r])
+        g = guide_pdf(guide, guide.root[node], kept[4, r], kept[5, r], kept[6, r], vx, vy, vz,
+                      c)
         b, p = kept[3, r], kept[2, r]
         for a in range(k):
             q = shares[a] * g + (1.0 - shares[a]) * b
@@ -323,8 +402,8 @@ class Trainer:
     guides made from them. Blocks hand their records in through add (from any thread); merge,
     after a pass, sums them in (first sample, first row) order."""
 
-    def __init__(self, lower, upper, split_samples=SPLIT_SAMPLES, learn=None):
-        self.tree = SpatialTree(lower, upper)
+    def __init__(self, lower, upper, split_samples=SPLIT_SAMPLES, learn=None, normals=None):
+        self.tree = SpatialTree(lower, upper, normals)
         self.split_samples = split_samples
         self.learn = LEARN if learn is None else learn
         self._lock = threading.Lock()
@@ -345,7 +424,39 @@ class Trainer:
             self.grid = np.zeros((leaves, RESOLUTION * RESOLUTION))
         else:
             self.grid = np.array([self.grid[k] * share for k, share in origin])
+        if origin is None:
+            self.focus = np.zeros((leaves, 5))
+        else:   # (every iteration's: the focus points settle as the records come in)
+            self.focus = np.array([self.focus[k] * share for k, share in origin])
+        self.frames = self.leaf_frames()
         self._arrays = self.tree.arrays()
+
+    def leaf_frames(self):
+        """Each leaf's parallax frame (ptrace.kernel.guide) for this iteration's records and the
+        guide made from them: its box's centre and the mean of the points its records' rays
+        reached, weighted by their energy, from the records so far. On (with PARALLAX) where
+        most of the leaf's energy reached a point (not the sky), and that focus is more than
+        FOCUS_LEAST half diagonals of the leaf's box from its centre."""
+        leaves = self.tree.leaves()
+        frames = np.zeros((len(leaves), 7))
+        for k, j in enumerate(leaves):
+            low, high = self.tree.lower[j], self.tree.upper[j]
+            centre = 0.5 * (low + high)
+            frames[k, 0:3] = centre
+            sums = self.focus[k]
+            if not (PARALLAX and sums[3] > sums[4] and sums[3] > 0.0):
+                continue
+            focus = sums[0:3] / sums[3]
+            frames[k, 3:6] = focus
+            reach = FOCUS_LEAST * 0.5 * float(np.linalg.norm(high - low))
+            frames[k, 6] = float(np.linalg.norm(focus - centre) > reach)
+        return frames
+
+    def node_frames(self):
+        """leaf_frames by spatial tree node (what guide_node returns)."""
+        out = np.zeros((len(self.tree.axis), 7))
+        out[self.tree.leaves()] = self.frames
+        return out
 
     def add(self, key, records):
         """One block's records (RECORD_ROWS, n), keyed by its place in the pass."""
@@ -381,6 +492,7 @@ class Trainer:
             runs.append(np.ascontiguousarray(np.concatenate(pieces, axis=1)))
         leaves = self.grid.shape[0]
         grids = [self.grid] + [np.zeros_like(self.grid) for _ in range(parts - 1)]
+        focus = [self.focus] + [np.zeros_like(self.focus) for _ in range(parts - 1)]
         counts = [self.counts] + [np.zeros(leaves, dtype=np.int64) for _ in range(parts - 1)]
         found = [np.empty(r.shape[1], dtype=np.int64) for r in runs]
         axis, split, child, root = self._arrays
@@ -388,7 +500,7 @@ class Trainer:
 
         def splat(j):
             accumulate(axis, split, child, root, lower, upper, runs[j], counts[j], grids[j],
-                       found[j], COSINE, BOX)
+                       found[j], COSINE, BOX, self.frames, focus[j])
 
         if parts == 1:
             splat(0)
@@ -398,6 +510,7 @@ class Trainer:
         for j in range(1, parts):   # (in run order: the same sums whatever finished first)
             self.grid += grids[j]
             self.counts += counts[j]
+            self.focus += focus[j]
         if self.learn and self.keep:
             for j in range(parts):
                 self._keep(runs[j], found[j])
@@ -407,10 +520,8 @@ class Trainer:
         learn_share, doubling the stride while more than KEEP_RECORDS are kept."""
         first = (-self.seen) % self.stride
         self.seen += records.shape[1]
-        pick = records[:, first::self.stride]
-        self.kept.append(np.vstack([leaves[first::self.stride][None].astype(np.float64),
-                                    pick[R_F:R_BSDF + 1], pick[R_DX:R_DX + 3],
-                                    pick[R_NX:R_NX + 3], pick[0:3]]))
+        pick = keep_rows(records, leaves, first, self.stride)
+        self.kept.append(pick)
         self.count += pick.shape[1]
         if self.count > KEEP_RECORDS:   # (the same records whatever the blocks: by index)
             kept = np.concatenate(self.kept, axis=1)[:, ::2]
@@ -426,7 +537,8 @@ class Trainer:
         q_child, q_density, roots = build_quadtrees(self.grid, ENERGY_SHARE)
         axis, split, child, root = self.tree.arrays(roots)
         share = np.ones(q_child.shape[0])
-        guide = GuideArrays(axis, split, child, root, q_child, q_density, share, 1.0, 1)
+        guide = GuideArrays(axis, split, child, root, q_child, q_density, share, 1.0, 1,
+                            self.node_frames())
         self.shares = np.full(roots.shape[0], float(alpha))
         if self.learn and sampled is not None:
             kept = np.concatenate(self.kept, axis=1) if self.kept else np.zeros((13, 0))

@@ -189,8 +189,8 @@ MUTANTS = {
         [GUIDE_TEST, "-k", "chi_square or sphere"]),
     "guide-left-out-of-bsdf-bounce-pdf": (
         "a bounce the BSDF draws is weighted by the BSDF's pdf alone, not the mixture's",
-        [(SHADING, "pdf = (1.0 - mix) * pdf + mix * folded_pdf(guide, leaf, wx / length,",
-          "pdf = pdf + 0.0 * folded_pdf(guide, leaf, wx / length,")],
+        [(SHADING, "pdf = (1.0 - mix) * pdf + mix * guide_pdf(guide, leaf, wx / length,",
+          "pdf = pdf + 0.0 * guide_pdf(guide, leaf, wx / length,")],
         [GUIDE_TEST, "-k", "means_agree"]),
     "guide-chosen-at-half-alpha": (
         "the guide is chosen with probability alpha / 2 while the pdf mixes at alpha",
@@ -207,6 +207,25 @@ MUTANTS = {
         "the splatting threads' other runs are counted but their energy is never added",
         [("ptrace/guiding.py", "            self.grid += grids[j]\n", "")],
         [GUIDE_TEST, "-k", "splatting_on_threads"]),
+    "guide-splat-turned-the-wrong-way": (
+        "records are splatted into a leaf's parallax frame turned by the frame's rotation, not "
+        "by its inverse",
+        [("ptrace/guiding.py", "    dx, dy, dz = turn(vx, vy, vz, c, -1.0, dx, dy, dz)\n",
+          "    dx, dy, dz = turn(vx, vy, vz, c, 1.0, dx, dy, dz)\n")],
+        [GUIDE_TEST, "-k", "parallax"]),
+    "guide-pdf-not-turned-back": (
+        "the guide's pdf looks a direction up in the leaf's quadtree without turning it back "
+        "into the leaf's frame (the samples are turned)",
+        [(GUIDE, "    ax, ay, az = turn(vx, vy, vz, vc, -1.0, dx, dy, dz)\n",
+          "    ax, ay, az = dx, dy, dz\n")],
+        [GUIDE_TEST, "-k", "turned"]),
+    "guide-box-filter-across-normals": (
+        "the box filter splats a record into the leaves of every normal's tree, not only its "
+        "own normal's",
+        [("ptrace/guiding.py",
+          "            if axis[node] == 3:   # (the record's own bucket only)\n",
+          "            if axis[node] == 99:\n")],
+        [GUIDE_TEST, "-k", "facing"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "
         "chosen lane's interval",

@@ -3,7 +3,8 @@ drawn from the directional quadtree of that leaf, the density of any direction, 
 stages that turn a training wave's vertices into records for ptrace.guiding.
 
 The guide (GuideArrays) is flat arrays. The spatial tree: node j is a leaf where axis[j] < 0,
-else its children are child[j] (below split[j] on that axis) and child[j] + 1; a leaf's root[j]
+else its children are child[j] (below split[j] on that axis: x, y, z, or 3, the bucket of the
+way the surface's normal faces, normal_bucket) and child[j] + 1; a leaf's root[j]
 is its quadtree's root node (or, in the tree being filled, the leaf's number). The directional
 quadtrees share q_child (N, 4, int32) and q_density (N, 4): quadrant q = 2 iy + ix of a node
 covers [ix/2, ix/2 + 1/2) x [iy/2, iy/2 + 1/2) of the node's square, q_child -1 where the
@@ -21,46 +22,112 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from .layout import MAT, VERTEX, R
+from .layout import MAT, VERTEX, R, T
 
 GuideArrays = namedtuple("GuideArrays", ["axis", "split", "child", "root", "q_child",
-                                         "q_density", "share", "alpha", "record"])
+                                         "q_density", "share", "alpha", "record", "frame"])
 # share: per quadtree root node (what guide_leaf returns), the guide's learnt share of that
 # spatial leaf's bounces; a vertex draws from the guide with probability alpha * share[leaf],
 # and alpha 0 turns the guide off (the kernels then skip it: no lookup, no pdf).
+# frame: per spatial tree node (what guide_node returns), its leaf's parallax frame: the
+# centre c of the leaf's box (3), its focus f (3), the point its light mostly comes from, and
+# whether the frame is on (1). A leaf's quadtree holds directions as seen from c; at a point x,
+# the guide turns them by the rotation that takes the direction c -> f to x -> f (guide_turn),
+# so the bright spot its light comes from is aimed at from x, not from c. A rotation keeps
+# solid angle: the density at a direction is the quadtree's at the direction turned back.
 
 # the rows of a wave's vertex history (one column per path slot and recorded vertex): the
 # vertex, the unit direction it left by, the mixture pdf of that direction, the throughput after
 # the bounce, the path's radiance when the bounce ray left, whether the column is set, the
-# bounce's f cos / pdf (R, G, B), the BSDF's own pdf of the direction and the shading normal
+# bounce's f cos / pdf (R, G, B), the BSDF's own pdf of the direction, the shading normal and
+# the distance its ray went to the next vertex
 (H_PX, H_PY, H_PZ, H_DX, H_DY, H_DZ, H_PDF, H_TR, H_TG, H_TB, H_LR, H_LG, H_LB,
- H_VALID, H_MR, H_MG, H_MB, H_BSDF, H_NX, H_NY, H_NZ) = range(21)
-HISTORY_ROWS = 21
+ H_VALID, H_MR, H_MG, H_MB, H_BSDF, H_NX, H_NY, H_NZ, H_T) = range(22)
+HISTORY_ROWS = 22
 # a record: position (3), unit direction (3), luminance of Li / pdf (the guide's energy), the
 # bounce's contribution over its pdf F / p (luminance), the mixture pdf p, the BSDF's pdf, and
-# the shading normal (3): the last five learn the guide's share (ptrace.guiding.learn_share)
+# the shading normal (3): those five learn the guide's share (ptrace.guiding.learn_share); the
+# distance to the next vertex (inf if the ray left the scene: the leaves' focus points)
 (R_PX, R_PY, R_PZ, R_DX, R_DY, R_DZ, R_ENERGY, R_F, R_PDF, R_BSDF, R_NX, R_NY,
- R_NZ) = range(13)
-RECORD_ROWS = 13
+ R_NZ, R_T) = range(14)
+RECORD_ROWS = 14
 INV_FOUR_PI = 0.25 / math.pi
+BUCKETS = 6   # the ways a normal faces (normal_bucket)
 
 
 def uniform_guide(alpha=0.0, record=False):
     """A guide of one spatial leaf whose quadtree is uniform over the sphere."""
     return GuideArrays(np.full(1, -1, dtype=np.int64), np.zeros(1), np.zeros(1, dtype=np.int64),
                        np.zeros(1, dtype=np.int64), np.full((1, 4), -1, dtype=np.int32),
-                       np.ones((1, 4)), np.ones(1), float(alpha), int(bool(record)))
+                       np.ones((1, 4)), np.ones(1), float(alpha), int(bool(record)),
+                       np.zeros((1, 7)))
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def guide_leaf(axis, split, child, root, px, py, pz):
-    """root[] of the spatial leaf holding point p."""
+def normal_bucket(nx, ny, nz):
+    """Which of BUCKETS ways unit normal n faces: 2 x its largest component's axis, plus 1
+    where that component is negative."""
+    ax, ay, az = abs(nx), abs(ny), abs(nz)
+    if ax >= ay and ax >= az:
+        return 0 if nx >= 0.0 else 1
+    if ay >= az:
+        return 2 if ny >= 0.0 else 3
+    return 4 if nz >= 0.0 else 5
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_node(axis, split, child, px, py, pz, bucket):
+    """The spatial tree's leaf node holding point p on a surface whose normal is in `bucket`
+    (normal_bucket; axis 3 splits on it)."""
     node = 0
     while axis[node] >= 0:
         a = axis[node]
-        c = px if a == 0 else (py if a == 1 else pz)
+        c = px if a == 0 else (py if a == 1 else (pz if a == 2 else bucket))
         node = child[node] + (0 if c < split[node] else 1)
-    return root[node]
+    return node
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def frame_turn(frame, node, px, py, pz):
+    """The rotation of spatial node `node`'s parallax frame at point p, as (v, c): the cross and
+    dot products of the unit directions a (centre to focus) and b (p to focus); (0, 0, 0, 1),
+    no turn, where the frame is off or b is not defined. turn() applies it."""
+    if frame[node, 6] == 0.0:
+        return 0.0, 0.0, 0.0, 1.0
+    fx, fy, fz = frame[node, 3], frame[node, 4], frame[node, 5]
+    ax, ay, az = fx - frame[node, 0], fy - frame[node, 1], fz - frame[node, 2]
+    bx, by, bz = fx - px, fy - py, fz - pz
+    la = math.sqrt(ax * ax + ay * ay + az * az)
+    lb = math.sqrt(bx * bx + by * by + bz * bz)
+    if not (la > 0.0 and lb > 0.0):
+        return 0.0, 0.0, 0.0, 1.0
+    s = 1.0 / (la * lb)
+    c = (ax * bx + ay * by + az * bz) * s
+    if not c > -0.5:   # (a turn past 120 degrees: p is about as far from the focus as c)
+        return 0.0, 0.0, 0.0, 1.0
+    return (ay * bz - az * by) * s, (az * bx - ax * bz) * s, (ax * by - ay * bx) * s, c
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def turn(vx, vy, vz, c, sign, dx, dy, dz):
+    """Direction d turned by the rotation (v, c) of frame_turn (sign 1), or by its inverse
+    (sign -1): Rodrigues' formula d c + (v x d) + v (v . d) / (1 + c)."""
+    vx, vy, vz = sign * vx, sign * vy, sign * vz
+    k = (vx * dx + vy * dy + vz * dz) / (1.0 + c)
+    return (dx * c + (vy * dz - vz * dy) + vx * k, dy * c + (vz * dx - vx * dz) + vy * k,
+            dz * c + (vx * dy - vy * dx) + vz * k)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_turn(guide, node, px, py, pz):
+    """frame_turn of the guide's spatial node at point p."""
+    return frame_turn(guide.frame, node, px, py, pz)
+
+
+@njit(cache=True, _nrt=False, forceinline=True)
+def guide_leaf(axis, split, child, root, px, py, pz, bucket):
+    """root[] of the spatial leaf holding point p, normal in `bucket`."""
+    return root[guide_node(axis, split, child, px, py, pz, bucket)]
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -196,94 +263,24 @@ def direction_pdf(q_child, q_density, node, dx, dy, dz):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def guide_sample(guide, node, u1, u2):
-    """A unit direction drawn from the guide's quadtree `node`: (dx, dy, dz, pdf in solid
-    angle)."""
+def guide_sample(guide, node, u1, u2, vx=0.0, vy=0.0, vz=0.0, vc=1.0):
+    """A unit direction drawn from the guide's quadtree `node`, turned by the rotation (v, vc)
+    of guide_turn: (dx, dy, dz, pdf in solid angle, the warp's). It may point below the
+    surface, where a BSDF that only reflects gives it nothing (mirroring such directions
+    above the surface costs a second walk per vertex; with the spatial tree split by normal,
+    few point below: benchmarks/results/guiding.md)."""
     x, y, pdf = quadtree_sample(guide.q_child, guide.q_density, node, u1, u2)
-    dx, dy, dz = square_to_sphere(x, y)
+    lx, ly, lz = square_to_sphere(x, y)
+    dx, dy, dz = turn(vx, vy, vz, vc, 1.0, lx, ly, lz)
     return dx, dy, dz, pdf * INV_FOUR_PI
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def guide_pdf(guide, node, dx, dy, dz):
-    """The solid-angle density of guide_sample from quadtree `node` at unit direction d."""
-    return direction_pdf(guide.q_child, guide.q_density, node, dx, dy, dz) * INV_FOUR_PI
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def _half(dx, dy, level, low):
-    """direction_pdf's y half at `level` (< MID_LEVELS) of a node whose phi interval starts at
-    2 pi low / 2^MID_LEVELS: (iy, the child's low)."""
-    mids = 1 << MID_LEVELS
-    if level == 0:
-        iy = 1 if (dy < 0.0 or (dy == 0.0 and dx < 0.0)) else 0
-        return iy, iy * (mids >> 1)
-    half = mids >> (level + 1)
-    j = low + half
-    iy = 1 if dy * MID_COS[j] - dx * MID_SIN[j] >= 0.0 else 0
-    return iy, low + iy * half
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def pair_pdf(q_child, q_density, node, ax, ay, az, bx, by, bz):
-    """direction_pdf of quadtree `node` at unit directions a and b, the two walks in one loop
-    (independent loads and compares side by side): (pdf at a, pdf at b), the same numbers."""
-    if ax == 0.0 and ay == 0.0:
-        ax = 1.0
-    if bx == 0.0 and by == 0.0:
-        bx = 1.0
-    xa = min(max(0.5 * (az + 1.0), 0.0), 0.9999999999999999)
-    xb = min(max(0.5 * (bz + 1.0), 0.0), 0.9999999999999999)
-    na = nb = node
-    lowa = lowb = 0
-    pa = pb = 1.0
-    level = 0
-    while na >= 0 or nb >= 0:
-        if level >= MID_LEVELS:   # (deeper than the guides ptrace.guiding builds)
-            return (direction_pdf(q_child, q_density, node, ax, ay, az),
-                    direction_pdf(q_child, q_density, node, bx, by, bz))
-        if na >= 0:
-            ix = 1 if xa >= 0.5 else 0
-            xa = min(2.0 * xa - ix, 0.9999999999999999)
-            iy, lowa = _half(ax, ay, level, lowa)
-            q = 2 * iy + ix
-            pa *= q_density[na, q]
-            na = q_child[na, q]
-        if nb >= 0:
-            ix = 1 if xb >= 0.5 else 0
-            xb = min(2.0 * xb - ix, 0.9999999999999999)
-            iy, lowb = _half(bx, by, level, lowb)
-            q = 2 * iy + ix
-            pb *= q_density[nb, q]
-            nb = q_child[nb, q]
-        level += 1
-    return pa, pb
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def folded_pdf(guide, node, dx, dy, dz, nx, ny, nz):
-    """The solid-angle density of folded_sample at unit direction d above the surface of unit
-    normal n: the guide's density at d plus at d mirrored through the surface (0 below it)."""
-    c = dx * nx + dy * ny + dz * nz
-    if c < 0.0:
-        return 0.0
-    pa, pb = pair_pdf(guide.q_child, guide.q_density, node, dx, dy, dz, dx - 2.0 * c * nx,
-                      dy - 2.0 * c * ny, dz - 2.0 * c * nz)
-    return pa * INV_FOUR_PI + pb * INV_FOUR_PI
-
-
-@njit(cache=True, _nrt=False, forceinline=True)
-def folded_sample(guide, node, u1, u2, nx, ny, nz):
-    """A direction of guide_sample, mirrored through the surface of unit normal n when it
-    points below it (a BSDF that only reflects would waste it): (dx, dy, dz, folded_pdf). The
-    drawn direction's density is the warp's; only its mirror image's is looked up."""
-    dx, dy, dz, pdf = guide_sample(guide, node, u1, u2)
-    c = dx * nx + dy * ny + dz * nz
-    mx, my, mz = dx - 2.0 * c * nx, dy - 2.0 * c * ny, dz - 2.0 * c * nz
-    pdf += guide_pdf(guide, node, mx, my, mz)
-    if c < 0.0:
-        return mx, my, mz, pdf
-    return dx, dy, dz, pdf
+def guide_pdf(guide, node, dx, dy, dz, vx=0.0, vy=0.0, vz=0.0, vc=1.0):
+    """The solid-angle density of guide_sample (turned by (v, vc)) at unit direction d: the
+    quadtree's at d turned back into the leaf's frame."""
+    ax, ay, az = turn(vx, vy, vz, vc, -1.0, dx, dy, dz)
+    return direction_pdf(guide.q_child, guide.q_density, node, ax, ay, az) * INV_FOUR_PI
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -300,6 +297,7 @@ def snapshot_stage(floats, ints, queue, n, history, depth):
             col = i * depth + v
             for c in range(3):
                 history[H_LR + c, col] = floats[R + c, i]
+            history[H_T, col] = floats[T, i]   # (inf where the ray left the scene)
 
 
 @njit(cache=True, nogil=True, _nrt=False)
@@ -309,8 +307,8 @@ def record_stage(floats, size, history, depth, out):
     mean over R, G, B of the radiance the bounce brought back (what the path gathered after it,
     divided by the throughput after it) divided by the bounce's pdf, that radiance times the
     bounce's f cos / pdf (the bounce's estimate F / p of the light it reflects), the pdf, the
-    BSDF's pdf and the normal. Clears the columns; returns the count, in slot and vertex
-    order."""
+    BSDF's pdf, the normal and the distance to the next vertex. Clears the columns; returns
+    the count, in slot and vertex order."""
     count = 0
     for i in range(size):
         for v in range(depth):
@@ -345,6 +343,7 @@ def record_stage(floats, size, history, depth, out):
             out[10, count] = history[H_NX, col]
             out[11, count] = history[H_NY, col]
             out[12, count] = history[H_NZ, col]
+            out[13, count] = history[H_T, col]
             count += 1
     return count
 

@@ -30,7 +30,7 @@ from ..integrator import (
 from ..lights import sample_area_row
 from ..scene import GLASS, GLOSSY, GLTF_PBR, ROUGH_PLASTIC
 from ..textures import surface_albedo
-from .guide import folded_pdf, folded_sample, guide_leaf, remember
+from .guide import guide_node, guide_pdf, guide_sample, guide_turn, normal_bucket, remember
 from .layout import (
     DELTA,
     DX,
@@ -108,13 +108,16 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
     (stages.probe_found_stage).
 
     With `guided` (a kind that is not delta, without -H), the bounce is drawn from the guide
-    (ptrace.kernel.guide.GuideArrays), folded above the surface (every such kind only
-    reflects), with probability guide.alpha x guide.share of the vertex's spatial leaf (the
-    first bounce sample's u1 split at it) and from the BSDF otherwise, and weighted by the
-    mixture's pdf; the MIS weights between the light samples and the bounce's emission take the
-    BSDF's pdf alone (no guide lookup per light sample); guide.alpha 0 skips the guide.
-    With guide.record set, each bounce is remembered in `history` (its first `depth` vertices)
-    for the guide's records. Without it, guide, history and depth are not read.
+    (ptrace.kernel.guide.GuideArrays), turned by its spatial leaf's parallax frame at the
+    vertex (one below the surface gets nothing: every such kind only reflects), with
+    probability guide.alpha x guide.share of the vertex's spatial leaf (the first bounce
+    sample's u1 split at it) and from the BSDF otherwise, and weighted by the mixture's pdf;
+    the MIS weights between the light samples and the bounce's emission take the BSDF's pdf
+    alone (no guide lookup per light sample); guide.alpha 0 skips the guide, and so does the
+    last vertex (-m), whose bounce only finds direct light, which the guide does not learn.
+    With guide.record set, each bounce but the last vertex's is remembered in `history` (its
+    first `depth` vertices) for the guide's records. Without it, guide, history and depth are
+    not read.
 
     With `exact`, a GLASS kind reflects with the exact Fresnel reflectance
     (ptrace.bsdf.EXACT_GLASS), not Schlick's."""
@@ -163,9 +166,13 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
             base = vertex * DIMS_PER_VERTEX
             rays = 0
             mix = 0.0
-            leaf = 0
-            if GUIDED and guide.alpha > 0.0:   # (alpha 0: the guide is off, and skipped)
-                leaf = guide_leaf(guide.axis, guide.split, guide.child, guide.root, px, py, pz)
+            leaf = node = 0
+            # (alpha 0: the guide is off, and skipped; at the last vertex the bounce only finds
+            # direct light, which the guide does not learn: the BSDF alone, nothing recorded)
+            if GUIDED and guide.alpha > 0.0 and vertex < max_depth:
+                node = guide_node(guide.axis, guide.split, guide.child, px, py, pz,
+                                  normal_bucket(nx, ny, nz))
+                leaf = guide.root[node]
                 mix = guide.alpha * guide.share[leaf]
             if LIT and HEMI and light_count:    # -H: the course's uniform hemisphere sampling
                 count = 0
@@ -261,7 +268,8 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                     u1 = min((u1 - mix) / (1.0 - mix), 0.9999999999999999)
             if guided:
                 # the guide's direction, weighted by the mixture's pdf
-                wx, wy, wz, guided_pdf = folded_sample(guide, leaf, u1, u2, nx, ny, nz)
+                vx, vy, vz, vc = guide_turn(guide, node, px, py, pz)
+                wx, wy, wz, guided_pdf = guide_sample(guide, leaf, u1, u2, vx, vy, vz, vc)
                 wix = wx * xx + wy * xy + wz * xz
                 wiy = wx * yx + wy * yy + wz * yz
                 wiz = wx * nx + wy * ny + wz * nz
@@ -282,9 +290,10 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                     wy = wix * xy + wiy * yy + wiz * ny
                     wz = wix * xz + wiy * yz + wiz * nz
                     length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                    pdf = (1.0 - mix) * pdf + mix * folded_pdf(guide, leaf, wx / length,
-                                                               wy / length, wz / length, nx, ny,
-                                                               nz)
+                    vx, vy, vz, vc = guide_turn(guide, node, px, py, pz)
+                    pdf = (1.0 - mix) * pdf + mix * guide_pdf(guide, leaf, wx / length,
+                                                              wy / length, wz / length, vx, vy,
+                                                              vz, vc)
             delta = DELTA_KIND
             if MIXED_KIND:   # a delta lobe's sample: its probability negated
                 delta = pdf < 0.0
@@ -323,7 +332,7 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                 # BSDF's pdf (no guide lookup per light sample): the two weights still sum to 1,
                 # and the bounce's estimate still divides by the mixture's pdf
                 floats[PDF, i] = bsdf_pdf
-            if GUIDED and guide.record:
+            if GUIDED and guide.record and vertex < max_depth:
                 remember(history, depth, i, vertex, px, py, pz, dx, dy, dz, pdf, tr, tg, tb,
                          mr, mg, mb, bsdf_pdf, nx, ny, nz)
             ints[DELTA, i] = delta
