@@ -70,6 +70,8 @@ SHARE_RECORDS = 256      # a leaf with fewer records takes the share learnt over
 KEEP_RECORDS = 1 << 17   # records kept per iteration to learn the shares (thinned evenly)
 TRAIN_SHARE = 0.25       # training passes take at most this share of -s (0.5: less error
 #                           per sample, more per second on the door ajar; guiding.md)
+TRAIN_MOST = 32          # ... and at most this many passes (at 256 spp the guide learnt no
+#                           more from 63 than from 31; guiding.md)
 CHUNK = 4                # training passes traced in one call, their records merged after it
 PARTS = 2                # runs of a merge's records splatted on threads of their own
 PART_LEAST = 4096        # ... of at least this many records each
@@ -101,9 +103,10 @@ def split_samples(pixels):
 
 def schedule(spp, first=1):
     """The training iterations' passes (first, 2 first, 4 first, ...) while their total stays
-    within TRAIN_SHARE of spp (at least one sample is left for the final image)."""
+    within TRAIN_SHARE of spp and TRAIN_MOST (at least one sample is left for the final
+    image)."""
     out, total, n = [], 0, first
-    while total + n <= TRAIN_SHARE * spp and total + n < spp:
+    while total + n <= min(TRAIN_SHARE * spp, TRAIN_MOST) and total + n < spp:
         out.append(n)
         total += n
         n *= 2
@@ -577,7 +580,7 @@ def auto_schedule(spp):
     if spp < AUTO_LEAST:
         return []
     out, total, n = [PROBE], PROBE, PROBE
-    while total + n <= TRAIN_SHARE * spp and total + n < spp:
+    while total + n <= min(TRAIN_SHARE * spp, TRAIN_MOST) and total + n < spp:
         out.append(n)
         total += n
         n *= 2

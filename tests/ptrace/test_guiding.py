@@ -407,13 +407,14 @@ def test_splatting_on_threads_sums_what_one_thread_does(monkeypatch):
         assert np.allclose(other.grid, one.grid, rtol=1e-12, atol=0)
 
 
-def test_the_training_schedule_doubles_within_a_quarter_of_the_samples():
+def test_the_training_schedule_doubles_within_a_quarter_of_the_samples_and_32_passes():
     assert schedule(64) == [1, 2, 4, 8]
+    assert schedule(256) == schedule(4096) == [1, 2, 4, 8, 16]    # at most TRAIN_MOST passes
     assert schedule(16) == [1, 2]
     assert schedule(3) == []
     assert schedule(64, first=2) == [2, 4, 8]
     assert auto_schedule(64) == [4, 4, 8]     # the unguided probe, then guided iterations
-    assert auto_schedule(128) == [4, 4, 8, 16]
+    assert auto_schedule(128) == auto_schedule(1024) == [4, 4, 8, 16]
     assert auto_schedule(32) == [4, 4]
     assert auto_schedule(16) == []            # too few samples to try the guide: off
 
