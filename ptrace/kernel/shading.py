@@ -166,7 +166,9 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
             base = vertex * DIMS_PER_VERTEX
             rays = 0
             mix = 0.0
-            leaf = node = 0
+            leaf = 0
+            vx = vy = vz = 0.0
+            vc = 1.0
             # (alpha 0: the guide is off, and skipped; at the last vertex the bounce only finds
             # direct light, which the guide does not learn: the BSDF alone, nothing recorded)
             if GUIDED and guide.alpha > 0.0 and vertex < max_depth:
@@ -174,6 +176,7 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                                   normal_bucket(nx, ny, nz))
                 leaf = guide.root[node]
                 mix = guide.alpha * guide.share[leaf]
+                vx, vy, vz, vc = guide_turn(guide, node, px, py, pz)   # (its parallax frame)
             if LIT and HEMI and light_count:    # -H: the course's uniform hemisphere sampling
                 count = 0
                 for light in range(light_count):
@@ -268,7 +271,6 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                     u1 = min((u1 - mix) / (1.0 - mix), 0.9999999999999999)
             if guided:
                 # the guide's direction, weighted by the mixture's pdf
-                vx, vy, vz, vc = guide_turn(guide, node, px, py, pz)
                 wx, wy, wz, guided_pdf = guide_sample(guide, leaf, u1, u2, vx, vy, vz, vc)
                 wix = wx * xx + wy * xy + wz * xz
                 wiy = wx * yx + wy * yy + wz * yz
@@ -290,7 +292,6 @@ def shading_stage(kind, general=False, hemisphere=False, guided=False, exact=Fal
                     wy = wix * xy + wiy * yy + wiz * ny
                     wz = wix * xz + wiy * yz + wiz * nz
                     length = math.sqrt(wx * wx + wy * wy + wz * wz)
-                    vx, vy, vz, vc = guide_turn(guide, node, px, py, pz)
                     pdf = (1.0 - mix) * pdf + mix * guide_pdf(guide, leaf, wx / length,
                                                               wy / length, wz / length, vx, vy,
                                                               vz, vc)
