@@ -64,8 +64,18 @@ def scene_info(scene, camera=None):
                    "hfov": camera.hfov, "vfov": camera.vfov, "screen_dist": camera.screen_dist,
                    "znear": camera.znear, "zfar": camera.zfar},
         "bounds": None if bounds is None else [bounds[0].tolist(), bounds[1].tolist()],
-        "notes": grouped_notes(scene.notes),
+        "notes": scene_notes(scene),
     }
+
+
+MESH_FILE = "mesh file: "   # how the mesh files' loader starts a note about the file as a whole
+
+
+def scene_notes(scene):
+    """grouped_notes of the scene's notes, a note on a mesh file as a whole naming the file."""
+    name = os.path.basename(scene.path)
+    return [f"{name}: {line[len(MESH_FILE):]}" if line.startswith(MESH_FILE) else line
+            for line in grouped_notes(scene.notes)]
 
 
 def grouped_notes(notes):
@@ -181,7 +191,7 @@ def run(argv):
               f"{os.path.abspath(denoised_path(output))}")
     if not args.quiet:   # what the loader ignored, changed or assumed (after the render, so that
         # an error stays the one line it promises to be)
-        for line in grouped_notes(scene.notes):
+        for line in scene_notes(scene):
             print(f"ptrace: note: {line}", file=sys.stderr)
     if stats["interrupted"]:
         print("ptrace: interrupted: wrote the samples rendered so far", file=sys.stderr)

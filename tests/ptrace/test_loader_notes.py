@@ -91,7 +91,11 @@ def test_the_command_line_prints_the_notes_and_quiet_silences_them(tmp_path):
     assert any("NaN" in line for line in lines), loud.stderr
     assert any("one diffuse material" in line for line in lines), loud.stderr
     assert len(lines) == len(set(lines))
+    # a note on the file as a whole names it (the loader's own "mesh file:" does not)
+    assert any(line.startswith(f"ptrace: note: {mesh.name}: default camera") for line in lines)
+    assert not any("mesh file:" in line for line in lines), loud.stderr
     quiet = run("-q", "-s", "1", "-r", "8", "6", "-f", out, mesh)
     assert quiet.returncode == 0 and "note" not in quiet.stderr, quiet.stderr
     info = json.loads(run("--info", mesh).stdout)
     assert any("NaN" in note for note in info["notes"])
+    assert any(note.startswith(f"{mesh.name}: default camera") for note in info["notes"])
