@@ -83,17 +83,19 @@ PARALLAX = True          # turn each leaf's directions toward its focus point (l
 FOCUS_LEAST = 1.0        # ... where the focus is this many half diagonals from its centre
 NORMALS = True           # the spatial tree's first levels split by the normal's bucket
 # --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
-# the guide is turned off); then, on every SUBSET-th pixel, the BSDF alone renders TRIAL
-# (= PROBE) samples once and the guide they trained twice, under other scrambles of the
-# sampler; the guide stays on only if its error (its renders' squared difference) times its
-# cost (rays traced, times GUIDED_COST for the guide's own work) is below MARGIN times the
-# BSDF's (against the first iteration's image)
-PROBE = 4
-TRIAL = PROBE
-AUTO_LEAST = 32            # fewer samples than this: no trial, auto is off
-SUBSET = 16
-GUIDED_COST = 1.3          # measured: a guided final pass 1.2-1.3x an unguided one (Zen 1)
-MARGIN = 0.8
+# the guide is turned off), whose records give the bounces' headroom (Trainer.headroom): how
+# far the BSDF's choice of direction is from the best one, which bounds what any guide can
+# gain at a vertex. Below HEADROOM the guide is off for the rest of the render. Above it,
+# training goes on, and the guide is off for the final passes if the last training
+# iteration's variance per sample is not below the probe's.
+PROBE = 2                  # (at most CHUNK: the probe's records are all held until it decides)
+AUTO_LEAST = 32            # fewer samples than this: auto is off (the probe's records cost
+#                            about as much as an unguided sample)
+HEADROOM = 32.0            # measured (six seeds each, 64 spp): the course's diffuse boxes and
+#                            cornell.dae 1.9-2.2, CBspheres 11.6-12.8 (mirror, glass),
+#                            scenes/mitsuba/envmap.xml 17-25 (no gain per sample); the lamp
+#                            facing the ceiling 60-178, the door ajar 53-69, and their glossy
+#                            variants 55-176
 
 
 def split_samples(pixels):
@@ -420,6 +422,7 @@ class Trainer:
         SpatialTree.refine), or from zero."""
         leaves = len(self.tree.leaves())
         self.counts = np.zeros(leaves, dtype=np.int64)
+        self.moments = np.zeros((2, leaves))   # each leaf's sums of F / p and of its square
         self.kept, self.seen, self.count = [], 0, 0
         self.stride = getattr(self, "stride", 1)   # (the last iteration's, a good first guess)
         self.keep = origin is not None   # (the first iteration's guide learns no share)
@@ -514,9 +517,34 @@ class Trainer:
             self.grid += grids[j]
             self.counts += counts[j]
             self.focus += focus[j]
+        for run, leaf in zip(runs, found):
+            f = run[R_F]
+            self.moments[0] += np.bincount(leaf, weights=f, minlength=leaves)
+            self.moments[1] += np.bincount(leaf, weights=f * f, minlength=leaves)
         if self.learn and self.keep:
             for j in range(parts):
                 self._keep(runs[j], found[j])
+
+    def headroom(self):
+        """The bounces' headroom (headroom()) of this iteration's records merged so far."""
+        return headroom(self.counts, self.moments)
+
+    def pending_headroom(self):
+        """The headroom of the records handed in since the last merge, without merging them:
+        --guiding auto's probe decides on it before anything is splatted (train). Their order
+        is merge's, so the sums are the same whatever the blocks."""
+        with self._lock:
+            ordered = [np.asarray(self._blocks[key]) for key in sorted(self._blocks)]
+        leaves = self.grid.shape[0]
+        if not ordered or not sum(b.shape[1] for b in ordered):
+            return headroom(np.zeros(leaves), np.zeros((2, leaves)))
+        records = np.ascontiguousarray(np.concatenate(ordered, axis=1))
+        found = np.empty(records.shape[1], dtype=np.int64)
+        record_leaves(*self._arrays, records, found)
+        f = records[R_F]
+        moments = np.array([np.bincount(found, weights=f, minlength=leaves),
+                            np.bincount(found, weights=f * f, minlength=leaves)])
+        return headroom(np.bincount(found, minlength=leaves), moments)
 
     def _keep(self, records, leaves):
         """Keep every stride-th record of the iteration (by its place in merge order) for
@@ -554,6 +582,33 @@ class Trainer:
         return guide
 
 
+def headroom(counts, moments):
+    """The bounces' headroom in records counted per leaf (counts) with their sums of F / p and
+    of its square (moments): over each leaf, the second moment of the bounce's estimate F / p
+    of the light it reflects over its mean squared, E[(F/p)^2] / E[F/p]^2, averaged over the
+    leaves by their light (sum of F / p). That is the factor by which the bounce's second
+    moment would fall if its directions were drawn in proportion to F (a perfect guide; no
+    guide does better, so 1 leaves nothing to gain), where the records' directions were drawn
+    by the BSDF. 1.0 where nothing was lit."""
+    n = np.asarray(counts, dtype=np.float64)
+    first, second = moments
+    lit = first > 0.0
+    total = float(np.sum(first[lit]))
+    if not total > 0.0:
+        return 1.0
+    return float(np.sum(n[lit] * second[lit] / first[lit])) / total
+
+
+@njit(cache=True, nogil=True)
+def record_leaves(axis, split, child, root, records, leaves):
+    """Each record's leaf number (the root[] of its leaf node, as accumulate finds it) into
+    leaves."""
+    for k in range(records.shape[1]):
+        bucket = normal_bucket(records[R_NX, k], records[R_NX + 1, k], records[R_NX + 2, k])
+        leaves[k] = root[guide_node(axis, split, child, records[0, k], records[1, k],
+                                    records[2, k], bucket)]
+
+
 def guide_bytes(guide):
     """The memory a guide's arrays hold."""
     return sum(a.nbytes for a in guide if isinstance(a, np.ndarray))
@@ -574,9 +629,8 @@ def relative_variance(sum_l, sum_l2, count):
 
 def auto_schedule(spp):
     """--guiding auto's iterations: PROBE unguided passes, then guided ones of PROBE, 2 PROBE,
-    ... while the total stays within TRAIN_SHARE of spp (none, auto off, below 32 spp: the
-    probe's records and the trial cost about as much as 2 unguided samples, too much of
-    fewer)."""
+    ... while the total stays within TRAIN_SHARE of spp and TRAIN_MOST (none, auto off, below
+    AUTO_LEAST samples)."""
     if spp < AUTO_LEAST:
         return []
     out, total, n = [PROBE], PROBE, PROBE
@@ -587,67 +641,17 @@ def auto_schedule(spp):
     return out
 
 
-def relative_error(a, b, level):
-    """Half the mean squared difference of two independent estimates a, b of the same image
-    (N, 3) over (level^2 + 1e-3), level the image's estimate: the relative MSE of either if
-    they are alike."""
-    return float(np.mean((a - b) ** 2 / (level ** 2 + 1e-3))) / 2.0
-
-
-def trial(job, pixel_x, pixel_y, guide, probe):
-    """Render TRIAL samples of every SUBSET-th pixel with the BSDF alone and with `guide`,
-    under other scrambles of the sampler (other seeds), and compare at equal cost: (guided
-    error x cost) / (unguided error x cost), and the figures. `probe` is the unguided first
-    iteration's image (TRIAL samples, a net of the render's own sequence), independent of
-    both: the mean squared difference of two independent unbiased images is the sum of their
-    errors, so the BSDF render's against the probe is twice the unguided error, and the guided
-    render's against the probe is the guided error plus the unguided one. The sampler is the
-    render's, so its stratification is in both errors."""
-    wavefront = job.wavefront
-    options = wavefront.options
-    rows = np.arange(0, pixel_x.shape[0], SUBSET)
-    sub_x, sub_y = pixel_x[rows], pixel_y[rows]
-    index = np.arange(rows.shape[0])
-    from .rendering.tiles import new_sums
-
-    half = rows.shape[0] // 2
-    parts = ((0, half), (half, rows.shape[0]))
-
-    def render(seed, alpha):
-        wavefront.options = options._replace(seed=(options.seed + seed) % (1 << 31))
-        wavefront.guide = guide._replace(alpha=alpha, record=0)
-        sums = new_sums(rows.shape[0])
-        before = job.rays_traced
-        # two halves on two threads (a call of fewer pixels than a block runs on one)
-        list(pool.map(lambda p: job.trace(sub_x[p[0]:p[1]], sub_y[p[0]:p[1]], 0, TRIAL, sums,
-                                          index[p[0]:p[1]]), parts))
-        return sums[0] / TRIAL, job.rays_traced - before
-
-    pool = ThreadPoolExecutor(2)
-    try:
-        u1, ru = render(1000003, 0.0)
-        g1, rg = render(2000003, 1.0)
-    finally:
-        wavefront.options = options
-        pool.shutdown()
-    u2 = probe[rows]
-    level = (u1 + u2 + g1) / 3.0
-    unguided = relative_error(u1, u2, level)
-    guided = max(2.0 * relative_error(g1, u2, level) - unguided, 0.0)
-    cost = GUIDED_COST * rg / max(ru, 1)
-    ratio = guided * cost / unguided if unguided > 0 else math.inf
-    return ratio, dict(unguided_error=unguided, guided_error=guided, cost=cost, ratio=ratio)
-
-
 def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     """Train job's guide (its wavefront must be guided) on the pixels: the iterations of
     schedule(spp) (under mode "auto", auto_schedule(spp)), the first unguided, on the samples
     from spp down (the last iteration's lowest), so the final passes render the first ones.
     Each iteration's records make the guide the next one samples (its share per spatial leaf
-    learnt, Trainer.finish). Under "auto", after the unguided first iteration, trial() decides:
-    if the guide does not lower the error at equal cost by MARGIN, training stops and the
-    guide is off for the rest of the render, whose final passes with the first iteration's
-    are then the unguided render of spp - PROBE ... (its samples 0 .. spp - 1). Returns
+    learnt, Trainer.finish). Under "auto", the unguided first iteration's records give the
+    bounces' headroom (Trainer.headroom): below HEADROOM, training stops and the guide is off
+    for the rest of the render, whose final passes with the first iteration's are then the
+    unguided render of spp samples (its samples 0 .. spp - 1). Above it, training goes on; if
+    the last training iteration's variance per sample (relative_variance) is not below the
+    first's, the final passes are unguided (the training images still combine). Returns
     (training samples, figures, images): images, for combine, holds each iteration's samples,
     relative variance and mean radiance per pixel, or the first iteration's sums to add."""
     from .rendering.tiles import new_sums
@@ -672,31 +676,35 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
         for passes in plan:
             sums = new_sums(pixel_x.shape[0])
             top -= passes
+            probe = mode == "auto" and not done   # (its records merged only if it says on)
             for s in range(0, passes, CHUNK):   # (CHUNK passes' records held at once)
                 job.trace(pixel_x, pixel_y, top + s, min(CHUNK, passes - s), sums, rows,
                           on_chunk)
-                trainer.merge()
+                if not probe:
+                    trainer.merge()
             done.append(passes)
             variance = relative_variance(*sums[1:])
             figures["variance"].append(variance)
             if math.isfinite(variance):
                 images.append((passes, variance, sums[0] / np.maximum(sums[3], 1)[:, None]))
-            guide = trainer.finish(passes, guide if len(done) > 1 else None)
-            if mode == "auto" and len(done) == 1:
-                wavefront.trainer = None
-                ratio, figures["decision"] = trial(job, pixel_x, pixel_y, guide,
-                                                   sums[0] / np.maximum(sums[3], 1)[:, None])
-                wavefront.trainer = trainer
-                if not ratio < MARGIN:   # the unguided render, with this iteration's samples
+            if probe:
+                room = trainer.pending_headroom()
+                figures["decision"] = dict(headroom=room, probe_variance=variance)
+                if not room >= HEADROOM:   # the unguided render, with these samples
+                    guide = uniform_guide()
                     figures["guided"] = False
                     images = [sums]
                     break
+                trainer.merge()
+            guide = trainer.finish(passes, guide if len(done) > 1 else None)
             wavefront.guide = guide
     finally:
         wavefront.trainer = None
     total = sum(done)
     figures.update(records=trainer.records, guide_bytes=guide_bytes(guide),
                    leaves=len(trainer.tree.leaves()), iterations=done, training_samples=total)
+    if figures["guided"] and mode == "auto":   # (the probe's variance against the last's)
+        figures["guided"] = bool(variance < figures["variance"][0])
     if figures["guided"]:
         wavefront.guide = guide._replace(record=0)
         figures["share_mean"] = float(np.mean(trainer.shares))

@@ -226,6 +226,13 @@ MUTANTS = {
           "            if axis[node] == 3:   # (the record's own bucket only)\n",
           "            if axis[node] == 99:\n")],
         [GUIDE_TEST, "-k", "facing"]),
+    "guide-headroom-unweighted": (
+        "auto's headroom averages the leaves' second moments over their mean squared with equal "
+        "weights, not by their light",
+        [("ptrace/guiding.py",
+          "    return float(np.sum(n[lit] * second[lit] / first[lit])) / total\n",
+          "    return float(np.mean(n[lit] * second[lit] / first[lit] ** 2))\n")],
+        [GUIDE_TEST, "-k", "headroom"]),
     "light-tree-u-not-rescaled": (
         "the light tree's walk reuses u at every step instead of rescaling it within the "
         "chosen lane's interval",

@@ -179,8 +179,9 @@ def build_parser(prog="ptrace", description=DESCRIPTION):
     add("--guiding", choices=GUIDING, default="off",
         help="path guiding: on (training passes, up to a quarter of -s and at most 32, learn "
              "where light comes from; the rest sample bounces from the guide and the BSDF), "
-             "auto (on unless a trial on a few pixels shows it does not lower the error at "
-             "equal cost) or off (the default); "
+             "auto (2 unguided samples first; on where their bounces could gain from a "
+             "guide, their headroom above 32, and training lowers the variance) or off (the "
+             "default); "
              "in-process renders of the path integrator without -H or -a")
     add("-r", "--resolution", nargs=2, type=int_at_least("resolution (-r)", 1, MAX_SIDE),
         metavar=("W", "H"), default=None,
