@@ -1,11 +1,12 @@
 """Path guiding: relative MSE against wall time (training included) for unguided ptrace, guided
-ptrace (--guiding on), --guiding auto and Mitsuba 3's `path` (llvm_ad_rgb, its independent
-sampler) on the project's indirectly lit scenes (scenes/guiding_*.xml), with one chart per
-scene, and unguided against auto on two course Cornell boxes (where next-event estimation does
-the work, so auto must not lose: at most 1.05x the unguided relative MSE x time).
+ptrace (--guiding on), --guiding auto and Mitsuba 3's `path` (llvm_ad_rgb, its multijitter
+sampler, a box filter of one pixel) on the project's indirectly lit scenes
+(scenes/guiding_*.xml), with one chart per scene, and unguided against auto on two course
+Cornell boxes (where next-event estimation does the work, so auto must not lose: at most 1.05x
+the unguided relative MSE x time).
 
     python -m benchmarks.guiding [--quick] [--size N] [--spp 16,32,64] [--reference-spp N]
-                                 [--repeats R] [--pairs SPP]
+                                 [--repeats R] [--pairs SPP] [--pairs-size N]
 
 The reference is ptrace's unguided render at --reference-spp (Mitsuba and ptrace agree on these
 scenes' means: their lamps reflect nothing). Each point is rendered R times on 2 threads after
@@ -15,7 +16,9 @@ the images do not change between repeats); relative MSE is the mean over pixels 
 error over (reference^2 + 1e-3), averaged over R, G, B. With --pairs SPP, each scene is also
 rendered unguided and guided at SPP under R seeds, the modes in turns, and the error of each is
 half the mean squared difference of its seed 1 and seed 2 images (over the reference^2 + 1e-3):
-no reference noise in it, so it holds where SPP is past the reference's reach. Writes
+no reference noise in it, so it holds where SPP is past the reference's reach; Mitsuba's the
+same way. --pairs-size renders those at N x N (the issue's targets name 256x256 and 60-120 s),
+over the level of the pairs' own mean image. Writes
 benchmarks/results/guiding.md and guiding_<scene>.png.
 """
 import argparse
@@ -50,18 +53,48 @@ def ptrace_point(scene, spp, depth, resolution, guiding, reference):
     return seconds, relative_mse(image, reference), stats.get("guiding", {})
 
 
-def mitsuba_point(path, spp, size, reference):
+def mitsuba_sensor(mi, scene, size, spp):
+    """The file's camera with a box filter of one pixel (Mitsuba's default is a Gaussian of 2
+    pixels' radius, whose image ptrace's per-pixel reference does not converge to) and the
+    multijitter sampler the issue's target names."""
+    p = mi.traverse(scene.sensors()[0])
+    matrix = np.array(p["to_world"].matrix).reshape(4, 4, -1)[..., 0]
+    return mi.load_dict({
+        "type": "perspective", "to_world": mi.ScalarTransform4f(matrix),
+        "fov": float(p["x_fov"][0]), "fov_axis": "x",
+        "near_clip": float(p["near_clip"]), "far_clip": float(p["far_clip"]),
+        "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb",
+                 "rfilter": {"type": "box"}},
+        "sampler": {"type": "multijitter", "sample_count": spp}})
+
+
+def mitsuba_renders(path, spp, size, seeds, repeats):
+    """Mitsuba's images under `seeds` and the median seconds of `repeats` renders of the first
+    (after a warm-up render that compiles its kernels), and the samples it took (multijitter
+    rounds some counts up)."""
     import mitsuba as mi
     scene = mi.load_file(str(path), res=size)
-    start = time.perf_counter()
-    image = np.array(mi.render(scene, spp=spp, seed=1))
-    return time.perf_counter() - start, relative_mse(image, reference)
+    sensor = mitsuba_sensor(mi, scene, size, spp)
+    mi.render(scene, sensor=sensor, spp=spp, seed=0)
+    seconds, images = [], []
+    for r in range(max(repeats, len(seeds))):
+        start = time.perf_counter()
+        image = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seeds[r % len(seeds)]))
+        seconds.append(time.perf_counter() - start)
+        if r < len(seeds):
+            images.append(image)
+    return statistics.median(seconds), images, sensor.sampler().sample_count()
+
+
+def mitsuba_point(path, spp, size, reference, repeats):
+    seconds, (image,), taken = mitsuba_renders(path, spp, size, [1], repeats)
+    return seconds, relative_mse(image, reference), taken
 
 
 def measure(scene, spps, depth, resolution, reference, modes, repeats):
     """{(mode, spp): (median seconds, relMSE, guiding figures, median training seconds)}, the
     modes in turns within each repeat."""
-    for guiding in modes:   # warm-up: compile (auto's trial too)
+    for guiding in modes:   # warm-up: compile
         ptrace_point(scene, 16, depth, resolution, guiding, reference)
     runs = {}
     for _ in range(repeats):
@@ -74,10 +107,13 @@ def measure(scene, spps, depth, resolution, reference, modes, repeats):
             for key, points in runs.items()}
 
 
-def pairs(scene, spp, depth, resolution, reference, repeats):
-    """(unguided, guided): (median seconds, error from two seeds, median training seconds),
-    the modes in turns within each repeat (seed = repeat + 1)."""
+def pairs(scene, spp, depth, resolution, repeats):
+    """{mode: (median seconds, the images of seeds 1 and 2, median training seconds)} for
+    unguided and guided, the modes in turns within each repeat (seed = repeat + 1)."""
     import ptrace
+    for guiding in ("off", "on"):   # warm-up: compile
+        ptrace.render(scene, spp=4, max_depth=depth, resolution=resolution, threads=2,
+                      guiding=guiding)
     images, seconds, training = {}, {}, {}
     for r in range(max(repeats, 2)):
         for guiding in ("off", "on"):
@@ -89,20 +125,23 @@ def pairs(scene, spp, depth, resolution, reference, repeats):
             training.setdefault(guiding, []).append(
                 stats.get("guiding", {}).get("training_seconds", 0.0))
             images.setdefault(guiding, []).append(image)
-    out = []
-    for guiding in ("off", "on"):
-        a, b = images[guiding][:2]
-        error = float(np.mean((a - b) ** 2 / (reference ** 2 + 1e-3))) / 2.0
-        out.append((statistics.median(seconds[guiding]), error,
-                    statistics.median(training[guiding])))
-    return out
+    return {guiding: (statistics.median(seconds[guiding]), images[guiding][:2],
+                      statistics.median(training[guiding])) for guiding in ("off", "on")}
+
+
+def pair_error(a, b, level):
+    """Half the mean squared difference of two seeds' images over (level^2 + 1e-3): the
+    relative MSE of either, without a reference's noise."""
+    return float(np.mean((a - b) ** 2 / (level ** 2 + 1e-3))) / 2.0
 
 
 def auto_text(figures):
     if not figures.get("decision"):
         return "off (too few samples)"
     d = figures["decision"]
-    return f"{'on' if figures['guided'] else 'off'} ({d['ratio']:.2f})"
+    trained = len(figures.get("iterations", [])) > 1
+    after = " after training" if trained and not figures["guided"] else ""
+    return f"{'on' if figures['guided'] else 'off'}{after} (headroom {d['headroom']:.1f})"
 
 
 def main(argv=None):
@@ -113,70 +152,105 @@ def main(argv=None):
     parser.add_argument("--reference-spp", type=int, default=None)
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--pairs", type=int, default=0)
+    parser.add_argument("--pairs-size", type=int, default=None)
+    parser.add_argument("--scene", action="append", default=None)
+    parser.add_argument("--output", default="guiding.md")
     args = parser.parse_args(argv)
     size = args.size or (32 if args.quick else 128)
-    spps = [int(s) for s in (args.spp or ("16,32" if args.quick else "16,32,64,128")).split(",")]
+    spp_text = args.spp or ("16,32" if args.quick else "16,32,64,128")
+    spps = [] if spp_text == "none" else [int(s) for s in spp_text.split(",")]
+    cases = [c for c in CASES if args.scene is None or c[0] in args.scene]
     reference_spp = args.reference_spp or (64 if args.quick else 1024)
     repeats = args.repeats or (1 if args.quick else 3)
     import ptrace
     try:
         import mitsuba as mi
         mi.set_variant("llvm_ad_rgb")
+        mi.set_log_level(mi.LogLevel.Error)   # (not multijitter's rounding of 32 up to 35)
     except (ImportError, AttributeError):
         mi = None
     lines = [report.header("Path guiding: relative MSE against wall time"),
              f"{size}x{size}, reference: ptrace unguided at {reference_spp} spp; 2 threads; "
              "seconds include training (guided, auto) and exclude compiling (warm-up renders "
              f"run first); medians of {repeats} runs, the modes in turns. Mitsuba: `path`, "
-             "llvm_ad_rgb, max_depth one more than ptrace's -m. Ratios are to unguided ptrace "
+             "llvm_ad_rgb, max_depth one more than ptrace's -m, the file's camera with a box "
+             "filter of one pixel (as ptrace's pixels) and the multijitter sampler, seconds the "
+             f"median of {repeats} renders after one that compiles. Ratios are to unguided ptrace "
              "at the same spp: relMSE at equal samples, and relMSE x seconds (equal time). "
-             "auto: its choice and its trial's ratio (guided error x cost over unguided's; "
-             "on below 0.8).", ""]
-    for name, depth in CASES:
+             "auto: its choice and its probe's headroom (trains above 32; then off after "
+             "training if the guided variance per sample is not below the probe's).", ""]
+    for name, depth in cases:
         path = SCENES / name
         scene = ptrace.load(str(path), defines={"res": str(size)})   # the whole view
         resolution = (size, size)
-        reference = ptrace.render(scene, spp=reference_spp, max_depth=depth,
-                                  resolution=resolution, seed=99)
-        points = measure(scene, spps, depth, resolution, reference, MODES, repeats)
+        lines += [f"## {name} (-m {depth})", ""]
+        reference, points = None, {}
+        if spps:
+            reference = ptrace.render(scene, spp=reference_spp, max_depth=depth,
+                                      resolution=resolution, seed=99)
+            points = measure(scene, spps, depth, resolution, reference, MODES, repeats)
         rows = {"unguided": [], "guided": [], "auto": [], "mitsuba": []}
-        lines += [f"## {name} (-m {depth})", "",
+        lines += [] if not spps else [
                   "| spp | unguided s | unguided relMSE | guided s (training s) | guided relMSE "
                   "| guided/unguided relMSE | guided/unguided relMSE x s | auto s | auto "
-                  "relMSE x s / unguided | auto | mitsuba s | mitsuba relMSE |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "relMSE x s / unguided | auto | mitsuba s | mitsuba relMSE | guided/mitsuba "
+                  "relMSE x s |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for spp in spps:
             off, on, auto = (points[(m, spp)] for m in MODES)
             for label, p in (("unguided", off), ("guided", on), ("auto", auto)):
                 rows[label].append(p[:2])
-            mit_text = "- | -"
+            mit_text = "- | - | -"
             if mi is not None:
-                mit = mitsuba_point(path, spp, size, reference)
-                rows["mitsuba"].append(mit)
-                mit_text = f"{mit[0]:.2f} | {mit[1]:.4f}"
+                mit = mitsuba_point(path, spp, size, reference, repeats)
+                rows["mitsuba"].append(mit[:2])
+                taken = "" if mit[2] == spp else f" ({mit[2]} spp)"
+                mit_text = (f"{mit[0]:.2f}{taken} | {mit[1]:.4f} | "
+                            f"{on[0] * on[1] / (mit[0] * mit[1]):.2f}")
             lines.append(
                 f"| {spp} | {off[0]:.2f} | {off[1]:.4f} | {on[0]:.2f} ({on[3]:.2f}) "
                 f"| {on[1]:.4f} | {on[1] / off[1]:.2f} | {on[0] * on[1] / (off[0] * off[1]):.2f} "
                 f"| {auto[0]:.2f} | {auto[0] * auto[1] / (off[0] * off[1]):.2f} "
                 f"| {auto_text(auto[2])} | {mit_text} |")
             print(lines[-1], flush=True)
-        lines.append("")
+        if spps:
+            lines.append("")
         if args.pairs:
-            off, on = pairs(scene, args.pairs, depth, resolution, reference, repeats)
-            lines += [f"At {args.pairs} spp, error from two seeds (no reference noise), seconds "
-                      f"medians of {max(repeats, 2)} in turns:", "",
+            pair_size = args.pairs_size or size
+            runs = pairs(scene, args.pairs, depth, (pair_size, pair_size), repeats)
+            (off_s, off_images, _), (on_s, on_images, on_training) = runs["off"], runs["on"]
+            mitsuba = None
+            if mi is not None:
+                mitsuba = mitsuba_renders(path, args.pairs, pair_size, [1, 2], max(repeats, 2))
+            # the level: the reference where it has the pairs' size, else the mean of all the
+            # pairs' images (a firefly of one renderer's over a level without it would weigh
+            # as much as the rest of the image)
+            level = reference if reference is not None and pair_size == size else np.mean(
+                off_images + on_images + (mitsuba[1] if mitsuba else []), axis=0)
+            off_error, on_error = pair_error(*off_images, level), pair_error(*on_images, level)
+            mit_text = "- | - | -"
+            if mitsuba:
+                seconds, images, taken = mitsuba
+                error = pair_error(*images, level)
+                mit_text = (f"{seconds:.2f} | {error:.4f} | "
+                            f"{on_s * on_error / (seconds * error):.3f}")
+            lines += [f"At {args.pairs} spp and {pair_size}x{pair_size}, error from two seeds "
+                      f"(no reference noise), seconds medians of {max(repeats, 2)} in turns "
+                      "(Mitsuba's after ptrace's):", "",
                       "| spp | unguided s | unguided error | guided s (training s) | guided "
-                      "error | guided/unguided error | guided/unguided error x s |",
-                      "|---|---|---|---|---|---|---|",
-                      f"| {args.pairs} | {off[0]:.2f} | {off[1]:.4f} | {on[0]:.2f} ({on[2]:.2f}) "
-                      f"| {on[1]:.4f} | {on[1] / off[1]:.3f} | "
-                      f"{on[0] * on[1] / (off[0] * off[1]):.3f} |", ""]
+                      "error | guided/unguided error | guided/unguided error x s | mitsuba s "
+                      "| mitsuba error | guided/mitsuba error x s |",
+                      "|---|---|---|---|---|---|---|---|---|---|",
+                      f"| {args.pairs} | {off_s:.2f} | {off_error:.4f} | {on_s:.2f} "
+                      f"({on_training:.2f}) | {on_error:.4f} | {on_error / off_error:.3f} | "
+                      f"{on_s * on_error / (off_s * off_error):.3f} | {mit_text} |", ""]
             print(lines[-2], flush=True)
-        chart(rows, report.destination(f"guiding_{path.stem}.png"), name)
-        lines += [f"![{name}](guiding_{path.stem}.png)", ""]
+        if spps:
+            chart(rows, report.destination(f"guiding_{path.stem}.png"), name)
+            lines += [f"![{name}](guiding_{path.stem}.png)", ""]
     root = Path(os.environ.get("PTRACE_SCENES", report.RESULTS.parents[2] / "shared" / "scenes"
                                / "cs184"))
-    course = [c for c in COURSE if (root / c[0]).exists()]
+    course = [c for c in COURSE if (root / c[0]).exists() and args.scene is None]
     if course:
         spp = max(spps) if args.quick else 64
         lines += [f"## Course boxes under --guiding auto ({spp} spp, reference unguided at "
@@ -197,7 +271,7 @@ def main(argv=None):
                          f"| {auto_text(auto[2])} | {on[1] / off[1]:.2f} |")
             print(lines[-1], flush=True)
         lines.append("")
-    out = report.destination("guiding.md")
+    out = report.destination(args.output)
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(out)
 
