@@ -88,16 +88,18 @@ def conductor_fresnel(eta, k, cos_i):
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
-def _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz):
+def _microfacet_f(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz):
+    """The microfacet conductor's f: Beckmann D and Smith G, the conductor's Fresnel times
+    specular[m] (Mitsuba's specular_reflectance; 1 for every other file's)."""
     hx, hy, hz, _, defined = half_vector(wox, woy, woz, wix, wiy, wiz)
     if not defined:
         return 0.0, 0.0, 0.0
     d = beckmann_d(alpha, hz)
     g = 1.0 / (1.0 + smith_lambda(alpha, wiz) + smith_lambda(alpha, woz))
     scale = d * g / (4.0 * woz * wiz)
-    return (conductor_fresnel(eta[m, 0], k[m, 0], wiz) * scale,
-            conductor_fresnel(eta[m, 1], k[m, 1], wiz) * scale,
-            conductor_fresnel(eta[m, 2], k[m, 2], wiz) * scale)
+    return (conductor_fresnel(eta[m, 0], k[m, 0], wiz) * scale * specular[m, 0],
+            conductor_fresnel(eta[m, 1], k[m, 1], wiz) * scale * specular[m, 1],
+            conductor_fresnel(eta[m, 2], k[m, 2], wiz) * scale * specular[m, 2])
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
@@ -220,14 +222,14 @@ def microfacet_sample(ar, ag, ab, transmittance, ior, alpha, metallic, eta, k, s
     if wiz <= 0.0:
         return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0
     pdf = _microfacet_pdf(a, wox, woy, woz, wix, wiy, wiz)
-    fr, fg, fb = _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+    fr, fg, fb = _microfacet_f(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz)
     return wix, wiy, wiz, fr, fg, fb, pdf
 
 
 @njit(cache=True, _nrt=False, forceinline=True)
 def microfacet_eval(ar, ag, ab, alpha, metallic, eta, k, specular, m, wox, woy, woz, wix, wiy,
                     wiz):
-    return _microfacet_f(alpha, eta, k, m, wox, woy, woz, wix, wiy, wiz)
+    return _microfacet_f(alpha, eta, k, specular, m, wox, woy, woz, wix, wiy, wiz)
 
 
 @njit(cache=True, _nrt=False, forceinline=True)

@@ -38,7 +38,9 @@ class Materials:
 
     diffuse: albedo; emission: emission; mirror: albedo (reflectance);
     glass: albedo (reflectance), transmittance, ior; refraction: transmittance, ior;
-    microfacet: alpha, eta, k; glossy (not the course's: a diffuse base under a glossy
+    microfacet: alpha, eta, k, and specular, a factor on its Fresnel reflectance (Mitsuba's
+    specular_reflectance beside eta and k; (1, 1, 1) where a record or the arrays leave it
+    out); glossy (not the course's: a diffuse base under a glossy
     dielectric coat, for mesh files' plastics): albedo (the base), specular (the coat's
     reflectance at normal incidence), alpha; gltf_pbr (glTF's metallic-roughness BRDF,
     ptrace.gltf_brdf, for glTF files): albedo (the base colour), metallic, alpha (roughness^2),
@@ -96,6 +98,9 @@ class Materials:
 
     def __post_init__(self):
         m = len(self.kind)
+        if self.specular is None:   # a microfacet's reflectance factor: 1 unless it is given
+            self.specular = np.zeros((m, 3))
+            self.specular[np.asarray(self.kind) == MICROFACET] = 1.0
         for name, default in OPTIONAL_FIELDS.items():
             if getattr(self, name) is None:
                 shape = (m, 3) if name in RGB_FIELDS else m
@@ -120,6 +125,8 @@ class Materials:
         """Build from a list of dicts with a 'kind' and any of the fields above (a field a
         record leaves out takes its default in RGB_FIELDS, NUMBER_FIELDS or TEXTURE_FIELDS)."""
         m = len(records)
+        records = [dict(r, specular=MICROFACET_SPECULAR)
+                   if r["kind"] == MICROFACET and "specular" not in r else r for r in records]
         column = lambda key, default, dtype, shape: np.array(
             [r.get(key, default) for r in records], dtype=dtype).reshape(shape)
         tables = [r["table"] for r in records if "table" in r]
@@ -153,6 +160,7 @@ NUMBER_FIELDS = {"ior": 1.0, "roughness": 0.0, "alpha": 0.0, "metallic": 0.0, "o
                  "cutoff": 0.0, "normal_scale": 1.0, "fresnel": SCHLICK}
 TEXTURE_FIELDS = ("albedo_texture", "emission_texture", "roughness_texture", "alpha_texture",
                   "normal_texture")
+MICROFACET_SPECULAR = (1.0, 1.0, 1.0)   # a microfacet's specular where its record has none
 # the fields Materials may be built without, and what they then hold (per material)
 OPTIONAL_FIELDS = {"specular": 0.0, "metallic": 0.0, "opacity": 1.0, "cutoff": 0.0,
                    "normal_scale": 1.0, "fresnel": SCHLICK, **{key: -1 for key in TEXTURE_FIELDS}}

@@ -276,10 +276,8 @@ class Materials:
         if not rough:
             self.note(bsdf, f"a smooth conductor with Fresnel: Beckmann alpha {MIN_ALPHA} "
                             f"(ptrace's mirror has no Fresnel)")
-        if reflectance != (1.0, 1.0, 1.0):
-            self.note(bsdf, "specular_reflectance with eta and k ignored (ptrace's microfacet "
-                            "has no reflectance factor)")
-        return {"kind": MICROFACET, "alpha": alpha, "eta": tuple(eta), "k": tuple(k)}
+        return {"kind": MICROFACET, "alpha": alpha, "eta": tuple(eta), "k": tuple(k),
+                "specular": tuple(reflectance)}   # (a factor on the Fresnel, as Mitsuba's)
 
     def _roughconductor(self, bsdf):
         return self._conductor(bsdf, rough=True)

@@ -35,10 +35,10 @@ def hit_features(shapes, materials, ox, oy, oz, dx, dy, dz, t, prim, u, v):
         tr = materials.transmittance
         ar, ag, ab = tr[m, 0], tr[m, 1], tr[m, 2]
     elif kind == MICROFACET:
-        eta, k = materials.eta, materials.k
-        ar = conductor_fresnel(eta[m, 0], k[m, 0], 1.0)
-        ag = conductor_fresnel(eta[m, 1], k[m, 1], 1.0)
-        ab = conductor_fresnel(eta[m, 2], k[m, 2], 1.0)
+        eta, k, specular = materials.eta, materials.k, materials.specular
+        ar = conductor_fresnel(eta[m, 0], k[m, 0], 1.0) * specular[m, 0]
+        ag = conductor_fresnel(eta[m, 1], k[m, 1], 1.0) * specular[m, 1]
+        ab = conductor_fresnel(eta[m, 2], k[m, 2], 1.0) * specular[m, 2]
     if nx * dx + ny * dy + nz * dz > 0.0:    # glass keeps its outward normal: face the camera
         nx, ny, nz = -nx, -ny, -nz
     return ar, ag, ab, nx, ny, nz, t * math.sqrt(dx * dx + dy * dy + dz * dz), 1.0
