@@ -316,8 +316,11 @@ class Reader:
             elif tag in OBJECT_TAGS and tag != "scene":
                 self._object(child, holder, path, depth)
             else:
+                hint = (" (Mitsuba 0.6's blackbody element, which Mitsuba 3 does not read "
+                        "either: write <spectrum name=\"radiance\" type=\"blackbody\"> with its "
+                        "temperature)") if tag == "blackbody" else ""
                 raise at(path, child, f": unknown element <{tag}> in "
-                                      f"{holder.where}")
+                                      f"{holder.where}{hint}")
 
     def _name(self, element, path):
         name = self.attribute(element, "name", path)

@@ -161,6 +161,11 @@ def test_a_blackbody_emitter_is_what_mitsubas_spectral_variant_renders(tmp_path)
                           '</spectrum></bsdf></shape>', name="bad.xml")
     with pytest.raises(ptrace.SceneError, match="blackbody spectrum outside an emitter"):
         ptrace.load(bad)
+    old = write(tmp_path, '<shape type="sphere"><emitter type="area"><blackbody name='
+                          '"radiance" temperature="3000"/></emitter></shape>', name="old.xml",
+                version="0.6.0")   # (0.6's element: the one line says what Mitsuba 3 reads)
+    with pytest.raises(ptrace.SceneError, match='unknown element <blackbody>.*type="blackbody"'):
+        ptrace.load(old)
     mi = pytest.importorskip("mitsuba")
     mi.set_variant("scalar_spectral")
     try:
