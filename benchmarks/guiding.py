@@ -68,52 +68,59 @@ def mitsuba_sensor(mi, scene, size, spp):
         "sampler": {"type": "multijitter", "sample_count": spp}})
 
 
-def mitsuba_renders(path, spp, size, seeds, repeats):
-    """Mitsuba's images under `seeds` and the median seconds of `repeats` renders of the first
-    (after a warm-up render that compiles its kernels), and the samples it took (multijitter
-    rounds some counts up)."""
-    import mitsuba as mi
-    scene = mi.load_file(str(path), res=size)
-    sensor = mitsuba_sensor(mi, scene, size, spp)
-    mi.render(scene, sensor=sensor, spp=spp, seed=0)
-    seconds, images = [], []
-    for r in range(max(repeats, len(seeds))):
+class MitsubaRenderer:
+    """Mitsuba's renders of one file at spp and size x size through mitsuba_sensor, compiled
+    by a first render; a call renders under one seed: (image, seconds). taken: the samples it
+    takes (multijitter rounds some counts up: 32 to 35, 512 to 528)."""
+
+    def __init__(self, path, spp, size):
+        import mitsuba as mi
+        self.mi, self.spp = mi, spp
+        self.scene = mi.load_file(str(path), res=size)
+        self.sensor = mitsuba_sensor(mi, self.scene, size, spp)
+        self.taken = self.sensor.sampler().sample_count()
+        self(0)
+
+    def __call__(self, seed):
         start = time.perf_counter()
-        image = np.array(mi.render(scene, sensor=sensor, spp=spp, seed=seeds[r % len(seeds)]))
-        seconds.append(time.perf_counter() - start)
-        if r < len(seeds):
-            images.append(image)
-    return statistics.median(seconds), images, sensor.sampler().sample_count()
+        image = np.array(self.mi.render(self.scene, sensor=self.sensor, spp=self.spp,
+                                        seed=seed))
+        return image, time.perf_counter() - start
 
 
-def mitsuba_point(path, spp, size, reference, repeats):
-    seconds, (image,), taken = mitsuba_renders(path, spp, size, [1], repeats)
-    return seconds, relative_mse(image, reference), taken
-
-
-def measure(scene, spps, depth, resolution, reference, modes, repeats):
+def measure(scene, spps, depth, resolution, reference, modes, repeats, mitsuba=None):
     """{(mode, spp): (median seconds, relMSE, guiding figures, median training seconds)}, the
-    modes in turns within each repeat."""
+    modes in turns within each repeat; with mitsuba (a file's path), its renders in turn after
+    them under mode "mitsuba" (figures: the samples it took)."""
     for guiding in modes:   # warm-up: compile
         ptrace_point(scene, 16, depth, resolution, guiding, reference)
+    renderers = {spp: MitsubaRenderer(mitsuba, spp, resolution[0]) for spp in spps} \
+        if mitsuba else {}
     runs = {}
     for _ in range(repeats):
         for spp in spps:
             for guiding in modes:
                 runs.setdefault((guiding, spp), []).append(
                     ptrace_point(scene, spp, depth, resolution, guiding, reference))
+            if spp in renderers:
+                image, seconds = renderers[spp](1)
+                runs.setdefault(("mitsuba", spp), []).append(
+                    (seconds, relative_mse(image, reference), renderers[spp].taken))
     return {key: (statistics.median(r[0] for r in points), points[-1][1], points[-1][2],
-                  statistics.median(r[2].get("training_seconds", 0.0) for r in points))
+                  statistics.median(r[2].get("training_seconds", 0.0) if isinstance(r[2], dict)
+                                    else 0.0 for r in points))
             for key, points in runs.items()}
 
 
-def pairs(scene, spp, depth, resolution, repeats):
+def pairs(scene, spp, depth, resolution, repeats, mitsuba=None):
     """{mode: (median seconds, the images of seeds 1 and 2, median training seconds)} for
-    unguided and guided, the modes in turns within each repeat (seed = repeat + 1)."""
+    unguided and guided, and Mitsuba's (mitsuba: a file's path) with its sample count in place
+    of training seconds, the three in turns within each repeat (seed = repeat + 1)."""
     import ptrace
     for guiding in ("off", "on"):   # warm-up: compile
         ptrace.render(scene, spp=4, max_depth=depth, resolution=resolution, threads=2,
                       guiding=guiding)
+    renderer = MitsubaRenderer(mitsuba, spp, resolution[0]) if mitsuba else None
     images, seconds, training = {}, {}, {}
     for r in range(max(repeats, 2)):
         for guiding in ("off", "on"):
@@ -125,8 +132,13 @@ def pairs(scene, spp, depth, resolution, repeats):
             training.setdefault(guiding, []).append(
                 stats.get("guiding", {}).get("training_seconds", 0.0))
             images.setdefault(guiding, []).append(image)
-    return {guiding: (statistics.median(seconds[guiding]), images[guiding][:2],
-                      statistics.median(training[guiding])) for guiding in ("off", "on")}
+        if renderer:
+            image, took = renderer(r + 1)
+            seconds.setdefault("mitsuba", []).append(took)
+            training.setdefault("mitsuba", []).append(renderer.taken)
+            images.setdefault("mitsuba", []).append(image)
+    return {mode: (statistics.median(seconds[mode]), images[mode][:2],
+                   statistics.median(training[mode])) for mode in images}
 
 
 def pair_error(a, b, level):
@@ -174,11 +186,12 @@ def main(argv=None):
              "seconds include training (guided, auto) and exclude compiling (warm-up renders "
              f"run first); medians of {repeats} runs, the modes in turns. Mitsuba: `path`, "
              "llvm_ad_rgb, max_depth one more than ptrace's -m, the file's camera with a box "
-             "filter of one pixel (as ptrace's pixels) and the multijitter sampler, seconds the "
-             f"median of {repeats} renders after one that compiles. Ratios are to unguided ptrace "
-             "at the same spp: relMSE at equal samples, and relMSE x seconds (equal time). "
-             "auto: its choice and its probe's headroom (trains above 32; then off after "
-             "training if the guided variance per sample is not below the probe's).", ""]
+             "filter of one pixel (as ptrace's pixels) and the multijitter sampler, rendered in "
+             "turn after ptrace's modes, after one render that compiles. Ratios are to "
+             "unguided ptrace at the same spp: relMSE at equal samples, and relMSE x seconds "
+             "(equal time). auto: its choice and its probe's headroom (trains above 32; then "
+             "off after training if the guided variance per sample is not below the probe's).",
+             ""]
     for name, depth in cases:
         path = SCENES / name
         scene = ptrace.load(str(path), defines={"res": str(size)})   # the whole view
@@ -188,7 +201,8 @@ def main(argv=None):
         if spps:
             reference = ptrace.render(scene, spp=reference_spp, max_depth=depth,
                                       resolution=resolution, seed=99)
-            points = measure(scene, spps, depth, resolution, reference, MODES, repeats)
+            points = measure(scene, spps, depth, resolution, reference, MODES, repeats,
+                             path if mi is not None else None)
         rows = {"unguided": [], "guided": [], "auto": [], "mitsuba": []}
         lines += [] if not spps else [
                   "| spp | unguided s | unguided relMSE | guided s (training s) | guided relMSE "
@@ -201,8 +215,8 @@ def main(argv=None):
             for label, p in (("unguided", off), ("guided", on), ("auto", auto)):
                 rows[label].append(p[:2])
             mit_text = "- | - | -"
-            if mi is not None:
-                mit = mitsuba_point(path, spp, size, reference, repeats)
+            if ("mitsuba", spp) in points:
+                mit = points[("mitsuba", spp)]
                 rows["mitsuba"].append(mit[:2])
                 taken = "" if mit[2] == spp else f" ({mit[2]} spp)"
                 mit_text = (f"{mit[0]:.2f}{taken} | {mit[1]:.4f} | "
@@ -217,26 +231,25 @@ def main(argv=None):
             lines.append("")
         if args.pairs:
             pair_size = args.pairs_size or size
-            runs = pairs(scene, args.pairs, depth, (pair_size, pair_size), repeats)
+            runs = pairs(scene, args.pairs, depth, (pair_size, pair_size), repeats,
+                         path if mi is not None else None)
             (off_s, off_images, _), (on_s, on_images, on_training) = runs["off"], runs["on"]
-            mitsuba = None
-            if mi is not None:
-                mitsuba = mitsuba_renders(path, args.pairs, pair_size, [1, 2], max(repeats, 2))
             # the level: the reference where it has the pairs' size, else the mean of all the
             # pairs' images (a firefly of one renderer's over a level without it would weigh
             # as much as the rest of the image)
             level = reference if reference is not None and pair_size == size else np.mean(
-                off_images + on_images + (mitsuba[1] if mitsuba else []), axis=0)
+                [i for run in runs.values() for i in run[1]], axis=0)
             off_error, on_error = pair_error(*off_images, level), pair_error(*on_images, level)
             mit_text = "- | - | -"
-            if mitsuba:
-                seconds, images, taken = mitsuba
+            if "mitsuba" in runs:
+                seconds, images, taken = runs["mitsuba"]
                 error = pair_error(*images, level)
-                mit_text = (f"{seconds:.2f} | {error:.4f} | "
+                taken = "" if taken == args.pairs else f" ({taken:.0f} spp)"
+                mit_text = (f"{seconds:.2f}{taken} | {error:.4f} | "
                             f"{on_s * on_error / (seconds * error):.3f}")
             lines += [f"At {args.pairs} spp and {pair_size}x{pair_size}, error from two seeds "
-                      f"(no reference noise), seconds medians of {max(repeats, 2)} in turns "
-                      "(Mitsuba's after ptrace's):", "",
+                      f"(no reference noise), seconds medians of {max(repeats, 2)}, the three "
+                      "in turns:", "",
                       "| spp | unguided s | unguided error | guided s (training s) | guided "
                       "error | guided/unguided error | guided/unguided error x s | mitsuba s "
                       "| mitsuba error | guided/mitsuba error x s |",
