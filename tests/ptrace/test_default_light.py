@@ -9,7 +9,7 @@ import pytest
 from files_by_hand import gltf
 
 import ptrace
-from ptrace.app.cli import main
+from ptrace.app.cli import MESH_FILE, main
 from ptrace.io.default_light import EMITTER_SHARE, NOTE, emitter_share
 from ptrace.scene import AMBIENT, ENVIRONMENT
 
@@ -132,7 +132,8 @@ def test_no_default_light_removes_it(tmp_path, capsys):
     assert main(["--info", "--no-default-light", str(path)]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["lights"] == []
-    assert any(n.startswith(NOTE + "off") for n in info["notes"]), info["notes"]
+    said = f"{path.name}: {NOTE.removeprefix(MESH_FILE)}off"   # (the command names the file)
+    assert any(n.startswith(said) for n in info["notes"]), info["notes"]
     assert main(["--info", str(path)]) == 0
     assert [light["type"] for light in json.loads(capsys.readouterr().out)["lights"]] == \
         ["ambient"]
