@@ -83,7 +83,7 @@ PARALLAX = True          # turn each leaf's directions toward its focus point (l
 FOCUS_LEAST = 1.0        # ... where the focus is this many half diagonals from its centre
 NORMALS = True           # the spatial tree's first levels split by the normal's bucket
 # --guiding auto: an unguided first iteration of PROBE passes (part of the unguided image if
-# the guide is turned off), whose records give the bounces' headroom (Trainer.headroom): how
+# the guide is turned off), whose records give the bounces' headroom (headroom()): how
 # far the BSDF's choice of direction is from the best one, which bounds what any guide can
 # gain at a vertex. Below HEADROOM the guide is off for the rest of the render. Above it,
 # training goes on, and the guide is off for the final passes if the last training
@@ -422,7 +422,6 @@ class Trainer:
         SpatialTree.refine), or from zero."""
         leaves = len(self.tree.leaves())
         self.counts = np.zeros(leaves, dtype=np.int64)
-        self.moments = np.zeros((2, leaves))   # each leaf's sums of F / p and of its square
         self.kept, self.seen, self.count = [], 0, 0
         self.stride = getattr(self, "stride", 1)   # (the last iteration's, a good first guess)
         self.keep = origin is not None   # (the first iteration's guide learns no share)
@@ -517,17 +516,9 @@ class Trainer:
             self.grid += grids[j]
             self.counts += counts[j]
             self.focus += focus[j]
-        for run, leaf in zip(runs, found):
-            f = run[R_F]
-            self.moments[0] += np.bincount(leaf, weights=f, minlength=leaves)
-            self.moments[1] += np.bincount(leaf, weights=f * f, minlength=leaves)
         if self.learn and self.keep:
             for j in range(parts):
                 self._keep(runs[j], found[j])
-
-    def headroom(self):
-        """The bounces' headroom (headroom()) of this iteration's records merged so far."""
-        return headroom(self.counts, self.moments)
 
     def pending_headroom(self):
         """The headroom of the records handed in since the last merge, without merging them:
@@ -647,7 +638,7 @@ def train(job, pixel_x, pixel_y, spp, mode="on", on_chunk=None):
     from spp down (the last iteration's lowest), so the final passes render the first ones.
     Each iteration's records make the guide the next one samples (its share per spatial leaf
     learnt, Trainer.finish). Under "auto", the unguided first iteration's records give the
-    bounces' headroom (Trainer.headroom): below HEADROOM, training stops and the guide is off
+    bounces' headroom (headroom()): below HEADROOM, training stops and the guide is off
     for the rest of the render, whose final passes with the first iteration's are then the
     unguided render of spp samples (its samples 0 .. spp - 1). Above it, training goes on; if
     the last training iteration's variance per sample (relative_variance) is not below the

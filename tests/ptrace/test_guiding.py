@@ -513,24 +513,21 @@ def test_the_headroom_is_the_records_second_moment_over_their_mean_squared_by_le
     light = np.array([0.2, -0.4, 0.9])
     light /= np.linalg.norm(light)
     trainer = Trainer(-np.ones(3), np.ones(3), split_samples=10 ** 9)
-    assert trainer.headroom() == 1.0
+    assert trainer.pending_headroom() == 1.0           # nothing handed in
     cone = light_records(rng, 40000, light, math.radians(10))
     lit = int(np.count_nonzero(cone[7]))
     trainer.add((0, 0), cone)
-    assert trainer.pending_headroom() == pytest.approx(40000 / lit, rel=1e-9)   # (auto's probe)
-    assert trainer.headroom() == 1.0                    # nothing merged yet
-    trainer.merge()
     share = (1 - math.cos(math.radians(10))) / 2
-    assert trainer.headroom() == pytest.approx(40000 / lit, rel=1e-9)
-    assert trainer.headroom() == pytest.approx(1 / share, rel=0.15)
+    assert trainer.pending_headroom() == pytest.approx(40000 / lit, rel=1e-9)
+    assert trainer.pending_headroom() == pytest.approx(1 / share, rel=0.15)
+    trainer.merge()
+    assert trainer.pending_headroom() == 1.0           # merged: no longer pending
     flat = light_records(rng, 10000, light, math.pi)   # lit everywhere: x = 4 pi
     flat[R_NX + 2] = -1.0                               # normals down: the other bucket
-    trainer.add((1, 0), flat)
-    trainer.merge()
+    trainer.add((1, 0), cone)
+    trainer.add((1, 1), flat)
     weight = lit / (lit + 10000)                        # each leaf's share of the light
-    assert trainer.headroom() == pytest.approx(weight * 40000 / lit + (1 - weight) * 1.0)
-    trainer.finish(1)                                   # a new iteration: its records only
-    assert trainer.headroom() == 1.0
+    assert trainer.pending_headroom() == pytest.approx(weight * 40000 / lit + (1 - weight) * 1.0)
 
 
 def test_auto_trains_on_the_ceiling_lamp_box_and_is_the_same_whatever_the_threads(ceiling):
